@@ -1,0 +1,110 @@
+// Codec `store` (id 1): the reference codec. Quantized positions and triangle indices packed tightly, plus
+// normals (octahedral, the container's normal bits) and colors (8 bits per channel) when the scan has them.
+// No prediction and no entropy coding: it is the baseline the real codecs are measured against, and the
+// codec that proves the container end to end.
+//
+// Payload v1 (little-endian):
+//   u32 vertex count V, u32 triangle count T
+//   if V > 0: per axis x,y,z: u32 minimum coordinate, u8 bits b_a (enough for max - min)
+//   bit stream (LSB first): V x (b_x + b_y + b_z) bits of (coordinate - minimum),
+//   3T x bitsFor(V-1) bits of vertex indices, V x 2 x normal_bits bits of octahedral normals (if any),
+//   V x 8 x channels bits of colors (if any); zero padding to the byte.
+#include <algorithm>
+#include <string>
+
+#include "engine/codecs/codec.h"
+#include "engine/entropy/bit_io.h"
+#include "engine/io/bytes.h"
+
+namespace scanpress {
+
+Status storeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out) {
+  const size_t n = mesh.positions.size();
+  if (n > UINT32_MAX || mesh.triangles.size() > UINT32_MAX)
+    return makeError(ErrorCode::kLimitExceeded, "tile has more than 2^32-1 vertices or triangles");
+  ByteWriter w(out);
+  w.u32(static_cast<uint32_t>(n));
+  w.u32(static_cast<uint32_t>(mesh.triangles.size()));
+  if (n == 0) return Status::ok();
+  Vec3u lo{UINT32_MAX, UINT32_MAX, UINT32_MAX}, hi{0, 0, 0};
+  for (const auto& p : mesh.positions)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+  int axis_bits[3];
+  for (int a = 0; a < 3; ++a) {
+    axis_bits[a] = bitsFor(hi[a] - lo[a]);
+    w.u32(lo[a]);
+    w.u8(static_cast<uint8_t>(axis_bits[a]));
+  }
+  BitWriter bw(out);
+  for (const auto& p : mesh.positions)
+    for (int a = 0; a < 3; ++a) bw.put(p[a] - lo[a], axis_bits[a]);
+  const int index_bits = bitsFor(n - 1);
+  for (const auto& t : mesh.triangles)
+    for (uint32_t v : t) bw.put(v, index_bits);
+  if (ctx.layout.hasNormals())
+    for (const auto& e : mesh.normals) bw.put(e[0], ctx.layout.normal_bits), bw.put(e[1], ctx.layout.normal_bits);
+  if (ctx.layout.hasColors())
+    for (const auto& c : mesh.colors)
+      for (int k = 0; k < ctx.layout.color_channels; ++k) bw.put(c[k], 8);
+  bw.flush();
+  return Status::ok();
+}
+
+Result<QuantizedMesh> storeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload) {
+  if (version != 1)
+    return makeError(ErrorCode::kUnknownVersion, "store codec version " + std::to_string(version) +
+                                                     " is not known to this build (knows 1)");
+  ByteReader r(payload, "store payload");
+  uint32_t n = 0, t = 0;
+  SP_RETURN_IF_ERROR(r.u32(n));
+  SP_RETURN_IF_ERROR(r.u32(t));
+  QuantizedMesh mesh;
+  if (n == 0) {
+    if (t != 0) return r.error(ErrorCode::kMalformed, "triangles without vertices");
+    return mesh;
+  }
+  Vec3u lo;
+  int axis_bits[3];
+  for (int a = 0; a < 3; ++a) {
+    uint8_t b = 0;
+    SP_RETURN_IF_ERROR(r.u32(lo[a]));
+    SP_RETURN_IF_ERROR(r.u8(b));
+    if (b > ctx.bits || uint64_t(lo[a]) + ((uint64_t(1) << b) - 1) > (uint64_t(1) << ctx.bits) - 1)
+      return r.error(ErrorCode::kMalformed, "axis range exceeds the grid");
+    axis_bits[a] = b;
+  }
+  const int index_bits = bitsFor(uint64_t(n) - 1);
+  const uint64_t per_vertex = uint64_t(axis_bits[0]) + axis_bits[1] + axis_bits[2] + 2u * ctx.layout.normal_bits +
+                              8u * ctx.layout.color_channels;
+  const uint64_t need_bits = per_vertex * n + uint64_t(t) * 3 * index_bits;
+  if ((need_bits + 7) / 8 != r.remaining())
+    return r.error(ErrorCode::kMalformed, "payload holds " + std::to_string(r.remaining()) + " bytes, counts need " +
+                                              std::to_string((need_bits + 7) / 8));
+  std::span<const uint8_t> rest;
+  SP_RETURN_IF_ERROR(r.bytes(r.remaining(), rest));
+  BitReader br(rest);
+  mesh.positions.resize(n);
+  for (auto& p : mesh.positions)
+    for (int a = 0; a < 3; ++a) p[a] = lo[a] + br.get(axis_bits[a]);
+  mesh.triangles.resize(t);
+  for (auto& tri : mesh.triangles)
+    for (auto& v : tri) v = br.get(index_bits);
+  if (ctx.layout.hasNormals()) {
+    mesh.normals.resize(n);
+    for (auto& e : mesh.normals)
+      e[0] = static_cast<uint16_t>(br.get(ctx.layout.normal_bits)),
+      e[1] = static_cast<uint16_t>(br.get(ctx.layout.normal_bits));
+  }
+  if (ctx.layout.hasColors()) {
+    mesh.colors.resize(n);
+    for (auto& c : mesh.colors) {
+      c = {0, 0, 0, 255};
+      for (int k = 0; k < ctx.layout.color_channels; ++k) c[k] = static_cast<uint8_t>(br.get(8));
+    }
+  }
+  if (br.overrun()) return makeError(ErrorCode::kTruncated, "store payload ends inside the bit stream");
+  SP_RETURN_IF_ERROR(validateTile(ctx, mesh).withContext("store payload"));
+  return mesh;
+}
+
+}  // namespace scanpress

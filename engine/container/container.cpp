@@ -1,0 +1,359 @@
+#include "engine/container/container.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#include "engine/io/bytes.h"
+#include "engine/io/crc32c.h"
+
+namespace scanpress {
+namespace {
+
+constexpr uint8_t kHeaderMagic[8] = {0x89, 'S', 'P', 'Z', '\r', '\n', 0x1A, '\n'};
+constexpr uint8_t kFooterMagic[8] = {0x1A, 'S', 'P', 'Z', 'E', 'O', 'F', '\n'};
+constexpr uint32_t kChunkMagic = 0x454C4954;  // "TILE" little-endian
+constexpr uint32_t kIndexMagic = 0x58444954;  // "TIDX"
+
+std::string hex32(uint32_t v) {
+  char buf[16];
+  std::snprintf(buf, sizeof buf, "%08x", v);
+  return buf;
+}
+
+Status checkCrc(uint32_t stored, std::span<const uint8_t> covered, const std::string& what_part) {
+  const uint32_t actual = crc32c(covered);
+  if (stored != actual)
+    return makeError(ErrorCode::kChecksum, what_part + ": checksum mismatch (stored " + hex32(stored) +
+                                               ", computed " + hex32(actual) + ")");
+  return Status::ok();
+}
+
+std::vector<uint8_t> chunkHeader(const TileEntry& e, std::span<const uint8_t> payload) {
+  std::vector<uint8_t> out;
+  ByteWriter w(out);
+  w.u32(kChunkMagic);
+  w.u32(e.tile_id);
+  w.u16(static_cast<uint16_t>(e.codec));
+  w.u16(e.codec_version);
+  w.u32(e.vertices);
+  w.u32(e.faces);
+  w.u64(payload.size());
+  w.u32(crc32c(payload));
+  w.u32(crc32c(out));
+  return out;
+}
+
+// In-memory sink for encodeContainer.
+class VectorSink : public ByteSink {
+ public:
+  explicit VectorSink(std::vector<uint8_t>& out) : out_(out) {}
+  Status append(std::span<const uint8_t> b) override {
+    out_.insert(out_.end(), b.begin(), b.end());
+    return Status::ok();
+  }
+  Status writeAt(uint64_t offset, std::span<const uint8_t> b) override {
+    if (offset + b.size() > out_.size()) return makeError(ErrorCode::kInternal, "writeAt past the end");
+    std::copy(b.begin(), b.end(), out_.begin() + static_cast<ptrdiff_t>(offset));
+    return Status::ok();
+  }
+
+ private:
+  std::vector<uint8_t>& out_;
+};
+
+}  // namespace
+
+std::vector<uint8_t> serializeHeader(const ContainerHeader& h) {
+  std::vector<uint8_t> out;
+  ByteWriter w(out);
+  w.bytes(kHeaderMagic);
+  w.u32(h.version);
+  w.u32(kHeaderSize);
+  for (double c : h.grid.origin) w.f64(c);
+  w.f64(h.grid.cell);
+  w.u8(static_cast<uint8_t>(h.grid.bits));
+  w.u8(h.layout.normal_bits);
+  w.u8(h.layout.color_channels);
+  w.u8(0);
+  w.u32(h.tile_count);
+  w.u64(h.vertices);
+  w.u64(h.faces);
+  w.u32(0);
+  w.u32(crc32c(out));
+  return out;
+}
+
+ContainerWriter::ContainerWriter(ByteSink& sink, const Grid& grid, const AttributeLayout& layout) : sink_(sink) {
+  header_.grid = grid;
+  header_.layout = layout;
+}
+
+Status ContainerWriter::begin() {
+  const auto bytes = serializeHeader(header_);
+  SP_RETURN_IF_ERROR(sink_.append(bytes));
+  offset_ = bytes.size();
+  return Status::ok();
+}
+
+Status ContainerWriter::addTile(uint32_t tile_id, const CodecInfo& codec, const QuantizedMesh& mesh,
+                                std::span<const uint8_t> payload) {
+  if (entries_.size() >= kMaxTiles) return makeError(ErrorCode::kLimitExceeded, "too many tiles");
+  if (mesh.positions.size() > UINT32_MAX || mesh.triangles.size() > UINT32_MAX)
+    return makeError(ErrorCode::kLimitExceeded, "tile has more than 2^32-1 vertices or faces");
+  TileEntry e;
+  e.tile_id = tile_id;
+  e.codec = codec.id;
+  e.codec_version = codec.version;
+  e.offset = offset_;
+  e.vertices = static_cast<uint32_t>(mesh.positions.size());
+  e.faces = static_cast<uint32_t>(mesh.triangles.size());
+  e.lo = {UINT32_MAX, UINT32_MAX, UINT32_MAX};
+  e.hi = {0, 0, 0};
+  for (const auto& p : mesh.positions)
+    for (int a = 0; a < 3; ++a) e.lo[a] = std::min(e.lo[a], p[a]), e.hi[a] = std::max(e.hi[a], p[a]);
+  const auto head = chunkHeader(e, payload);
+  e.chunk_bytes = head.size() + payload.size();
+  SP_RETURN_IF_ERROR(sink_.append(head));
+  SP_RETURN_IF_ERROR(sink_.append(payload));
+  offset_ += e.chunk_bytes;
+  header_.vertices += e.vertices;
+  header_.faces += e.faces;
+  entries_.push_back(e);
+  return Status::ok();
+}
+
+Status ContainerWriter::finish() {
+  std::vector<uint8_t> index;
+  ByteWriter w(index);
+  w.u32(kIndexMagic);
+  w.u32(static_cast<uint32_t>(entries_.size()));
+  for (const auto& e : entries_) {
+    w.u32(e.tile_id);
+    w.u16(static_cast<uint16_t>(e.codec));
+    w.u16(e.codec_version);
+    w.u64(e.offset);
+    w.u64(e.chunk_bytes);
+    w.u32(e.vertices);
+    w.u32(e.faces);
+    for (uint32_t c : e.lo) w.u32(c);
+    for (uint32_t c : e.hi) w.u32(c);
+  }
+  w.u32(crc32c(index));
+  std::vector<uint8_t> footer;
+  ByteWriter f(footer);
+  f.u64(offset_);
+  f.u64(index.size());
+  f.u32(kContainerVersion);
+  f.u32(crc32c(footer));
+  f.bytes(kFooterMagic);
+  SP_RETURN_IF_ERROR(sink_.append(index));
+  SP_RETURN_IF_ERROR(sink_.append(footer));
+  offset_ += index.size() + footer.size();
+  header_.tile_count = static_cast<uint32_t>(entries_.size());
+  return sink_.writeAt(0, serializeHeader(header_));
+}
+
+Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::string& what) {
+  const std::string where = what + ": header";
+  if (bytes.size() < kHeaderSize)
+    return makeError(ErrorCode::kTruncated, where + ": file has " + std::to_string(bytes.size()) +
+                                                " bytes, a container header needs " + std::to_string(kHeaderSize));
+  if (std::memcmp(bytes.data(), kHeaderMagic, 8) != 0)
+    return makeError(ErrorCode::kMalformed, where + " at byte 0: not a scanpress container (bad magic)");
+  ByteReader r(bytes.first(kHeaderSize), where);
+  std::span<const uint8_t> magic;
+  SP_RETURN_IF_ERROR(r.bytes(8, magic));
+  ContainerHeader h;
+  uint32_t header_size = 0;
+  SP_RETURN_IF_ERROR(r.u32(h.version));
+  if (h.version != kContainerVersion)
+    return makeError(ErrorCode::kUnknownVersion, where + " at byte 8: container format version " +
+                                                     std::to_string(h.version) + " is not known to this build (knows " +
+                                                     std::to_string(kContainerVersion) + ")");
+  SP_RETURN_IF_ERROR(r.u32(header_size));
+  uint32_t stored_crc = 0;
+  std::memcpy(&stored_crc, bytes.data() + kHeaderSize - 4, 4);
+  SP_RETURN_IF_ERROR(checkCrc(stored_crc, bytes.first(kHeaderSize - 4), where));
+  if (header_size != kHeaderSize)
+    return makeError(ErrorCode::kMalformed, where + " at byte 12: header size " + std::to_string(header_size));
+  for (double& c : h.grid.origin) SP_RETURN_IF_ERROR(r.f64(c));
+  SP_RETURN_IF_ERROR(r.f64(h.grid.cell));
+  uint8_t bits = 0, reserved = 0;
+  uint32_t reserved32 = 0;
+  SP_RETURN_IF_ERROR(r.u8(bits));
+  SP_RETURN_IF_ERROR(r.u8(h.layout.normal_bits));
+  SP_RETURN_IF_ERROR(r.u8(h.layout.color_channels));
+  SP_RETURN_IF_ERROR(r.u8(reserved));
+  SP_RETURN_IF_ERROR(r.u32(h.tile_count));
+  SP_RETURN_IF_ERROR(r.u64(h.vertices));
+  SP_RETURN_IF_ERROR(r.u64(h.faces));
+  SP_RETURN_IF_ERROR(r.u32(reserved32));
+  h.grid.bits = bits;
+  if (bits < kMinGridBits || bits > kMaxGridBits)
+    return makeError(ErrorCode::kMalformed, where + " at byte 48: grid bits " + std::to_string(bits));
+  if (!(h.grid.cell > 0.0) || !std::isfinite(h.grid.cell) || !std::isfinite(h.grid.origin[0]) ||
+      !std::isfinite(h.grid.origin[1]) || !std::isfinite(h.grid.origin[2]))
+    return makeError(ErrorCode::kMalformed, where + " at byte 16: grid origin or cell not finite and positive");
+  if (h.layout.normal_bits != 0 && (h.layout.normal_bits < 4 || h.layout.normal_bits > 16))
+    return makeError(ErrorCode::kMalformed, where + " at byte 49: normal bits " +
+                                                std::to_string(h.layout.normal_bits));
+  if (h.layout.color_channels != 0 && h.layout.color_channels != 3 && h.layout.color_channels != 4)
+    return makeError(ErrorCode::kMalformed, where + " at byte 50: color channels " +
+                                                std::to_string(h.layout.color_channels));
+  if (reserved != 0 || reserved32 != 0) return makeError(ErrorCode::kMalformed, where + ": reserved bytes not 0");
+  if (h.tile_count > kMaxTiles)
+    return makeError(ErrorCode::kLimitExceeded, where + " at byte 52: " + std::to_string(h.tile_count) + " tiles");
+  return h;
+}
+
+Result<Footer> parseFooter(std::span<const uint8_t> last, uint64_t file_size, const std::string& what) {
+  const std::string where = what + ": footer";
+  if (file_size < kHeaderSize + kFooterSize || last.size() < kFooterSize)
+    return makeError(ErrorCode::kTruncated, where + ": file too short (" + std::to_string(file_size) + " bytes)");
+  last = last.last(kFooterSize);
+  const uint64_t base = file_size - kFooterSize;
+  if (std::memcmp(last.data() + 24, kFooterMagic, 8) != 0)
+    return makeError(ErrorCode::kTruncated, where + " at byte " + std::to_string(base + 24) +
+                                                ": footer magic missing (file truncated or not a container)");
+  ByteReader r(last, where, base);
+  Footer f;
+  uint32_t version = 0, stored_crc = 0;
+  SP_RETURN_IF_ERROR(r.u64(f.index_offset));
+  SP_RETURN_IF_ERROR(r.u64(f.index_bytes));
+  SP_RETURN_IF_ERROR(r.u32(version));
+  SP_RETURN_IF_ERROR(r.u32(stored_crc));
+  SP_RETURN_IF_ERROR(checkCrc(stored_crc, last.first(20), where));
+  if (version != kContainerVersion)
+    return makeError(ErrorCode::kUnknownVersion, where + ": container format version " + std::to_string(version));
+  if (f.index_offset < kHeaderSize || f.index_bytes < 12 || f.index_offset > base ||
+      f.index_bytes != base - f.index_offset)
+    return makeError(ErrorCode::kMalformed, where + " at byte " + std::to_string(base) +
+                                                ": index location does not match the file size");
+  return f;
+}
+
+Result<std::vector<TileEntry>> parseIndex(std::span<const uint8_t> bytes, const ContainerHeader& header,
+                                          const Footer& footer, const std::string& what) {
+  const std::string where = what + ": tile index";
+  if (bytes.size() != footer.index_bytes)
+    return makeError(ErrorCode::kTruncated, where + ": expected " + std::to_string(footer.index_bytes) + " bytes");
+  uint32_t stored_crc = 0;
+  std::memcpy(&stored_crc, bytes.data() + bytes.size() - 4, 4);
+  SP_RETURN_IF_ERROR(checkCrc(stored_crc, bytes.first(bytes.size() - 4), where));
+  ByteReader r(bytes, where, footer.index_offset);
+  uint32_t magic = 0, count = 0;
+  SP_RETURN_IF_ERROR(r.u32(magic));
+  if (magic != kIndexMagic) return r.error(ErrorCode::kMalformed, "bad index magic");
+  SP_RETURN_IF_ERROR(r.u32(count));
+  if (count != header.tile_count)
+    return r.error(ErrorCode::kMalformed, "index lists " + std::to_string(count) + " tiles, header says " +
+                                              std::to_string(header.tile_count));
+  if (uint64_t(count) * kIndexEntrySize + 12 != bytes.size())
+    return r.error(ErrorCode::kMalformed, "index size does not match its tile count");
+  std::vector<TileEntry> entries(count);
+  uint64_t next_offset = kHeaderSize, vertices = 0, faces = 0;
+  for (uint32_t i = 0; i < count; ++i) {
+    TileEntry& e = entries[i];
+    uint16_t codec = 0;
+    SP_RETURN_IF_ERROR(r.u32(e.tile_id));
+    SP_RETURN_IF_ERROR(r.u16(codec));
+    e.codec = static_cast<CodecId>(codec);
+    SP_RETURN_IF_ERROR(r.u16(e.codec_version));
+    SP_RETURN_IF_ERROR(r.u64(e.offset));
+    SP_RETURN_IF_ERROR(r.u64(e.chunk_bytes));
+    SP_RETURN_IF_ERROR(r.u32(e.vertices));
+    SP_RETURN_IF_ERROR(r.u32(e.faces));
+    for (uint32_t& c : e.lo) SP_RETURN_IF_ERROR(r.u32(c));
+    for (uint32_t& c : e.hi) SP_RETURN_IF_ERROR(r.u32(c));
+    // Chunks are contiguous, in index order, between the header and the index.
+    if (e.offset != next_offset || e.chunk_bytes < kChunkHeaderSize ||
+        e.chunk_bytes > footer.index_offset - e.offset)
+      return r.error(ErrorCode::kMalformed, "tile " + std::to_string(e.tile_id) + " has an invalid location");
+    next_offset = e.offset + e.chunk_bytes;
+    vertices += e.vertices;
+    faces += e.faces;
+    for (uint32_t j = 0; j < i; ++j)
+      if (entries[j].tile_id == e.tile_id)
+        return r.error(ErrorCode::kMalformed, "tile id " + std::to_string(e.tile_id) + " appears twice");
+  }
+  if (next_offset != footer.index_offset)
+    return makeError(ErrorCode::kMalformed, where + ": tile chunks do not end where the index starts");
+  if (vertices != header.vertices || faces != header.faces)
+    return makeError(ErrorCode::kMalformed, where + ": tile counts do not add up to the header's totals");
+  return entries;
+}
+
+Result<std::span<const uint8_t>> parseTileChunk(std::span<const uint8_t> chunk, const TileEntry& e,
+                                                const std::string& what) {
+  const std::string where = what + ": tile " + std::to_string(e.tile_id);
+  if (chunk.size() != e.chunk_bytes || chunk.size() < kChunkHeaderSize)
+    return makeError(ErrorCode::kTruncated, where + ": chunk is shorter than the index says");
+  ByteReader r(chunk, where, e.offset);
+  uint32_t magic = 0, tile_id = 0, vertices = 0, faces = 0, payload_crc = 0, head_crc = 0;
+  uint16_t codec = 0, version = 0;
+  uint64_t payload_bytes = 0;
+  SP_RETURN_IF_ERROR(r.u32(magic));
+  SP_RETURN_IF_ERROR(r.u32(tile_id));
+  SP_RETURN_IF_ERROR(r.u16(codec));
+  SP_RETURN_IF_ERROR(r.u16(version));
+  SP_RETURN_IF_ERROR(r.u32(vertices));
+  SP_RETURN_IF_ERROR(r.u32(faces));
+  SP_RETURN_IF_ERROR(r.u64(payload_bytes));
+  SP_RETURN_IF_ERROR(r.u32(payload_crc));
+  SP_RETURN_IF_ERROR(r.u32(head_crc));
+  if (magic != kChunkMagic) return makeError(ErrorCode::kMalformed, where + ": bad chunk magic at byte " +
+                                                                         std::to_string(e.offset));
+  SP_RETURN_IF_ERROR(checkCrc(head_crc, chunk.first(kChunkHeaderSize - 4), where + " chunk header"));
+  if (tile_id != e.tile_id || codec != static_cast<uint16_t>(e.codec) || version != e.codec_version ||
+      vertices != e.vertices || faces != e.faces || payload_bytes != e.chunk_bytes - kChunkHeaderSize)
+    return makeError(ErrorCode::kMalformed, where + ": chunk header disagrees with the tile index");
+  const auto payload = chunk.subspan(kChunkHeaderSize);
+  SP_RETURN_IF_ERROR(checkCrc(payload_crc, payload, where + " payload"));
+  return payload;
+}
+
+Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const TileEntry& e,
+                                        std::span<const uint8_t> payload, const std::string& what) {
+  const std::string where = what + ": tile " + std::to_string(e.tile_id);
+  const CodecInfo* codec = findCodec(e.codec);
+  if (!codec)
+    return makeError(ErrorCode::kUnknownCodec, where + ": codec id " + std::to_string(static_cast<int>(e.codec)) +
+                                                   " is not known to this build");
+  TileContext ctx{header.grid.bits, header.layout};
+  auto mesh = codec->decode(ctx, e.codec_version, payload);
+  if (!mesh.isOk()) return mesh.status().withContext(where);
+  if (mesh->positions.size() != e.vertices || mesh->triangles.size() != e.faces)
+    return makeError(ErrorCode::kMalformed, where + ": decoded counts differ from the index");
+  return mesh;
+}
+
+Result<std::vector<uint8_t>> encodeContainer(const Grid& grid, const AttributeLayout& layout,
+                                             const CodecInfo& codec, std::span<const QuantizedMesh> tiles) {
+  std::vector<uint8_t> out;
+  VectorSink sink(out);
+  ContainerWriter writer(sink, grid, layout);
+  SP_RETURN_IF_ERROR(writer.begin());
+  TileContext ctx{grid.bits, layout};
+  std::vector<uint8_t> payload;
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    payload.clear();
+    SP_RETURN_IF_ERROR(codec.encode(ctx, tiles[i], payload));
+    SP_RETURN_IF_ERROR(writer.addTile(static_cast<uint32_t>(i), codec, tiles[i], payload));
+  }
+  SP_RETURN_IF_ERROR(writer.finish());
+  return out;
+}
+
+Result<ParsedContainer> parseContainer(std::span<const uint8_t> file, const std::string& what) {
+  ParsedContainer pc;
+  SP_ASSIGN_OR_RETURN(pc.header, parseHeader(file, what));
+  Footer footer;
+  SP_ASSIGN_OR_RETURN(footer, parseFooter(file, file.size(), what));
+  SP_ASSIGN_OR_RETURN(pc.tiles, parseIndex(file.subspan(footer.index_offset, footer.index_bytes), pc.header,
+                                           footer, what));
+  return pc;
+}
+
+}  // namespace scanpress

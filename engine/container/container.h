@@ -1,0 +1,107 @@
+// Container format v1 (.spz): the byte-level layout is specified in FORMAT.md next to this file.
+//
+//   header | tile chunk | tile chunk | ... | tile index | footer (magic last)
+//
+// Tiles decode independently; a reader needs the header, the footer, the index and one chunk to decode one
+// tile. Everything is covered by CRC-32C checksums. This module only formats and parses bytes: the file I/O is
+// the caller's (jobs/), through ByteSink for writing and spans for reading.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "engine/codecs/codec.h"
+#include "engine/mesh.h"
+#include "engine/quantize.h"
+#include "engine/status.h"
+
+namespace scanpress {
+
+constexpr uint32_t kContainerVersion = 1;
+constexpr size_t kHeaderSize = 80;
+constexpr size_t kFooterSize = 32;
+constexpr size_t kChunkHeaderSize = 36;
+constexpr size_t kIndexEntrySize = 56;
+constexpr uint32_t kMaxTiles = 1u << 24;
+
+struct ContainerHeader {
+  uint32_t version = kContainerVersion;
+  Grid grid;
+  AttributeLayout layout;
+  uint32_t tile_count = 0;
+  uint64_t vertices = 0;  // sum over tiles (border vertices count once per tile that holds them)
+  uint64_t faces = 0;
+};
+
+struct TileEntry {
+  uint32_t tile_id = 0;
+  CodecId codec = CodecId::kStore;
+  uint16_t codec_version = 0;
+  uint64_t offset = 0;       // of the chunk (its header) from the start of the file
+  uint64_t chunk_bytes = 0;  // chunk header + payload
+  uint32_t vertices = 0;
+  uint32_t faces = 0;
+  Vec3u lo{0, 0, 0};  // quantized bounds of the tile's vertices (inclusive); lo > hi when the tile is empty
+  Vec3u hi{0, 0, 0};
+};
+
+struct Footer {
+  uint64_t index_offset = 0;
+  uint64_t index_bytes = 0;
+};
+
+// Where the writer puts bytes: appended in order, plus one rewrite of the header at the end.
+class ByteSink {
+ public:
+  virtual ~ByteSink() = default;
+  virtual Status append(std::span<const uint8_t> bytes) = 0;
+  virtual Status writeAt(uint64_t offset, std::span<const uint8_t> bytes) = 0;
+};
+
+// Writes a container: begin(), addTile() per tile in the order they should appear, finish(). Totals in the
+// header are filled in by finish(). Not thread-safe: one serial writer per output.
+class ContainerWriter {
+ public:
+  ContainerWriter(ByteSink& sink, const Grid& grid, const AttributeLayout& layout);
+  Status begin();
+  Status addTile(uint32_t tile_id, const CodecInfo& codec, const QuantizedMesh& mesh,
+                 std::span<const uint8_t> payload);
+  Status finish();
+  uint64_t bytesWritten() const { return offset_; }
+  const ContainerHeader& header() const { return header_; }
+
+ private:
+  ByteSink& sink_;
+  ContainerHeader header_;
+  std::vector<TileEntry> entries_;
+  uint64_t offset_ = 0;
+};
+
+std::vector<uint8_t> serializeHeader(const ContainerHeader& header);
+
+// Parsers. `what` names the file in error messages. Offsets in messages are absolute file offsets.
+Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::string& what);
+Result<Footer> parseFooter(std::span<const uint8_t> last_bytes, uint64_t file_size, const std::string& what);
+Result<std::vector<TileEntry>> parseIndex(std::span<const uint8_t> bytes, const ContainerHeader& header,
+                                          const Footer& footer, const std::string& what);
+
+// Checks a tile chunk (header fields against the index entry, both checksums) and returns its payload.
+Result<std::span<const uint8_t>> parseTileChunk(std::span<const uint8_t> chunk, const TileEntry& entry,
+                                                const std::string& what);
+
+// Decodes a verified payload with the entry's codec and checks the counts against the index.
+Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const TileEntry& entry,
+                                        std::span<const uint8_t> payload, const std::string& what);
+
+// Whole-container helpers for in-memory buffers (tests, and small files).
+Result<std::vector<uint8_t>> encodeContainer(const Grid& grid, const AttributeLayout& layout,
+                                             const CodecInfo& codec, std::span<const QuantizedMesh> tiles);
+struct ParsedContainer {
+  ContainerHeader header;
+  std::vector<TileEntry> tiles;
+};
+Result<ParsedContainer> parseContainer(std::span<const uint8_t> file, const std::string& what);
+
+}  // namespace scanpress

@@ -1,0 +1,65 @@
+// The scan's global quantization grid, and quantization of meshes onto it.
+//
+// One grid per scan, chosen before tiling, so that a vertex shared by two tiles has the same integer coordinates
+// in both. Cells are cubic: the largest bounding-box extent divided into 2^bits cells (the convention of Draco's
+// -qp, so sizes compare one to one). A coordinate maps to the index of its cell, clamped to [0, 2^bits - 1], and
+// decodes to the cell's center; the maximum error per axis is half a cell.
+#pragma once
+
+#include "engine/mesh.h"
+#include "engine/status.h"
+
+namespace scanpress {
+
+constexpr int kMinGridBits = 8;
+constexpr int kMaxGridBits = 24;
+constexpr int kDefaultGridBits = 16;
+constexpr int kDefaultNormalBits = 12;
+
+struct BoundingBox {
+  Vec3d lo{1e300, 1e300, 1e300};
+  Vec3d hi{-1e300, -1e300, -1e300};
+  bool empty() const { return lo[0] > hi[0]; }
+  void extend(const Vec3d& p) {
+    for (int a = 0; a < 3; ++a) {
+      if (p[a] < lo[a]) lo[a] = p[a];
+      if (p[a] > hi[a]) hi[a] = p[a];
+    }
+  }
+  double maxExtent() const;
+  double diagonal() const;
+};
+
+struct Grid {
+  Vec3d origin{0, 0, 0};
+  double cell = 1.0;
+  int bits = kDefaultGridBits;
+
+  uint32_t maxCoord() const { return (bits >= 32) ? 0xFFFFFFFFu : ((1u << bits) - 1); }
+  Vec3u quantize(const Vec3d& p) const;
+  Vec3d dequantize(const Vec3u& q) const {
+    return {origin[0] + (q[0] + 0.5) * cell, origin[1] + (q[1] + 0.5) * cell, origin[2] + (q[2] + 0.5) * cell};
+  }
+};
+
+// The grid for a bounding box (must be non-empty and finite) at `bits` in [kMinGridBits, kMaxGridBits].
+Result<Grid> makeGrid(const BoundingBox& box, int bits);
+
+BoundingBox boundingBox(const Mesh& mesh);
+
+struct QuantizeStats {
+  uint64_t degenerate_triangles = 0;   // triangles with two corners in one cell, dropped
+  uint64_t unreferenced_vertices = 0;  // vertices used by no kept triangle, dropped
+};
+
+// Quantizes positions onto `grid`, normals to octahedral `layout.normal_bits` bits (if the mesh has normals and
+// the layout wants them), colors as they are (if the layout has colors). Triangles that quantization makes
+// degenerate and vertices no kept triangle uses are dropped and counted; the other vertices keep their order.
+// Fails with kInvalidArgument if a triangle indexes past the vertex array or attributes do not match the layout.
+Result<QuantizedMesh> quantizeMesh(const Mesh& mesh, const Grid& grid, const AttributeLayout& layout,
+                                   QuantizeStats* stats);
+
+// Back to a float mesh: positions at cell centers, normals decoded from octahedral coordinates.
+Mesh dequantizeMesh(const QuantizedMesh& mesh, const Grid& grid, const AttributeLayout& layout);
+
+}  // namespace scanpress

@@ -1,0 +1,37 @@
+#include "jobs/container_file.h"
+
+namespace scanpress {
+
+Result<ContainerFile> ContainerFile::open(const std::string& path) {
+  ContainerFile cf;
+  SP_ASSIGN_OR_RETURN(auto file, RandomAccessFile::open(path));
+  cf.file_ = std::move(file);
+  std::vector<uint8_t> buf;
+  const uint64_t size = cf.file_->size();
+  if (size < kHeaderSize + kFooterSize)
+    return makeError(ErrorCode::kTruncated, path + ": " + std::to_string(size) +
+                                                " bytes is too short for a scanpress container");
+  SP_RETURN_IF_ERROR(cf.file_->read(0, kHeaderSize, buf));
+  SP_ASSIGN_OR_RETURN(cf.header_, parseHeader(buf, path));
+  SP_RETURN_IF_ERROR(cf.file_->read(size - kFooterSize, kFooterSize, buf));
+  Footer footer;
+  SP_ASSIGN_OR_RETURN(footer, parseFooter(buf, size, path));
+  SP_RETURN_IF_ERROR(cf.file_->read(footer.index_offset, footer.index_bytes, buf));
+  SP_ASSIGN_OR_RETURN(cf.tiles_, parseIndex(buf, cf.header_, footer, path));
+  return cf;
+}
+
+const TileEntry* ContainerFile::findTile(uint32_t tile_id) const {
+  for (const auto& t : tiles_)
+    if (t.tile_id == tile_id) return &t;
+  return nullptr;
+}
+
+Result<QuantizedMesh> ContainerFile::decodeTile(const TileEntry& entry) const {
+  std::vector<uint8_t> chunk;
+  SP_RETURN_IF_ERROR(file_->read(entry.offset, entry.chunk_bytes, chunk));
+  SP_ASSIGN_OR_RETURN(auto payload, parseTileChunk(chunk, entry, path()));
+  return decodeTilePayload(header_, entry, payload, path());
+}
+
+}  // namespace scanpress

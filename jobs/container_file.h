@@ -1,0 +1,31 @@
+// A container on disk: header, footer and index read on open; tiles read on demand with one pread each, so one
+// tile can be decoded without reading the others.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "engine/container/container.h"
+#include "jobs/file_io.h"
+
+namespace scanpress {
+
+class ContainerFile {
+ public:
+  static Result<ContainerFile> open(const std::string& path);
+  const ContainerHeader& header() const { return header_; }
+  const std::vector<TileEntry>& tiles() const { return tiles_; }
+  uint64_t size() const { return file_->size(); }
+  const std::string& path() const { return file_->path(); }
+  const TileEntry* findTile(uint32_t tile_id) const;
+  // Reads, verifies (both checksums) and decodes one tile.
+  Result<QuantizedMesh> decodeTile(const TileEntry& entry) const;
+
+ private:
+  std::shared_ptr<RandomAccessFile> file_;
+  ContainerHeader header_;
+  std::vector<TileEntry> tiles_;
+};
+
+}  // namespace scanpress

@@ -1,0 +1,134 @@
+#include "jobs/mesh_io/mesh_reader.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <limits>
+
+#include "jobs/mesh_io/input.h"
+
+namespace scanpress {
+
+Status ChunkBuffer::flushVertices() {
+  if (pos_.empty()) return Status::ok();
+  Status s = sink_.vertices(pos_, nrm_, col_, channels_);
+  pos_.clear();
+  nrm_.clear();
+  col_.clear();
+  return s;
+}
+
+Status ChunkBuffer::flushTriangles() {
+  SP_RETURN_IF_ERROR(flushVertices());
+  if (tri_.empty()) return Status::ok();
+  Status s = sink_.triangles(tri_);
+  tri_.clear();
+  return s;
+}
+
+MeshFormat formatFromName(const std::string& path) {
+  std::string name = path;
+  for (auto& ch : name) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  if (name.size() > 4 && name.ends_with(".zst")) name.resize(name.size() - 4);
+  if (name.ends_with(".ply")) return MeshFormat::kPly;
+  if (name.ends_with(".obj")) return MeshFormat::kObj;
+  if (name.ends_with(".stl")) return MeshFormat::kStl;
+  if (name.ends_with(".off")) return MeshFormat::kOff;
+  return MeshFormat::kUnknown;
+}
+
+namespace {
+
+MeshFormat sniffFormat(std::span<const uint8_t> head) {
+  std::string_view s(reinterpret_cast<const char*>(head.data()), head.size());
+  if (s.starts_with("ply")) return MeshFormat::kPly;
+  if (s.starts_with("OFF") || s.starts_with("COFF") || s.starts_with("NOFF") || s.starts_with("CNOFF"))
+    return MeshFormat::kOff;
+  if (s.starts_with("solid")) return MeshFormat::kStl;
+  size_t i = 0;
+  while (i < s.size()) {  // OBJ: first meaningful line starts with a known record
+    while (i < s.size() && std::isspace(static_cast<unsigned char>(s[i]))) ++i;
+    if (i < s.size() && s[i] == '#') {
+      while (i < s.size() && s[i] != '\n') ++i;
+      continue;
+    }
+    auto rest = s.substr(i);
+    if (rest.starts_with("v ") || rest.starts_with("vn ") || rest.starts_with("vt ") || rest.starts_with("f ") ||
+        rest.starts_with("o ") || rest.starts_with("g ") || rest.starts_with("mtllib"))
+      return MeshFormat::kObj;
+    break;
+  }
+  if (head.size() >= 84) return MeshFormat::kStl;  // binary STL has no magic
+  return MeshFormat::kUnknown;
+}
+
+class WholeMeshSink : public MeshSink {
+ public:
+  explicit WholeMeshSink(Mesh& mesh) : mesh_(mesh) {}
+  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c,
+                  uint8_t channels) override {
+    const size_t before = mesh_.positions.size();
+    mesh_.positions.insert(mesh_.positions.end(), p.begin(), p.end());
+    if (!n.empty()) {
+      mesh_.normals.resize(before, Vec3f{0, 0, 0});
+      mesh_.normals.insert(mesh_.normals.end(), n.begin(), n.end());
+    }
+    if (!c.empty()) {
+      mesh_.colors.resize(before, Rgba8{255, 255, 255, 255});
+      mesh_.colors.insert(mesh_.colors.end(), c.begin(), c.end());
+      mesh_.color_channels = std::max(mesh_.color_channels, channels);
+    }
+    return Status::ok();
+  }
+  Status triangles(std::span<const Triangle> t) override {
+    mesh_.triangles.insert(mesh_.triangles.end(), t.begin(), t.end());
+    return Status::ok();
+  }
+  Status vertexNormals(uint64_t first, std::span<const Vec3f> n) override {
+    if (first + n.size() > mesh_.positions.size())
+      return makeError(ErrorCode::kInternal, "vertex normals past the vertex count");
+    mesh_.normals.resize(mesh_.positions.size(), Vec3f{0, 0, 0});
+    for (size_t i = 0; i < n.size(); ++i)
+      if (!std::isnan(n[i][0])) mesh_.normals[first + i] = n[i];
+    return Status::ok();
+  }
+  void finish() {  // attributes that started late cover every vertex
+    if (!mesh_.normals.empty()) mesh_.normals.resize(mesh_.positions.size(), Vec3f{0, 0, 0});
+    if (!mesh_.colors.empty()) mesh_.colors.resize(mesh_.positions.size(), Rgba8{255, 255, 255, 255});
+  }
+
+ private:
+  Mesh& mesh_;
+};
+
+}  // namespace
+
+Result<ReadStats> readMesh(const std::string& path, MeshSink& sink, const ReadOptions& options) {
+  SP_ASSIGN_OR_RETURN(auto source, InputSource::open(path));
+  Scanner in(std::move(source), path);
+  MeshFormat format = formatFromName(path);
+  if (format == MeshFormat::kUnknown) {
+    SP_ASSIGN_OR_RETURN(auto head, in.peek(512));
+    format = sniffFormat(head);
+  }
+  switch (format) {
+    case MeshFormat::kPly: return readPly(in, sink, options);
+    case MeshFormat::kObj: return readObj(in, sink, options);
+    case MeshFormat::kStl: return readStl(in, sink, options);
+    case MeshFormat::kOff: return readOff(in, sink, options);
+    case MeshFormat::kUnknown: break;
+  }
+  return makeError(ErrorCode::kUnsupported,
+                   path + ": unknown mesh format (expected .ply, .obj, .stl or .off, optionally .zst-compressed)");
+}
+
+Result<Mesh> readMeshFile(const std::string& path, ReadStats* stats) {
+  Mesh mesh;
+  WholeMeshSink sink(mesh);
+  SP_ASSIGN_OR_RETURN(ReadStats s, readMesh(path, sink));
+  sink.finish();
+  if (stats) *stats = s;
+  return mesh;
+}
+
+}  // namespace scanpress

@@ -1,0 +1,104 @@
+// Streaming mesh readers: PLY (ascii, binary little and big endian, tristrips), OBJ, STL (binary and ascii,
+// welded), OFF; any of them zstd-compressed.
+//
+// A reader hands vertices and triangles to a MeshSink in chunks of at most `ReadOptions::chunk` elements, so its
+// own memory stays bounded whatever the file size (STL keeps one hash entry per distinct position, to weld).
+// Guarantees to the sink: every triangle's indices refer to vertices already delivered; normals and colors, when
+// present, come with their vertices (OBJ only: normals that faces assign to vertices arrive at the end through
+// vertexNormals). Polygons are fan-triangulated.
+//
+// Errors name the file and the line (text formats) or byte offset (binary formats; for compressed files, the
+// offset in the decompressed data). Malformed input fails with kMalformed or kTruncated, never a crash; declared
+// counts are never trusted for allocation.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+
+#include "engine/mesh.h"
+#include "engine/status.h"
+
+namespace scanpress {
+
+enum class MeshFormat { kUnknown, kPly, kObj, kStl, kOff };
+
+struct ReadOptions {
+  size_t chunk = 1u << 16;  // vertices or triangles per sink call
+};
+
+struct ReadStats {
+  MeshFormat format = MeshFormat::kUnknown;
+  std::string format_detail;  // e.g. "PLY binary_big_endian", "STL ascii"
+  uint64_t vertices = 0;      // vertices delivered (after STL welding)
+  uint64_t triangles = 0;     // triangles delivered (after triangulation)
+  uint64_t polygons = 0;      // faces with more than 3 corners that were triangulated
+  uint64_t source_vertices = 0;  // vertex records in the file (STL: 3 per facet)
+};
+
+class MeshSink {
+ public:
+  virtual ~MeshSink() = default;
+  // `normals` and `colors` are empty or as long as `positions`; `color_channels` is 3 or 4 when colors are given.
+  virtual Status vertices(std::span<const Vec3d> positions, std::span<const Vec3f> normals,
+                          std::span<const Rgba8> colors, uint8_t color_channels) = 0;
+  virtual Status triangles(std::span<const Triangle> triangles) = 0;
+  // OBJ: normals referenced by face corners, for vertices [first, first + normals.size()); NaN where none.
+  virtual Status vertexNormals(uint64_t first, std::span<const Vec3f> normals) = 0;
+};
+
+// Format from the name (a trailing .zst is ignored), else from the content.
+MeshFormat formatFromName(const std::string& path);
+
+Result<ReadStats> readMesh(const std::string& path, MeshSink& sink, const ReadOptions& options = {});
+
+// Convenience: the whole mesh in memory.
+Result<Mesh> readMeshFile(const std::string& path, ReadStats* stats = nullptr);
+
+// Format-specific entry points (used by readMesh; exposed for tests).
+class Scanner;
+Result<ReadStats> readPly(Scanner& in, MeshSink& sink, const ReadOptions& options);
+Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& options);
+Result<ReadStats> readStl(Scanner& in, MeshSink& sink, const ReadOptions& options);
+Result<ReadStats> readOff(Scanner& in, MeshSink& sink, const ReadOptions& options);
+
+// Buffers vertices and triangles and hands them to a sink in chunks (shared by the readers).
+class ChunkBuffer {
+ public:
+  ChunkBuffer(MeshSink& sink, size_t chunk, uint8_t color_channels, bool normals)
+      : sink_(sink), chunk_(chunk), channels_(color_channels), normals_(normals) {}
+  Status addVertex(const Vec3d& p, const Vec3f& n, const Rgba8& c) {
+    pos_.push_back(p);
+    if (normals_) nrm_.push_back(n);
+    if (channels_) col_.push_back(c);
+    ++vertices_;
+    return pos_.size() >= chunk_ ? flushVertices() : Status::ok();
+  }
+  Status addTriangle(const Triangle& t) {
+    tri_.push_back(t);
+    ++triangles_;
+    return tri_.size() >= chunk_ ? flushTriangles() : Status::ok();
+  }
+  Status flushVertices();
+  Status flushTriangles();  // flushes pending vertices first
+  Status flush() { return flushTriangles(); }
+  uint64_t vertices() const { return vertices_; }
+  uint64_t triangles() const { return triangles_; }
+
+ private:
+  MeshSink& sink_;
+  size_t chunk_;
+  uint8_t channels_;
+  bool normals_;
+  std::vector<Vec3d> pos_;
+  std::vector<Vec3f> nrm_;
+  std::vector<Rgba8> col_;
+  std::vector<Triangle> tri_;
+  uint64_t vertices_ = 0, triangles_ = 0;
+};
+
+// Limits that make hostile files fail early instead of exhausting memory.
+constexpr uint64_t kMaxVertices = 0xFFFFFFFEull;  // indices are 32-bit
+constexpr uint32_t kMaxPolygonCorners = 1u << 16;
+
+}  // namespace scanpress
