@@ -1,10 +1,15 @@
-// Octahedral normal encoding (Meyer et al., "On floating-point normal vectors", EGSR 2010; the survey of
-// Cigolle et al., JCGT 2014): a unit vector maps to the square [-1,1]^2 by projecting onto the octahedron
-// |x|+|y|+|z| = 1 and folding the lower half over the diagonals. Each component is stored on `bits` bits
-// (values 0 .. 2^bits-1, so the square's center and edges are exactly representable).
+// Octahedral normal encoding (Meyer et al., "On floating-point normal vectors", EGSR 2010; Cigolle et al., "A
+// survey of efficient representations for independent unit vectors", JCGT 2014): a unit vector maps to the square
+// [-1,1]^2 by projecting onto the octahedron |x|+|y|+|z| = 1 and folding the lower half over the diagonals.
 //
-// Precision (measured in tests/test_octahedral.cpp over 10^6 random directions): the maximum angular error is
-// below 0.03 degrees at 12 bits and below 0.2 degrees at 10 bits; it halves with each extra bit.
+// Each component is stored on `bits` bits as round(c * M) + M with M = 2^(bits-1) - 1, so codes run 0 .. 2^bits-2
+// and the square's center, edges and corners are exact (the six axis directions decode exactly). Encoding is the
+// "precise" variant of Cigolle et al.: of the four codes around the projected point, the one whose decoded
+// direction is closest to the input wins. Re-encoding a decoded normal gives back its code (or, on the folded
+// square's border where two codes name one direction, the other code of that direction): no drift.
+//
+// Precision (measured in tests/test_quantize.cpp over 10^6 random directions): maximum angular error 0.051
+// degrees at 12 bits per component (the default) and 0.16 degrees at 10 bits.
 #pragma once
 
 #include <cmath>
@@ -12,6 +17,21 @@
 #include "engine/mesh.h"
 
 namespace scanpress {
+
+inline Vec3f decodeOctahedral(const OctNormal& e, int bits) {
+  const float m = float((1u << (bits - 1)) - 1);
+  float u = (float(e[0]) - m) / m;
+  float v = (float(e[1]) - m) / m;
+  const float z = 1.f - std::fabs(u) - std::fabs(v);
+  if (z < 0.f) {
+    const float fu = (1.f - std::fabs(v)) * (u >= 0.f ? 1.f : -1.f);
+    const float fv = (1.f - std::fabs(u)) * (v >= 0.f ? 1.f : -1.f);
+    u = fu;
+    v = fv;
+  }
+  const float len = std::sqrt(u * u + v * v + z * z);
+  return {u / len, v / len, z / len};
+}
 
 inline OctNormal encodeOctahedral(const Vec3f& n, int bits) {
   const float len = std::fabs(n[0]) + std::fabs(n[1]) + std::fabs(n[2]);
@@ -26,27 +46,21 @@ inline OctNormal encodeOctahedral(const Vec3f& n, int bits) {
       v = fv;
     }
   }
-  const float scale = float((1u << bits) - 1);
-  auto q = [&](float c) {
-    const float t = std::round((c * 0.5f + 0.5f) * scale);
-    return static_cast<uint16_t>(t < 0.f ? 0.f : (t > scale ? scale : t));
-  };
-  return {q(u), q(v)};
-}
-
-inline Vec3f decodeOctahedral(const OctNormal& e, int bits) {
-  const float scale = float((1u << bits) - 1);
-  float u = e[0] / scale * 2.f - 1.f;
-  float v = e[1] / scale * 2.f - 1.f;
-  float z = 1.f - std::fabs(u) - std::fabs(v);
-  if (z < 0.f) {
-    const float fu = (1.f - std::fabs(v)) * (u >= 0.f ? 1.f : -1.f);
-    const float fv = (1.f - std::fabs(u)) * (v >= 0.f ? 1.f : -1.f);
-    u = fu;
-    v = fv;
-  }
-  const float len = std::sqrt(u * u + v * v + z * z);
-  return {u / len, v / len, z / len};
+  const float m = float((1u << (bits - 1)) - 1);
+  auto clampCode = [m](float c) { return static_cast<uint16_t>(c < 0.f ? 0.f : (c > 2.f * m ? 2.f * m : c)); };
+  const float fu = std::floor(u * m) + m, fv = std::floor(v * m) + m;
+  OctNormal best{clampCode(std::round(u * m) + m), clampCode(std::round(v * m) + m)};
+  if (!(len > 0.f && std::isfinite(len))) return best;
+  const float inv = 1.f / std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+  float best_dot = -2.f;
+  for (int du = 0; du < 2; ++du)
+    for (int dv = 0; dv < 2; ++dv) {
+      const OctNormal c{clampCode(fu + du), clampCode(fv + dv)};
+      const Vec3f d = decodeOctahedral(c, bits);
+      const float dot = (d[0] * n[0] + d[1] * n[1] + d[2] * n[2]) * inv;
+      if (dot > best_dot) best_dot = dot, best = c;
+    }
+  return best;
 }
 
 }  // namespace scanpress

@@ -69,7 +69,8 @@ Result<QuantizedMesh> storeDecode(const TileContext& ctx, uint16_t version, std:
     uint8_t b = 0;
     SP_RETURN_IF_ERROR(r.u32(lo[a]));
     SP_RETURN_IF_ERROR(r.u8(b));
-    if (b > ctx.bits || uint64_t(lo[a]) + ((uint64_t(1) << b) - 1) > (uint64_t(1) << ctx.bits) - 1)
+    // Decoded coordinates are lo + (< 2^b) < 2^25: no overflow; validateTile checks they lie on the grid.
+    if (b > ctx.bits || lo[a] > (1u << ctx.bits) - 1)
       return r.error(ErrorCode::kMalformed, "axis range exceeds the grid");
     axis_bits[a] = b;
   }

@@ -2,6 +2,7 @@
 
 #include <zstd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <cstdio>
@@ -48,8 +49,9 @@ class ZstdSource : public InputSource {
       if (in_.pos == in_.size) {
         if (in_eof_) {
           if (!frame_done_)
-            return makeError(ErrorCode::kTruncated,
-                             path_ + ": zstd stream ends inside a frame (compressed file truncated)");
+            return makeError(ErrorCode::kTruncated, path_ + ": byte " + std::to_string(compressed_offset_) +
+                                                        " of the compressed file: zstd stream ends inside a frame "
+                                                        "(compressed file truncated)");
           return size_t{0};
         }
         SP_ASSIGN_OR_RETURN(size_t got, file_->read(in_buf_.data(), in_buf_.size()));
@@ -117,7 +119,7 @@ Status Scanner::errorAtOffset(ErrorCode code, const std::string& message) const 
 }
 
 Status Scanner::errorAtLine(ErrorCode code, const std::string& message) const {
-  return makeError(code, name_ + ":" + std::to_string(line_) + ": " + message);
+  return makeError(code, name_ + ":" + std::to_string(std::max<uint64_t>(line_, 1)) + ": " + message);
 }
 
 Result<bool> Scanner::fill() {

@@ -1,0 +1,139 @@
+// The scanpress binary: exit codes, help, JSON outputs, all-or-nothing outputs.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "test_util.h"
+
+namespace scanpress {
+namespace {
+
+namespace fs = std::filesystem;
+
+int run(const std::string& args, std::string* out = nullptr) {
+  const std::string cmd = std::string("'") + SCANPRESS_BIN + "' " + args;
+  FILE* p = ::popen((cmd + " 2>&1").c_str(), "r");
+  std::string text;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) text.append(buf, n);
+  const int status = ::pclose(p);
+  if (out) *out = text;
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// Files in `dir` whose names contain ".tmp-" (left-over temporaries).
+int temporaries(const std::string& dir) {
+  int n = 0;
+  for (const auto& e : fs::directory_iterator(dir)) n += e.path().filename().string().find(".tmp-") != std::string::npos;
+  return n;
+}
+
+const std::string kBunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
+
+TEST(Cli, UsageErrorsExitOne) {
+  std::string out;
+  EXPECT_EQ(run("", &out), 1);
+  EXPECT_EQ(run("frobnicate", &out), 1);
+  EXPECT_NE(out.find("unknown command"), std::string::npos);
+  EXPECT_EQ(run("encode onlyone", &out), 1);
+  EXPECT_EQ(run("encode a b --bits 99", &out), 1);
+  EXPECT_NE(out.find("--bits"), std::string::npos);
+  EXPECT_EQ(run("encode a b --codec nope", &out), 1);
+  EXPECT_EQ(run("encode a b --what", &out), 1);
+  EXPECT_EQ(run("decode a.spz b.ply --tiles 1,x", &out), 1);
+}
+
+TEST(Cli, HelpOnEveryCommand) {
+  std::string out;
+  for (const char* c : {"--help", "encode --help", "decode --help", "info --help", "help encode"}) {
+    EXPECT_EQ(run(c, &out), 0) << c;
+    EXPECT_NE(out.find("usage"), std::string::npos) << c;
+  }
+}
+
+TEST(Cli, EncodeInfoDecodeWithReport) {
+  testing::TempDir dir;
+  std::string out;
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + dir.file("b.spz") + "' --report '" + dir.file("r.json") + "'", &out), 0)
+      << out;
+  const auto report = nlohmann::json::parse(std::ifstream(dir.file("r.json")));
+  for (const char* key : {"input", "vertices", "faces", "bytes", "bpv", "seconds", "degenerate_triangles_dropped",
+                          "unreferenced_vertices_dropped"})
+    EXPECT_TRUE(report.contains(key)) << key;
+  EXPECT_EQ(report["unreferenced_vertices_dropped"], 1113);
+  EXPECT_EQ(report["bytes"], fs::file_size(dir.file("b.spz")));
+  EXPECT_NEAR(report["bpv"].get<double>(), 8.0 * report["bytes"].get<double>() / report["vertices"].get<double>(), 1e-9);
+  for (const char* stage : {"read", "quantize", "encode", "write"}) EXPECT_TRUE(report["seconds"].contains(stage));
+
+  ASSERT_EQ(run("info '" + dir.file("b.spz") + "' --json --verify", &out), 0) << out;
+  const auto info = nlohmann::json::parse(out);
+  EXPECT_EQ(info["grid"]["bits"], 16);
+  EXPECT_EQ(info["grid"]["origin"].size(), 3u);
+  EXPECT_GT(info["grid"]["cell"].get<double>(), 0);
+  EXPECT_EQ(info["vertices"], 34834);
+  EXPECT_EQ(info["faces"], 69451);
+  EXPECT_EQ(info["bytes"], fs::file_size(dir.file("b.spz")));
+  ASSERT_EQ(info["tiles"].size(), 1u);
+  for (const char* key : {"id", "codec", "bytes", "vertices", "faces"}) EXPECT_TRUE(info["tiles"][0].contains(key));
+  EXPECT_EQ(info["tiles"][0]["codec"], "store");
+
+  ASSERT_EQ(run("decode '" + dir.file("b.spz") + "' '" + dir.file("b.obj") + "' --tiles 0", &out), 0) << out;
+  EXPECT_TRUE(fs::exists(dir.file("b.obj")));
+  EXPECT_EQ(run("decode '" + dir.file("b.spz") + "' '" + dir.file("c.ply") + "' --tiles 5", &out), 1);
+  EXPECT_FALSE(fs::exists(dir.file("c.ply")));
+  EXPECT_EQ(temporaries(dir.path()), 0);
+}
+
+TEST(Cli, BadDataExitsTwoAndLeavesNoOutput) {
+  testing::TempDir dir;
+  testing::writeBytes(dir.file("bad.ply"), "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n"
+                                            "property float y\nproperty float z\nend_header\n0 0 0\n1 nan 0\n");
+  std::string out;
+  EXPECT_EQ(run("encode '" + dir.file("bad.ply") + "' '" + dir.file("o.spz") + "'", &out), 2);
+  EXPECT_NE(out.find("bad.ply:9"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir.file("o.spz")));
+
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + dir.file("b.spz") + "' --quiet", &out), 0);
+  auto bytes = testing::readBytes(dir.file("b.spz"));
+  bytes.resize(bytes.size() - 10);
+  testing::writeBytes(dir.file("t.spz"), std::string(bytes.begin(), bytes.end()));
+  EXPECT_EQ(run("decode '" + dir.file("t.spz") + "' '" + dir.file("t.ply") + "'", &out), 2);
+  EXPECT_NE(out.find("t.spz"), std::string::npos);
+  EXPECT_FALSE(fs::exists(dir.file("t.ply")));
+  EXPECT_EQ(run("info '" + dir.file("t.spz") + "'", &out), 2);
+  EXPECT_EQ(temporaries(dir.path()), 0);
+}
+
+TEST(Cli, EnvironmentErrorsExitThree) {
+  testing::TempDir dir;
+  std::string out;
+  EXPECT_EQ(run("encode '" + dir.file("missing.ply") + "' '" + dir.file("o.spz") + "'", &out), 3);
+  EXPECT_NE(out.find("missing.ply"), std::string::npos);
+  EXPECT_EQ(run("encode '" + kBunny + "' '" + dir.file("no/such/dir/o.spz") + "'", &out), 3);
+}
+
+// A full disk, simulated with a file-size limit: the write fails, the exit code says environment, and neither
+// the output nor a temporary is left behind.
+TEST(Cli, FullDiskLeavesNothingBehind) {
+  testing::TempDir dir;
+  const std::string cmd = "sh -c \"ulimit -f 64; trap '' XFSZ; exec '" + std::string(SCANPRESS_BIN) + "' encode '" +
+                          kBunny + "' '" + dir.file("o.spz") + "'\" 2>&1";
+  FILE* p = ::popen(cmd.c_str(), "r");
+  std::string text;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) text.append(buf, n);
+  const int status = ::pclose(p);
+  ASSERT_TRUE(WIFEXITED(status)) << text;
+  EXPECT_EQ(WEXITSTATUS(status), 3) << text;
+  EXPECT_NE(text.find("o.spz"), std::string::npos) << text;
+  EXPECT_FALSE(fs::exists(dir.file("o.spz")));
+  EXPECT_EQ(temporaries(dir.path()), 0);
+}
+
+}  // namespace
+}  // namespace scanpress

@@ -1,0 +1,182 @@
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <random>
+
+#include "engine/container/container.h"
+#include "engine/io/crc32c.h"
+#include "jobs/container_file.h"
+#include "test_util.h"
+
+namespace scanpress {
+namespace {
+
+struct Fixture {
+  Grid grid;
+  AttributeLayout layout{12, 4};
+  std::vector<QuantizedMesh> tiles;
+  std::vector<uint8_t> bytes;
+};
+
+Fixture makeFixture(int tile_count = 2) {
+  Fixture f;
+  Mesh m = testing::octahedron(2.0);
+  for (size_t i = 0; i < m.positions.size(); ++i) {
+    const auto& p = m.positions[i];
+    m.normals.push_back({static_cast<float>(p[0] / 2), static_cast<float>(p[1] / 2), static_cast<float>(p[2] / 2)});
+    m.colors.push_back({static_cast<uint8_t>(40 * i), 7, 200, 255});
+  }
+  m.color_channels = 4;
+  f.grid = *makeGrid(boundingBox(m), 12);
+  auto q = quantizeMesh(m, f.grid, f.layout, nullptr);
+  for (int t = 0; t < tile_count; ++t) f.tiles.push_back(*q);
+  f.bytes = *encodeContainer(f.grid, f.layout, *findCodec(CodecId::kStore), f.tiles);
+  return f;
+}
+
+// Full decode of an in-memory container: header, footer, index, every tile.
+Status decodeAll(std::span<const uint8_t> file) {
+  auto pc = parseContainer(file, "mem");
+  if (!pc.isOk()) return pc.status();
+  for (const auto& e : pc->tiles) {
+    auto payload = parseTileChunk(file.subspan(e.offset, e.chunk_bytes), e, "mem");
+    if (!payload.isOk()) return payload.status();
+    auto mesh = decodeTilePayload(pc->header, e, *payload, "mem");
+    if (!mesh.isOk()) return mesh.status();
+  }
+  return Status::ok();
+}
+
+TEST(Container, RoundTripsTilesWithAttributes) {
+  Fixture f = makeFixture(3);
+  auto pc = parseContainer(f.bytes, "mem");
+  ASSERT_TRUE(pc.isOk()) << pc.status().toString();
+  EXPECT_EQ(pc->header.tile_count, 3u);
+  EXPECT_EQ(pc->header.vertices, 18u);
+  EXPECT_EQ(pc->header.faces, 24u);
+  EXPECT_EQ(pc->header.layout, f.layout);
+  EXPECT_EQ(pc->header.grid.bits, 12);
+  EXPECT_EQ(pc->header.grid.cell, f.grid.cell);
+  for (const auto& e : pc->tiles) {
+    auto payload = parseTileChunk(std::span(f.bytes).subspan(e.offset, e.chunk_bytes), e, "mem");
+    ASSERT_TRUE(payload.isOk());
+    auto mesh = decodeTilePayload(pc->header, e, *payload, "mem");
+    ASSERT_TRUE(mesh.isOk()) << mesh.status().toString();
+    EXPECT_EQ(mesh->positions, f.tiles[e.tile_id].positions);
+    EXPECT_EQ(mesh->triangles, f.tiles[e.tile_id].triangles);
+    EXPECT_EQ(mesh->normals, f.tiles[e.tile_id].normals);
+    EXPECT_EQ(mesh->colors, f.tiles[e.tile_id].colors);
+  }
+}
+
+TEST(Container, OneTileReadsWithoutTheOthers) {
+  Fixture f = makeFixture(3);
+  testing::TempDir dir;
+  const std::string path = dir.file("c.spz");
+  testing::writeBytes(path, std::string(f.bytes.begin(), f.bytes.end()));
+  // Corrupt tile 0's payload: tile 2 must still decode, tile 0 must fail naming itself.
+  auto pc = parseContainer(f.bytes, "mem");
+  auto bytes = f.bytes;
+  bytes[pc->tiles[0].offset + kChunkHeaderSize + 3] ^= 0x10;
+  testing::writeBytes(path, std::string(bytes.begin(), bytes.end()));
+  auto file = ContainerFile::open(path);
+  ASSERT_TRUE(file.isOk());
+  EXPECT_TRUE(file->decodeTile(file->tiles()[2]).isOk());
+  auto bad = file->decodeTile(file->tiles()[0]);
+  ASSERT_FALSE(bad.isOk());
+  EXPECT_EQ(bad.status().code(), ErrorCode::kChecksum);
+  EXPECT_NE(bad.status().message().find("tile 0"), std::string::npos) << bad.status().message();
+  EXPECT_NE(bad.status().message().find(path), std::string::npos);
+}
+
+TEST(Container, EveryTruncationIsRejected) {
+  Fixture f = makeFixture(2);
+  ASSERT_TRUE(decodeAll(f.bytes).isOk());
+  for (size_t len = 0; len < f.bytes.size(); ++len) {
+    std::vector<uint8_t> cut(f.bytes.begin(), f.bytes.begin() + static_cast<ptrdiff_t>(len));
+    Status s = decodeAll(cut);
+    ASSERT_FALSE(s.isOk()) << "truncation to " << len << " bytes was accepted";
+    EXPECT_FALSE(s.message().empty());
+  }
+}
+
+TEST(Container, EveryFlippedByteIsRejected) {
+  Fixture f = makeFixture(2);
+  for (size_t i = 0; i < f.bytes.size(); ++i) {
+    for (uint8_t mask : {uint8_t{0x01}, uint8_t{0x80}, uint8_t{0xFF}}) {
+      auto bytes = f.bytes;
+      bytes[i] ^= mask;
+      Status s = decodeAll(bytes);
+      ASSERT_FALSE(s.isOk()) << "flip of byte " << i << " with mask " << int(mask) << " was accepted";
+    }
+  }
+}
+
+// Rewrites a header field and fixes the header checksum, to reach the checks behind it.
+void patchHeader(std::vector<uint8_t>& bytes, size_t offset, const void* value, size_t n) {
+  std::memcpy(bytes.data() + offset, value, n);
+  const uint32_t crc = crc32c(std::span(bytes).first(kHeaderSize - 4));
+  std::memcpy(bytes.data() + kHeaderSize - 4, &crc, 4);
+}
+
+TEST(Container, UnknownVersionAndCodecAreTheirOwnErrors) {
+  Fixture f = makeFixture(1);
+  auto bytes = f.bytes;
+  const uint32_t v2 = 2;
+  patchHeader(bytes, 8, &v2, 4);
+  EXPECT_EQ(decodeAll(bytes).code(), ErrorCode::kUnknownVersion);
+
+  // Codec id 999 in both the index and the chunk header, with all checksums fixed up.
+  bytes = f.bytes;
+  auto pc = parseContainer(bytes, "mem");
+  const uint16_t codec = 999;
+  const auto& e = pc->tiles[0];
+  std::memcpy(bytes.data() + e.offset + 8, &codec, 2);
+  uint32_t crc = crc32c(std::span(bytes).subspan(e.offset, kChunkHeaderSize - 4));
+  std::memcpy(bytes.data() + e.offset + kChunkHeaderSize - 4, &crc, 4);
+  const uint64_t index_offset = bytes.size() - kFooterSize - (12 + kIndexEntrySize);
+  std::memcpy(bytes.data() + index_offset + 8 + 4, &codec, 2);
+  crc = crc32c(std::span(bytes).subspan(index_offset, 8 + kIndexEntrySize));
+  std::memcpy(bytes.data() + index_offset + 8 + kIndexEntrySize, &crc, 4);
+  Status s = decodeAll(bytes);
+  EXPECT_EQ(s.code(), ErrorCode::kUnknownCodec) << s.toString();
+
+  // Unknown codec version of a known codec.
+  bytes = f.bytes;
+  const uint16_t version = 77;
+  std::memcpy(bytes.data() + e.offset + 10, &version, 2);
+  crc = crc32c(std::span(bytes).subspan(e.offset, kChunkHeaderSize - 4));
+  std::memcpy(bytes.data() + e.offset + kChunkHeaderSize - 4, &crc, 4);
+  std::memcpy(bytes.data() + index_offset + 8 + 6, &version, 2);
+  crc = crc32c(std::span(bytes).subspan(index_offset, 8 + kIndexEntrySize));
+  std::memcpy(bytes.data() + index_offset + 8 + kIndexEntrySize, &crc, 4);
+  EXPECT_EQ(decodeAll(bytes).code(), ErrorCode::kUnknownVersion);
+}
+
+TEST(StoreCodec, HostilePayloadsFailCleanly) {
+  Fixture f = makeFixture(1);
+  TileContext ctx{f.grid.bits, f.layout};
+  std::vector<uint8_t> payload;
+  ASSERT_TRUE(storeEncode(ctx, f.tiles[0], payload).isOk());
+  // Every truncation, and random garbage, with no checksum in front: the decoder itself must hold.
+  for (size_t len = 0; len < payload.size(); ++len) {
+    std::vector<uint8_t> cut(payload.begin(), payload.begin() + static_cast<ptrdiff_t>(len));
+    EXPECT_FALSE(storeDecode(ctx, 1, cut).isOk());
+  }
+  std::mt19937 rng(4);
+  for (int i = 0; i < 2000; ++i) {
+    auto bytes = payload;
+    for (int k = 0; k < 3; ++k) bytes[rng() % bytes.size()] = static_cast<uint8_t>(rng());
+    auto r = storeDecode(ctx, 1, bytes);
+    if (r.isOk()) {
+      EXPECT_TRUE(validateTile(ctx, *r).isOk());
+    }
+  }
+  // Counts that promise more than the payload holds are rejected before allocating.
+  std::vector<uint8_t> huge = {0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF};
+  EXPECT_EQ(storeDecode(ctx, 1, huge).status().code(), ErrorCode::kTruncated);
+  EXPECT_EQ(storeDecode(ctx, 2, payload).status().code(), ErrorCode::kUnknownVersion);
+}
+
+}  // namespace
+}  // namespace scanpress

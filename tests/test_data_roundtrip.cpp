@@ -1,0 +1,146 @@
+// Every real scan round-trips through `store`: the decoded mesh equals the input after quantization, as the
+// multiset of triangles over quantized positions with orientation kept; attributes come back as quantized.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "engine/container/container.h"
+#include "jobs/commands.h"
+#include "jobs/mesh_io/mesh_reader.h"
+#include "test_util.h"
+
+namespace scanpress {
+namespace {
+
+struct Scan {
+  const char* file;
+  uint64_t vertices;   // vertices the reader delivers (STL: distinct positions)
+  uint64_t triangles;  // from ../shared/data/README.md
+};
+
+const Scan kScans[] = {
+    {"aneurysm_data.stl.zst", 10204, 20294},
+    {"armadillo.obj.zst", 43243, 86482},
+    {"bun_zipper.ply.zst", 35947, 69451},
+    {"bunny.stl.zst", 34834, 69451},
+    {"decimated-max.obj", 5272, 10540},
+    {"fandisk.obj", 6475, 12946},
+    {"gargo.ply.zst", 25002, 50000},
+    {"horse.ply.zst", 48485, 96966},
+    {"igea.ply.zst", 134345, 268686},
+    {"lato000.ply.zst", 44461, 86766},
+    {"lucy.ply.zst", 49987, 99970},
+    {"parasaurolophus_low_normals2.ply.zst", 28291, 54839},
+    {"rs1_normals.ply.zst", 114373, 221803},
+    {"screwdriver.ply", 6789, 13574},
+    {"turbineblade.ply.zst", 99519, 199034},
+};
+
+void PrintTo(const Scan& scan, std::ostream* os) { *os << scan.file; }
+
+class DataRoundTrip : public ::testing::TestWithParam<Scan> {};
+
+TEST_P(DataRoundTrip, StoreIsLosslessAfterQuantization) {
+  const Scan& scan = GetParam();
+  const std::string path = testing::sharedDataDir() + "/" + scan.file;
+  if (!std::filesystem::exists(path)) GTEST_SKIP() << "shared data not found: " << path << " (set SCANPRESS_DATA)";
+  ReadStats stats;
+  auto mesh = readMeshFile(path, &stats);
+  ASSERT_TRUE(mesh.isOk()) << mesh.status().toString();
+  EXPECT_EQ(stats.vertices, scan.vertices);
+  EXPECT_EQ(stats.triangles, scan.triangles);
+  AttributeLayout layout;
+  if (!mesh->normals.empty()) layout.normal_bits = 12;
+  if (!mesh->colors.empty()) layout.color_channels = mesh->color_channels;
+
+  for (int bits : {12, 16, 24}) {
+    SCOPED_TRACE(bits);
+    auto grid = makeGrid(boundingBox(*mesh), bits);
+    ASSERT_TRUE(grid.isOk());
+    QuantizeStats qs;
+    auto q = quantizeMesh(*mesh, *grid, layout, &qs);
+    ASSERT_TRUE(q.isOk());
+    EXPECT_EQ(q->triangles.size() + qs.degenerate_triangles, scan.triangles);
+    EXPECT_EQ(q->positions.size() + qs.unreferenced_vertices, scan.vertices);
+    const QuantizedMesh tiles[] = {*q};
+    auto bytes = encodeContainer(*grid, layout, *findCodec(CodecId::kStore), tiles);
+    ASSERT_TRUE(bytes.isOk());
+    auto pc = parseContainer(*bytes, scan.file);
+    ASSERT_TRUE(pc.isOk()) << pc.status().toString();
+    const auto& e = pc->tiles[0];
+    auto payload = parseTileChunk(std::span(*bytes).subspan(e.offset, e.chunk_bytes), e, scan.file);
+    ASSERT_TRUE(payload.isOk());
+    auto decoded = decodeTilePayload(pc->header, e, *payload, scan.file);
+    ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
+    EXPECT_TRUE(testing::triangleMultiset(*decoded) == testing::triangleMultiset(*q));
+    EXPECT_EQ(decoded->normals, q->normals);
+    EXPECT_EQ(decoded->colors, q->colors);
+  }
+}
+
+// Through files and the commands: encode, decode to PLY, read back, requantize on the container's grid.
+TEST_P(DataRoundTrip, ThroughFilesWithTheCommands) {
+  const Scan& scan = GetParam();
+  const std::string path = testing::sharedDataDir() + "/" + scan.file;
+  if (!std::filesystem::exists(path)) GTEST_SKIP() << "shared data not found: " << path << " (set SCANPRESS_DATA)";
+  testing::TempDir dir;
+  for (int bits : {16, 24}) {
+    SCOPED_TRACE(bits);
+    EncodeSettings es;
+    es.input = path;
+    es.output = dir.file("x.spz");
+    es.bits = bits;
+    auto enc = encodeFile(es);
+    ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+    EXPECT_EQ(enc->faces + enc->quantize.degenerate_triangles, scan.triangles);
+    EXPECT_EQ(enc->bytes, std::filesystem::file_size(es.output));
+
+    ContainerHeader header;
+    auto decoded = decodeContainer(es.output, std::nullopt, &header);
+    ASSERT_TRUE(decoded.isOk());
+    auto original = readMeshFile(path);
+    ASSERT_TRUE(original.isOk());
+    auto expected = quantizeMesh(*original, header.grid, header.layout, nullptr);
+    ASSERT_TRUE(expected.isOk());
+    const auto want = testing::triangleMultiset(*expected);
+    EXPECT_TRUE(testing::triangleMultiset(*decoded) == want);
+
+    DecodeSettings ds{es.output, dir.file("x.ply"), std::nullopt};
+    auto dec = decodeFile(ds);
+    ASSERT_TRUE(dec.isOk()) << dec.status().toString();
+    auto reread = readMeshFile(ds.output);
+    ASSERT_TRUE(reread.isOk());
+    auto requantized = quantizeMesh(*reread, header.grid, header.layout, nullptr);
+    ASSERT_TRUE(requantized.isOk());
+    EXPECT_TRUE(testing::triangleMultiset(*requantized) == want) << "decoded file does not requantize exactly";
+    EXPECT_TRUE(testing::sameNormalDirections(requantized->normals, expected->normals, header.layout.normal_bits));
+    EXPECT_EQ(requantized->colors, expected->colors);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Scans, DataRoundTrip, ::testing::ValuesIn(kScans),
+                         [](const ::testing::TestParamInfo<Scan>& info) {
+                           std::string n = info.param.file;
+                           for (char& c : n)
+                             if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+                           return n;
+                         });
+
+TEST(BundledScan, ReadsAndRoundTrips) {
+  const std::string path = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
+  testing::TempDir dir;
+  EncodeSettings es;
+  es.input = path;
+  es.output = dir.file("b.spz");
+  auto enc = encodeFile(es);
+  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+  EXPECT_EQ(enc->read.vertices, 35947u);
+  EXPECT_EQ(enc->quantize.unreferenced_vertices, 1113u);
+  EXPECT_EQ(enc->faces, 69451u);
+  auto decoded = decodeContainer(es.output, std::vector<uint32_t>{0});
+  ASSERT_TRUE(decoded.isOk());
+  EXPECT_EQ(decoded->triangles.size(), 69451u);
+}
+
+}  // namespace
+}  // namespace scanpress

@@ -1,0 +1,84 @@
+// Helpers shared by the tests.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "engine/mesh.h"
+#include "engine/octahedral.h"
+
+namespace scanpress::testing {
+
+// A triangle over positions, rotated so that its smallest corner comes first (orientation kept).
+using PosTriangle = std::array<Vec3u, 3>;
+
+inline std::vector<PosTriangle> triangleMultiset(const QuantizedMesh& m) {
+  std::vector<PosTriangle> out;
+  out.reserve(m.triangles.size());
+  for (const auto& t : m.triangles) {
+    PosTriangle p{m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]};
+    const int k = static_cast<int>(std::min_element(p.begin(), p.end()) - p.begin());
+    std::rotate(p.begin(), p.begin() + k, p.end());
+    out.push_back(p);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// Whether two octahedral normal arrays name the same directions (codes may differ on the fold border).
+inline bool sameNormalDirections(const std::vector<OctNormal>& a, const std::vector<OctNormal>& b, int bits) {
+  if (a.size() != b.size()) return false;
+  for (size_t i = 0; i < a.size(); ++i) {
+    if (a[i] == b[i]) continue;
+    const Vec3f x = decodeOctahedral(a[i], bits), y = decodeOctahedral(b[i], bits);
+    if (x[0] * y[0] + x[1] * y[1] + x[2] * y[2] < 1.f - 1e-6f) return false;
+  }
+  return true;
+}
+
+inline std::string sharedDataDir() {
+  if (const char* env = std::getenv("SCANPRESS_DATA")) return env;
+  return SCANPRESS_SHARED_DATA;
+}
+
+// A fresh temporary directory, removed with the object.
+class TempDir {
+ public:
+  TempDir() {
+    std::string templ = (std::filesystem::temp_directory_path() / "scanpress-test-XXXXXX").string();
+    path_ = ::mkdtemp(templ.data());
+  }
+  ~TempDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(path_, ec);
+  }
+  std::string file(const std::string& name) const { return path_ + "/" + name; }
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+};
+
+inline void writeBytes(const std::string& path, const std::string& bytes) {
+  std::ofstream(path, std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+}
+
+inline std::vector<uint8_t> readBytes(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return std::vector<uint8_t>(std::istreambuf_iterator<char>(f), {});
+}
+
+// A small closed mesh: an octahedron scaled by `s`.
+inline Mesh octahedron(double s = 1.0) {
+  Mesh m;
+  m.positions = {{s, 0, 0}, {-s, 0, 0}, {0, s, 0}, {0, -s, 0}, {0, 0, s}, {0, 0, -s}};
+  m.triangles = {{0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4}, {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
+  return m;
+}
+
+}  // namespace scanpress::testing
