@@ -190,7 +190,9 @@ TEST(Malformed, EveryCaseFailsCleanlyNamingFileAndPlace) {
     EXPECT_EQ(s.code(), c.code) << s.toString();
     EXPECT_EQ(exitCodeFor(s.code()), 2) << s.toString();
     EXPECT_NE(s.message().find(path), std::string::npos) << "message does not name the file: " << s.message();
-    if (c.has_place) EXPECT_TRUE(std::regex_search(s.message(), place)) << "no line or offset: " << s.message();
+    if (c.has_place) {
+      EXPECT_TRUE(std::regex_search(s.message(), place)) << "no line or offset: " << s.message();
+    }
   }
 }
 

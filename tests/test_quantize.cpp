@@ -89,7 +89,9 @@ TEST(Octahedral, PrecisionAsDocumented) {
     const OctNormal again = encodeOctahedral(decodeOctahedral(e, 12), 12);
     const Vec3f a = decodeOctahedral(e, 12), b = decodeOctahedral(again, 12);
     // Codes on the folded square's border name the same direction twice; compare directions there.
-    if (again != e) EXPECT_GT(a[0] * b[0] + a[1] * b[1] + a[2] * b[2], 1.f - 1e-6f);
+    if (again != e) {
+      EXPECT_GT(a[0] * b[0] + a[1] * b[1] + a[2] * b[2], 1.f - 1e-6f);
+    }
   }
   // Axis directions are exact.
   for (Vec3f axis : {Vec3f{1, 0, 0}, Vec3f{0, -1, 0}, Vec3f{0, 0, 1}, Vec3f{0, 0, -1}}) {

@@ -1,0 +1,107 @@
+// Codec and I/O throughput on real scans: mesh reading (MB/s, Mtri/s) and each codec's encode and decode
+// (Mtri/s, bits per vertex). Scans come from ../shared/data (the bundled bunny when it is missing).
+#include <benchmark/benchmark.h>
+
+#include <filesystem>
+#include <map>
+#include <stdexcept>
+
+#include "engine/codecs/codec.h"
+#include "engine/quantize.h"
+#include "jobs/mesh_io/mesh_reader.h"
+
+namespace scanpress {
+namespace {
+
+std::string scanPath(const std::string& name) {
+  const std::string shared = std::string(SCANPRESS_SHARED_DATA) + "/" + name;
+  if (std::filesystem::exists(shared)) return shared;
+  return std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
+}
+
+struct Prepared {
+  QuantizedMesh mesh;
+  TileContext ctx;
+};
+
+const Prepared& prepared(const std::string& name, int bits) {
+  static std::map<std::pair<std::string, int>, Prepared> cache;
+  auto key = std::make_pair(name, bits);
+  auto it = cache.find(key);
+  if (it != cache.end()) return it->second;
+  auto mesh = readMeshFile(scanPath(name));
+  if (!mesh.isOk()) throw std::runtime_error(mesh.status().toString());
+  Prepared p;
+  auto grid = makeGrid(boundingBox(*mesh), bits);
+  p.ctx.bits = bits;
+  if (!mesh->normals.empty()) p.ctx.layout.normal_bits = kDefaultNormalBits;
+  if (!mesh->colors.empty()) p.ctx.layout.color_channels = mesh->color_channels;
+  p.mesh = *quantizeMesh(*mesh, *grid, p.ctx.layout, nullptr);
+  return cache.emplace(key, std::move(p)).first->second;
+}
+
+void BM_Encode(benchmark::State& state, const CodecInfo* codec, std::string scan, int bits) {
+  const Prepared& p = prepared(scan, bits);
+  std::vector<uint8_t> out;
+  for (auto _ : state) {
+    out.clear();
+    if (!codec->encode(p.ctx, p.mesh, out).isOk()) state.SkipWithError("encode failed");
+    benchmark::DoNotOptimize(out.data());
+  }
+  const double tris = double(p.mesh.triangles.size());
+  state.counters["Mtri/s"] = benchmark::Counter(tris * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["bpv"] = 8.0 * out.size() / p.mesh.positions.size();
+  state.counters["bpt"] = 8.0 * out.size() / tris;
+}
+
+void BM_Decode(benchmark::State& state, const CodecInfo* codec, std::string scan, int bits) {
+  const Prepared& p = prepared(scan, bits);
+  std::vector<uint8_t> out;
+  if (!codec->encode(p.ctx, p.mesh, out).isOk()) return state.SkipWithError("encode failed");
+  for (auto _ : state) {
+    auto m = codec->decode(p.ctx, codec->version, out);
+    if (!m.isOk()) state.SkipWithError("decode failed");
+    benchmark::DoNotOptimize(m);
+  }
+  const double tris = double(p.mesh.triangles.size());
+  state.counters["Mtri/s"] = benchmark::Counter(tris * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["bpv"] = 8.0 * out.size() / p.mesh.positions.size();
+}
+
+void BM_Read(benchmark::State& state, std::string scan) {
+  const std::string path = scanPath(scan);
+  ReadStats stats;
+  for (auto _ : state) {
+    auto m = readMeshFile(path, &stats);
+    if (!m.isOk()) state.SkipWithError(m.status().message().c_str());
+    benchmark::DoNotOptimize(m);
+  }
+  state.counters["Mtri/s"] =
+      benchmark::Counter(double(stats.triangles) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["MB/s_file"] = benchmark::Counter(double(std::filesystem::file_size(path)) * state.iterations() / 1e6,
+                                                   benchmark::Counter::kIsRate);
+}
+
+const char* kScans[] = {"igea.ply.zst", "bun_zipper.ply.zst", "rs1_normals.ply.zst", "gargo.ply.zst"};
+
+int registerAll() {
+  for (const char* scan : kScans) {
+    benchmark::RegisterBenchmark((std::string("Read/") + scan).c_str(), BM_Read, std::string(scan))
+        ->Unit(benchmark::kMillisecond);
+    for (const auto& codec : allCodecs())
+      for (int bits : {12, 16}) {
+        const std::string suffix = std::string(codec.name) + "/" + scan + "/" + std::to_string(bits);
+        benchmark::RegisterBenchmark(("Encode/" + suffix).c_str(), BM_Encode, &codec, std::string(scan), bits)
+            ->Unit(benchmark::kMillisecond);
+        benchmark::RegisterBenchmark(("Decode/" + suffix).c_str(), BM_Decode, &codec, std::string(scan), bits)
+            ->Unit(benchmark::kMillisecond);
+      }
+  }
+  return 0;
+}
+const int kRegistered = registerAll();
+
+}  // namespace
+}  // namespace scanpress
+
+BENCHMARK_MAIN();
