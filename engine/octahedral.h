@@ -51,13 +51,13 @@ inline OctNormal encodeOctahedral(const Vec3f& n, int bits) {
   const float fu = std::floor(u * m) + m, fv = std::floor(v * m) + m;
   OctNormal best{clampCode(std::round(u * m) + m), clampCode(std::round(v * m) + m)};
   if (!(len > 0.f && std::isfinite(len))) return best;
-  const float inv = 1.f / std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-  float best_dot = -2.f;
+  // In double: at 12 bits neighbouring codes differ by cos ~ 1 - 1.4e-7, below float's resolution near 1.
+  double best_dot = -2.0;
   for (int du = 0; du < 2; ++du)
     for (int dv = 0; dv < 2; ++dv) {
       const OctNormal c{clampCode(fu + du), clampCode(fv + dv)};
       const Vec3f d = decodeOctahedral(c, bits);
-      const float dot = (d[0] * n[0] + d[1] * n[1] + d[2] * n[2]) * inv;
+      const double dot = double(d[0]) * n[0] + double(d[1]) * n[1] + double(d[2]) * n[2];
       if (dot > best_dot) best_dot = dot, best = c;
     }
   return best;

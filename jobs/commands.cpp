@@ -1,6 +1,7 @@
 #include "jobs/commands.h"
 
-#include <chrono>
+#include <oneapi/tbb/parallel_for.h>
+
 #include <cmath>
 
 #include "jobs/container_file.h"
@@ -9,63 +10,6 @@
 #include "spatial/weld.h"
 
 namespace scanpress {
-namespace {
-
-class Stopwatch {
- public:
-  double lap() {
-    const auto now = std::chrono::steady_clock::now();
-    const double s = std::chrono::duration<double>(now - last_).count();
-    last_ = now;
-    return s;
-  }
-
- private:
-  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
-};
-
-}  // namespace
-
-Result<EncodeResult> encodeFile(const EncodeSettings& settings) {
-  const CodecInfo* codec = findCodec(settings.codec);
-  if (!codec) return makeError(ErrorCode::kInvalidArgument, "unknown codec '" + settings.codec + "'");
-  if (settings.normal_bits < 4 || settings.normal_bits > 16)
-    return makeError(ErrorCode::kInvalidArgument, "normal bits must be in [4, 16]");
-  EncodeResult result;
-  result.codec = codec->name;
-  Stopwatch clock;
-  SP_ASSIGN_OR_RETURN(Mesh mesh, readMeshFile(settings.input, &result.read));
-  result.seconds.read = clock.lap();
-
-  if (settings.keep_normals && !mesh.normals.empty()) result.layout.normal_bits = static_cast<uint8_t>(settings.normal_bits);
-  if (settings.keep_colors && !mesh.colors.empty()) result.layout.color_channels = mesh.color_channels;
-  auto grid = makeGrid(boundingBox(mesh), settings.bits);
-  if (!grid.isOk()) return grid.status().withContext(settings.input);
-  result.grid = *grid;
-  SP_ASSIGN_OR_RETURN(QuantizedMesh q, quantizeMesh(mesh, result.grid, result.layout, &result.quantize));
-  mesh = Mesh();  // free the float mesh before coding
-  result.seconds.quantize = clock.lap();
-
-  // One tile for now: tiling comes with the parallel pipeline.
-  TileContext ctx{result.grid.bits, result.layout};
-  std::vector<uint8_t> payload;
-  SP_RETURN_IF_ERROR(codec->encode(ctx, q, payload).withContext(settings.input));
-  result.seconds.encode = clock.lap();
-
-  SP_ASSIGN_OR_RETURN(auto file, AtomicFile::create(settings.output));
-  ContainerWriter writer(*file, result.grid, result.layout);
-  SP_RETURN_IF_ERROR(writer.begin());
-  SP_RETURN_IF_ERROR(writer.addTile(0, *codec, q, payload));
-  SP_RETURN_IF_ERROR(writer.finish());
-  SP_RETURN_IF_ERROR(file->commit());
-  result.seconds.write = clock.lap();
-  result.vertices = q.positions.size();
-  result.faces = q.triangles.size();
-  result.bytes = writer.bytesWritten();
-  result.tiles = 1;
-  return result;
-}
-
 Result<QuantizedMesh> decodeContainer(const std::string& path, const std::optional<std::vector<uint32_t>>& tiles,
                                       ContainerHeader* header) {
   SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(path));
@@ -79,12 +23,15 @@ Result<QuantizedMesh> decodeContainer(const std::string& path, const std::option
   } else {
     for (const auto& e : file.tiles()) chosen.push_back(&e);
   }
-  std::vector<QuantizedMesh> decoded;
-  decoded.reserve(chosen.size());
-  for (const TileEntry* e : chosen) {
-    SP_ASSIGN_OR_RETURN(QuantizedMesh m, file.decodeTile(*e));
-    decoded.push_back(std::move(m));
-  }
+  // Tiles decode independently: in parallel, then welded in index order (deterministic).
+  std::vector<QuantizedMesh> decoded(chosen.size());
+  std::vector<Status> errors(chosen.size());
+  tbb::parallel_for(size_t(0), chosen.size(), [&](size_t i) {
+    auto m = file.decodeTile(*chosen[i]);
+    if (m.isOk()) decoded[i] = std::move(m).value();
+    else errors[i] = m.status();
+  });
+  for (const Status& e : errors) SP_RETURN_IF_ERROR(e);
   if (header) *header = file.header();
   if (decoded.empty()) return QuantizedMesh();
   return weldTiles(decoded);

@@ -13,6 +13,8 @@
 
 namespace scanpress {
 
+// Everything that decides what an encode produces and how it runs. The CLI's `encode` options and the job files'
+// keys both map onto this struct (jobs/config.cpp).
 struct EncodeSettings {
   std::string input;
   std::string output;
@@ -21,10 +23,27 @@ struct EncodeSettings {
   int normal_bits = kDefaultNormalBits;
   bool keep_normals = true;
   bool keep_colors = true;
+  uint64_t tile_triangles = 131072;  // target triangles per tile (tiles adapt to density around it)
+  int threads = 0;                   // 0: all cores
+  uint64_t memory_budget = 0;        // bytes; 0: no limit (the scan is processed in memory)
+  std::string scratch_dir;           // parent of the temporary tile bins; empty: the system temp directory
 };
 
 struct StageSeconds {
-  double read = 0, quantize = 0, encode = 0, write = 0;
+  double read = 0;      // first pass over the input: bounds, counts (and the mesh itself when it fits)
+  double quantize = 0;  // second pass: quantization, degenerate triangles, tile histogram
+  double tile = 0;      // tiling and binning
+  double encode = 0;    // the parallel per-tile pipeline, including the ordered write
+  double write = 0;     // index, footer, sync and rename
+};
+
+struct TileReport {
+  uint32_t id = 0;
+  uint32_t vertices = 0;
+  uint32_t faces = 0;
+  uint32_t border_vertices = 0;
+  uint64_t bytes = 0;
+  Status status;
 };
 
 struct EncodeResult {
@@ -32,16 +51,32 @@ struct EncodeResult {
   Grid grid;
   AttributeLayout layout;
   QuantizeStats quantize;
-  uint64_t vertices = 0;  // encoded (after dropping)
-  uint64_t faces = 0;
-  uint64_t bytes = 0;  // container size
-  uint32_t tiles = 0;
+  uint64_t vertices = 0;       // distinct vertices encoded (after dropping)
+  uint64_t faces = 0;          // triangles encoded
+  uint64_t tile_vertices = 0;  // vertices summed over tiles (border vertices count once per tile)
+  uint64_t bytes = 0;          // container size
+  std::vector<TileReport> tiles;
+  uint32_t failed_tiles = 0;
+  bool out_of_core = false;  // tile data went through scratch files
+  int threads = 0;
+  uint64_t peak_rss = 0;  // bytes, this process so far
   StageSeconds seconds;
   std::string codec;
   double bitsPerVertex() const { return vertices ? 8.0 * bytes / vertices : 0.0; }
 };
 
-Result<EncodeResult> encodeFile(const EncodeSettings& settings);
+// Observer of a running encode (progress display). Called from the pipeline's serial writer only.
+class ProgressListener {
+ public:
+  virtual ~ProgressListener() = default;
+  virtual void stage(const char* /*name*/) {}
+  virtual void tiles(uint32_t /*done*/, uint32_t /*total*/, uint64_t /*triangles_done*/) {}
+};
+
+// Encodes one scan: tiling, the parallel per-tile pipeline, the container (jobs/pipeline.cpp). The container is
+// written even when some tiles fail (they are listed in the result); it is not written at all on a read or
+// write error.
+Result<EncodeResult> encodeFile(const EncodeSettings& settings, ProgressListener* progress = nullptr);
 
 struct DecodeSettings {
   std::string input;

@@ -24,7 +24,7 @@ json layoutJson(const AttributeLayout& l) {
 
 }  // namespace
 
-std::string encodeReportJson(const EncodeSettings& settings, const EncodeResult& r) {
+nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& r) {
   json j;
   j["input"] = settings.input;
   j["output"] = settings.output;
@@ -37,18 +37,34 @@ std::string encodeReportJson(const EncodeSettings& settings, const EncodeResult&
   j["input_polygons_triangulated"] = r.read.polygons;
   j["vertices"] = r.vertices;
   j["faces"] = r.faces;
+  j["tile_vertices"] = r.tile_vertices;
   j["degenerate_triangles_dropped"] = r.quantize.degenerate_triangles;
   j["unreferenced_vertices_dropped"] = r.quantize.unreferenced_vertices;
-  j["tiles"] = r.tiles;
   j["bytes"] = r.bytes;
   j["bpv"] = r.bitsPerVertex();
   j["bits_per_triangle"] = r.faces ? 8.0 * r.bytes / r.faces : 0.0;
-  j["seconds"] = {{"read", r.seconds.read},
-                  {"quantize", r.seconds.quantize},
-                  {"encode", r.seconds.encode},
-                  {"write", r.seconds.write},
-                  {"total", r.seconds.read + r.seconds.quantize + r.seconds.encode + r.seconds.write}};
-  return j.dump(2) + "\n";
+  j["threads"] = r.threads;
+  j["memory_budget"] = settings.memory_budget;
+  j["out_of_core"] = r.out_of_core;
+  j["peak_rss"] = r.peak_rss;
+  const double total = r.seconds.read + r.seconds.quantize + r.seconds.tile + r.seconds.encode + r.seconds.write;
+  j["seconds"] = {{"read", r.seconds.read},     {"quantize", r.seconds.quantize}, {"tile", r.seconds.tile},
+                  {"encode", r.seconds.encode}, {"write", r.seconds.write},       {"total", total}};
+  j["mtri_per_second"] = total > 0 ? r.faces / total / 1e6 : 0.0;
+  j["failed_tiles"] = r.failed_tiles;
+  json tiles = json::array();
+  for (const auto& t : r.tiles) {
+    json e = {{"id", t.id},   {"vertices", t.vertices}, {"faces", t.faces}, {"border_vertices", t.border_vertices},
+              {"bytes", t.bytes}, {"status", t.status.isOk() ? "ok" : "failed"}};
+    if (!t.status.isOk()) e["error"] = t.status.toString();
+    tiles.push_back(std::move(e));
+  }
+  j["tiles"] = std::move(tiles);
+  return j;
+}
+
+std::string encodeReportJson(const EncodeSettings& settings, const EncodeResult& result) {
+  return encodeReport(settings, result).dump(2) + "\n";
 }
 
 std::string containerInfoJson(const ContainerFile& file) {

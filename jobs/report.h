@@ -8,7 +8,8 @@
 
 namespace scanpress {
 
-// The encode report as JSON text (pretty-printed).
+// The encode report as JSON text (pretty-printed): counts, drops, bytes, bits per vertex, seconds per stage,
+// threads, memory, and one entry per tile.
 std::string encodeReportJson(const EncodeSettings& settings, const EncodeResult& result);
 // `info --json`: grid, counts, bytes and one entry per tile.
 std::string containerInfoJson(const ContainerFile& file);

@@ -1,15 +1,29 @@
 #include "spatial/weld.h"
 
+#include <cstring>
 #include <unordered_map>
 
 namespace scanpress {
 namespace {
 
-struct PositionHash {
-  size_t operator()(const Vec3u& p) const {
-    uint64_t h = p[0] * 0x9E3779B97F4A7C15ull;
-    h ^= (h >> 29) ^ (p[1] * 0xC2B2AE3D27D4EB4Full);
-    h ^= (h >> 31) ^ (p[2] * 0x165667B19E3779F9ull);
+// A vertex's identity for welding: position and attributes.
+struct Key {
+  Vec3u p;
+  OctNormal n;
+  Rgba8 c;
+  bool operator==(const Key& o) const { return p == o.p && n == o.n && c == o.c; }
+};
+
+struct KeyHash {
+  size_t operator()(const Key& k) const {
+    uint64_t a;
+    uint32_t b;
+    std::memcpy(&a, &k.n, 4);
+    std::memcpy(&b, &k.c, 4);
+    uint64_t h = k.p[0] * 0x9E3779B97F4A7C15ull;
+    h ^= (h >> 29) ^ (k.p[1] * 0xC2B2AE3D27D4EB4Full);
+    h ^= (h >> 31) ^ (k.p[2] * 0x165667B19E3779F9ull);
+    h ^= (h >> 27) ^ ((a << 32 | b) * 0x27D4EB2F165667C5ull);
     return static_cast<size_t>(h ^ (h >> 32));
   }
 };
@@ -17,20 +31,22 @@ struct PositionHash {
 }  // namespace
 
 QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles) {
-  QuantizedMesh out;
   if (tiles.size() == 1) return tiles[0];
+  QuantizedMesh out;
   struct Owner {
     uint32_t index;
     uint32_t tile;
   };
-  std::unordered_map<Vec3u, Owner, PositionHash> first;
+  std::unordered_map<Key, Owner, KeyHash> first;
   std::vector<uint32_t> remap;
   for (uint32_t t = 0; t < tiles.size(); ++t) {
     const QuantizedMesh& tile = tiles[t];
     remap.assign(tile.positions.size(), 0);
     for (size_t v = 0; v < tile.positions.size(); ++v) {
+      const Key key{tile.positions[v], tile.normals.empty() ? OctNormal{0, 0} : tile.normals[v],
+                    tile.colors.empty() ? Rgba8{0, 0, 0, 0} : tile.colors[v]};
       const uint32_t next = static_cast<uint32_t>(out.positions.size());
-      auto [it, inserted] = first.try_emplace(tile.positions[v], Owner{next, t});
+      auto [it, inserted] = first.try_emplace(key, Owner{next, t});
       if (!inserted && it->second.tile != t) {
         remap[v] = it->second.index;
         continue;

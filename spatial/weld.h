@@ -1,10 +1,10 @@
 // Welding decoded tiles back into one mesh.
 //
 // All tiles of a container use the scan's one global grid, so a vertex that lies on a border between tiles has
-// the same integer coordinates in every tile that holds it. weldTiles concatenates tiles and merges vertices of
-// different tiles that share a position (the first tile in the given order keeps its vertex and attributes).
-// Vertices that share a position inside one tile are left as the codec returned them: welding must not change
-// what a single tile decodes to.
+// the same integer coordinates (and attributes) in every tile that holds it. weldTiles concatenates tiles and
+// merges vertices of different tiles that share position, normal and color. Two different scan vertices at one
+// quantized position with different attributes stay apart (their attributes survive); vertices that share a
+// position inside one tile are left as the codec returned them: welding never changes what one tile decodes to.
 #pragma once
 
 #include <span>

@@ -2,6 +2,8 @@
 #pragma once
 
 #include <algorithm>
+#include <cmath>
+#include <compare>
 #include <array>
 #include <cstdlib>
 #include <filesystem>
@@ -25,6 +27,41 @@ inline std::vector<PosTriangle> triangleMultiset(const QuantizedMesh& m) {
     const int k = static_cast<int>(std::min_element(p.begin(), p.end()) - p.begin());
     std::rotate(p.begin(), p.begin() + k, p.end());
     out.push_back(p);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// A triangle corner with its attributes (normal as a direction rounded to 1e-5, so that the two codes of one
+// direction on the octahedral fold compare equal).
+struct Corner {
+  Vec3u p;
+  std::array<int32_t, 3> n;
+  Rgba8 c;
+  auto operator<=>(const Corner&) const = default;
+};
+
+// Triangles with attributed corners, each rotated so that its smallest position comes first (orientation kept),
+// sorted: equal for two meshes when they have the same triangles with the same attributes, whatever the vertex
+// order or the tiling.
+inline std::vector<std::array<Corner, 3>> cornerMultiset(const QuantizedMesh& m, int normal_bits) {
+  auto corner = [&](uint32_t v) {
+    Corner c{m.positions[v], {0, 0, 0}, m.colors.empty() ? Rgba8{0, 0, 0, 0} : m.colors[v]};
+    if (!m.normals.empty()) {
+      const Vec3f d = decodeOctahedral(m.normals[v], normal_bits);
+      for (int a = 0; a < 3; ++a) c.n[a] = static_cast<int32_t>(std::lround(d[a] * 1e5));
+    }
+    return c;
+  };
+  std::vector<std::array<Corner, 3>> out;
+  out.reserve(m.triangles.size());
+  for (const auto& t : m.triangles) {
+    std::array<Corner, 3> tri{corner(t[0]), corner(t[1]), corner(t[2])};
+    const int k = static_cast<int>(std::min_element(tri.begin(), tri.end(),
+                                                    [](const Corner& a, const Corner& b) { return a.p < b.p; }) -
+                                   tri.begin());
+    std::rotate(tri.begin(), tri.begin() + k, tri.end());
+    out.push_back(tri);
   }
   std::sort(out.begin(), out.end());
   return out;

@@ -97,22 +97,35 @@ Status ContainerWriter::begin() {
   return Status::ok();
 }
 
+void meshBounds(const QuantizedMesh& mesh, Vec3u& lo, Vec3u& hi) {
+  lo = {UINT32_MAX, UINT32_MAX, UINT32_MAX};
+  hi = {0, 0, 0};
+  for (const auto& p : mesh.positions)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+}
+
 Status ContainerWriter::addTile(uint32_t tile_id, const CodecInfo& codec, const QuantizedMesh& mesh,
                                 std::span<const uint8_t> payload) {
-  if (entries_.size() >= kMaxTiles) return makeError(ErrorCode::kLimitExceeded, "too many tiles");
   if (mesh.positions.size() > UINT32_MAX || mesh.triangles.size() > UINT32_MAX)
     return makeError(ErrorCode::kLimitExceeded, "tile has more than 2^32-1 vertices or faces");
+  Vec3u lo, hi;
+  meshBounds(mesh, lo, hi);
+  return addTile(tile_id, codec, static_cast<uint32_t>(mesh.positions.size()),
+                 static_cast<uint32_t>(mesh.triangles.size()), lo, hi, payload);
+}
+
+Status ContainerWriter::addTile(uint32_t tile_id, const CodecInfo& codec, uint32_t vertices, uint32_t faces,
+                                const Vec3u& lo, const Vec3u& hi, std::span<const uint8_t> payload) {
+  if (entries_.size() >= kMaxTiles) return makeError(ErrorCode::kLimitExceeded, "too many tiles");
   TileEntry e;
   e.tile_id = tile_id;
   e.codec = codec.id;
   e.codec_version = codec.version;
   e.offset = offset_;
-  e.vertices = static_cast<uint32_t>(mesh.positions.size());
-  e.faces = static_cast<uint32_t>(mesh.triangles.size());
-  e.lo = {UINT32_MAX, UINT32_MAX, UINT32_MAX};
-  e.hi = {0, 0, 0};
-  for (const auto& p : mesh.positions)
-    for (int a = 0; a < 3; ++a) e.lo[a] = std::min(e.lo[a], p[a]), e.hi[a] = std::max(e.hi[a], p[a]);
+  e.vertices = vertices;
+  e.faces = faces;
+  e.lo = lo;
+  e.hi = hi;
   const auto head = chunkHeader(e, payload);
   e.chunk_bytes = head.size() + payload.size();
   SP_RETURN_IF_ERROR(sink_.append(head));

@@ -68,6 +68,9 @@ class ContainerWriter {
   Status begin();
   Status addTile(uint32_t tile_id, const CodecInfo& codec, const QuantizedMesh& mesh,
                  std::span<const uint8_t> payload);
+  // The same from a summary of the tile (counts and quantized bounds), when the mesh is no longer at hand.
+  Status addTile(uint32_t tile_id, const CodecInfo& codec, uint32_t vertices, uint32_t faces, const Vec3u& lo,
+                 const Vec3u& hi, std::span<const uint8_t> payload);
   Status finish();
   uint64_t bytesWritten() const { return offset_; }
   const ContainerHeader& header() const { return header_; }
@@ -80,6 +83,9 @@ class ContainerWriter {
 };
 
 std::vector<uint8_t> serializeHeader(const ContainerHeader& header);
+
+// Quantized bounds of a mesh's vertices (lo = UINT32_MAX, hi = 0 when it has none).
+void meshBounds(const QuantizedMesh& mesh, Vec3u& lo, Vec3u& hi);
 
 // Parsers. `what` names the file in error messages. Offsets in messages are absolute file offsets.
 Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::string& what);

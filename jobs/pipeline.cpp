@@ -1,0 +1,440 @@
+// The encode pipeline for one scan: bounded-memory passes over the input, tiling, and a oneTBB flow graph that
+// runs the per-tile pipeline in parallel and writes tiles in order.
+//
+//   pass 1  stream the input: bounding box, counts, which attributes exist (and the mesh itself, if it fits)
+//   grid    the scan's one global quantization grid
+//   pass 2  stream again (or replay the buffered mesh): quantize vertices into the vertex store, drop triangles
+//           that quantization makes degenerate, count each vertex's valence, histogram triangle centroids
+//   tiling  octree tiles from the histogram (spatial/tiling), then a counting sort of triangles into tile bins
+//   graph   source -> limiter -> tile task (parallel) -> sequencer (tile order) -> serial container writer
+//
+// Memory: with no budget everything stays in memory. With a budget, the store, the spill and the bins go to
+// scratch files when they would not fit in half of it, their buffers take about a quarter each, and the limiter
+// keeps the tiles in flight (and the tile size) within the rest. The output is byte-identical at any thread count:
+// each tile's bytes depend only on its content, and the sequencer restores tile order.
+#include <sys/resource.h>
+
+#include <oneapi/tbb/flow_graph.h>
+#include <oneapi/tbb/global_control.h>
+#include <oneapi/tbb/info.h>
+#include <oneapi/tbb/task_arena.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <new>
+#include <optional>
+
+#include "engine/codecs/codec.h"
+#include "engine/container/container.h"
+#include "engine/octahedral.h"
+#include "engine/tile.h"
+#include "jobs/commands.h"
+#include "jobs/file_io.h"
+#include "jobs/scan_store.h"
+#include "spatial/tiling.h"
+
+namespace scanpress {
+namespace {
+
+constexpr uint64_t kTileBytesPerTriangle = 160;  // measured peak of a tile task, generously rounded up
+
+class Stopwatch {
+ public:
+  double lap() {
+    const auto now = std::chrono::steady_clock::now();
+    const double s = std::chrono::duration<double>(now - last_).count();
+    last_ = now;
+    return s;
+  }
+
+ private:
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
+
+uint64_t peakRss() {
+  struct rusage ru {};
+  ::getrusage(RUSAGE_SELF, &ru);
+  return static_cast<uint64_t>(ru.ru_maxrss) * 1024;
+}
+
+// Pass 1: bounds, counts, attributes; keeps the mesh while it fits in `keep_limit` bytes.
+class SurveySink : public MeshSink {
+ public:
+  explicit SurveySink(uint64_t keep_limit) : keep_limit_(keep_limit) {}
+  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c,
+                  uint8_t channels) override {
+    for (const auto& v : p) box.extend(v);
+    vertex_count += p.size();
+    has_normals |= !n.empty();
+    if (!c.empty()) channels_ = std::max(channels_, channels);
+    if (keeping()) {
+      const size_t before = mesh.positions.size();
+      mesh.positions.insert(mesh.positions.end(), p.begin(), p.end());
+      if (!n.empty() || !mesh.normals.empty()) {
+        mesh.normals.resize(before, Vec3f{0, 0, 0});
+        if (n.empty()) mesh.normals.resize(before + p.size(), Vec3f{0, 0, 0});
+        else mesh.normals.insert(mesh.normals.end(), n.begin(), n.end());
+      }
+      if (!c.empty() || !mesh.colors.empty()) {
+        mesh.colors.resize(before, Rgba8{255, 255, 255, 255});
+        if (c.empty()) mesh.colors.resize(before + p.size(), Rgba8{255, 255, 255, 255});
+        else mesh.colors.insert(mesh.colors.end(), c.begin(), c.end());
+      }
+      checkLimit();
+    }
+    return Status::ok();
+  }
+  Status triangles(std::span<const Triangle> t) override {
+    triangle_count += t.size();
+    if (keeping()) {
+      mesh.triangles.insert(mesh.triangles.end(), t.begin(), t.end());
+      checkLimit();
+    }
+    return Status::ok();
+  }
+  Status vertexNormals(uint64_t first, std::span<const Vec3f> n) override {
+    has_normals = true;
+    if (keeping()) {
+      mesh.normals.resize(mesh.positions.size(), Vec3f{0, 0, 0});
+      for (size_t i = 0; i < n.size(); ++i)
+        if (!std::isnan(n[i][0])) mesh.normals[first + i] = n[i];
+    }
+    return Status::ok();
+  }
+  bool kept() const { return !dropped_; }
+  uint8_t colorChannels() const { return channels_; }
+
+  BoundingBox box;
+  uint64_t vertex_count = 0, triangle_count = 0;
+  bool has_normals = false;
+  Mesh mesh;
+
+ private:
+  bool keeping() const { return !dropped_; }
+  void checkLimit() {
+    const uint64_t bytes = mesh.positions.size() * sizeof(Vec3d) + mesh.normals.size() * sizeof(Vec3f) +
+                           mesh.colors.size() * sizeof(Rgba8) + mesh.triangles.size() * sizeof(Triangle);
+    if (bytes > keep_limit_) {
+      dropped_ = true;
+      mesh = Mesh();
+    }
+  }
+  uint64_t keep_limit_;
+  bool dropped_ = false;
+  uint8_t channels_ = 0;
+};
+
+// Pass 2: quantize into the store, drop degenerate triangles, valences, histogram, spill.
+class IngestSink : public MeshSink {
+ public:
+  IngestSink(const Grid& grid, const AttributeLayout& layout, VertexStore& store, TileHistogram& hist,
+             TriangleSpill& spill)
+      : grid_(grid), layout_(layout), store_(store), hist_(hist), spill_(spill) {}
+  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c,
+                  uint8_t) override {
+    const OctNormal no_normal = encodeOctahedral({0, 0, 0}, layout_.hasNormals() ? layout_.normal_bits : 8);
+    for (size_t i = 0; i < p.size(); ++i) {
+      VertexRecord r;
+      r.q = grid_.quantize(p[i]);
+      if (layout_.hasNormals()) r.normal = n.empty() ? no_normal : encodeOctahedral(n[i], layout_.normal_bits);
+      if (layout_.hasColors() && !c.empty()) r.color = c[i];
+      SP_RETURN_IF_ERROR(store_.append(r));
+    }
+    return Status::ok();
+  }
+  Status triangles(std::span<const Triangle> tris) override {
+    VertexRecord r[3];
+    for (const Triangle& t : tris) {
+      for (int k = 0; k < 3; ++k) SP_RETURN_IF_ERROR(store_.get(t[k], r[k]));
+      if (r[0].q == r[1].q || r[1].q == r[2].q || r[0].q == r[2].q) {
+        ++stats.degenerate_triangles;
+        continue;
+      }
+      for (uint32_t v : t) {
+        bool first = false;
+        SP_RETURN_IF_ERROR(store_.bumpValence(v, first));
+        referenced += first;
+      }
+      const Vec3u c = triangleCentroid(r[0].q, r[1].q, r[2].q);
+      hist_.add(c);
+      SP_RETURN_IF_ERROR(spill_.append({t, c}));
+    }
+    return Status::ok();
+  }
+  Status vertexNormals(uint64_t first, std::span<const Vec3f> n) override {
+    if (!layout_.hasNormals()) return Status::ok();
+    for (size_t i = 0; i < n.size(); ++i)
+      if (!std::isnan(n[i][0])) SP_RETURN_IF_ERROR(store_.setNormal(first + i, encodeOctahedral(n[i], layout_.normal_bits)));
+    return Status::ok();
+  }
+
+  QuantizeStats stats;
+  uint64_t referenced = 0;
+
+ private:
+  const Grid& grid_;
+  const AttributeLayout& layout_;
+  VertexStore& store_;
+  TileHistogram& hist_;
+  TriangleSpill& spill_;
+};
+
+// Feeds a buffered mesh to a sink in chunks, as a reader would.
+Status replay(const Mesh& m, MeshSink& sink, size_t chunk) {
+  for (size_t i = 0; i < m.positions.size(); i += chunk) {
+    const size_t n = std::min(chunk, m.positions.size() - i);
+    SP_RETURN_IF_ERROR(sink.vertices(std::span(m.positions).subspan(i, n),
+                                     m.normals.empty() ? std::span<const Vec3f>() : std::span(m.normals).subspan(i, n),
+                                     m.colors.empty() ? std::span<const Rgba8>() : std::span(m.colors).subspan(i, n),
+                                     m.color_channels));
+  }
+  for (size_t i = 0; i < m.triangles.size(); i += chunk)
+    SP_RETURN_IF_ERROR(sink.triangles(std::span(m.triangles).subspan(i, std::min(chunk, m.triangles.size() - i))));
+  return Status::ok();
+}
+
+struct TileJob {
+  uint32_t tile = 0;
+};
+
+struct TileResult {
+  uint32_t tile = 0;
+  Status status;
+  std::vector<uint8_t> payload;
+  uint32_t vertices = 0, faces = 0, border = 0;
+  Vec3u lo{0, 0, 0}, hi{0, 0, 0};
+};
+
+// Builds the tile's local mesh (sorted global ids, local triangles, border flags) from the bins and the store.
+Status buildTileMesh(uint32_t tile, const TileBins& bins, const VertexStore& store, const AttributeLayout& layout,
+                     TileMesh& out) {
+  std::vector<Triangle> tris;
+  SP_RETURN_IF_ERROR(bins.read(tile, tris));
+  std::vector<uint32_t>& ids = out.local_to_global;
+  ids.clear();
+  ids.reserve(tris.size() * 3);
+  for (const auto& t : tris) ids.insert(ids.end(), t.begin(), t.end());
+  std::sort(ids.begin(), ids.end());
+  ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+  std::vector<VertexRecord> records;
+  SP_RETURN_IF_ERROR(store.read(ids, records));
+  out.tile_id = tile;
+  QuantizedMesh& m = out.mesh;
+  m.positions.resize(ids.size());
+  for (size_t i = 0; i < ids.size(); ++i) m.positions[i] = records[i].q;
+  if (layout.hasNormals()) {
+    m.normals.resize(ids.size());
+    for (size_t i = 0; i < ids.size(); ++i) m.normals[i] = records[i].normal;
+  }
+  if (layout.hasColors()) {
+    m.colors.resize(ids.size());
+    for (size_t i = 0; i < ids.size(); ++i) m.colors[i] = records[i].color;
+  }
+  std::vector<uint32_t> local_valence(ids.size(), 0);
+  m.triangles.resize(tris.size());
+  for (size_t t = 0; t < tris.size(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t local =
+          static_cast<uint32_t>(std::lower_bound(ids.begin(), ids.end(), tris[t][k]) - ids.begin());
+      m.triangles[t][k] = local;
+      ++local_valence[local];
+    }
+  out.border.resize(ids.size());
+  for (size_t i = 0; i < ids.size(); ++i) out.border[i] = local_valence[i] < records[i].valence ? 1 : 0;
+  return Status::ok();
+}
+
+Status statusFromException() {
+  try {
+    throw;
+  } catch (const std::bad_alloc&) {
+    return makeError(ErrorCode::kIo, "out of memory");
+  } catch (const std::exception& e) {
+    return makeError(ErrorCode::kInternal, e.what());
+  } catch (...) {
+    return makeError(ErrorCode::kInternal, "unknown exception");
+  }
+}
+
+}  // namespace
+
+Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progress) {
+  const CodecInfo* codec = findCodec(s.codec);
+  if (!codec) return makeError(ErrorCode::kInvalidArgument, "unknown codec '" + s.codec + "'");
+  if (s.normal_bits < 4 || s.normal_bits > 16)
+    return makeError(ErrorCode::kInvalidArgument, "normal bits must be in [4, 16]");
+  EncodeResult result;
+  result.codec = codec->name;
+  result.threads = s.threads > 0 ? s.threads : tbb::info::default_concurrency();
+  const uint64_t budget = s.memory_budget;
+  Stopwatch clock;
+
+  // ---- pass 1
+  if (progress) progress->stage("reading");
+  SurveySink survey(budget == 0 ? UINT64_MAX : budget / 3);
+  SP_ASSIGN_OR_RETURN(result.read, readMesh(s.input, survey));
+  if (s.keep_normals && survey.has_normals) result.layout.normal_bits = static_cast<uint8_t>(s.normal_bits);
+  if (s.keep_colors && survey.colorChannels()) result.layout.color_channels = survey.colorChannels();
+  auto grid = makeGrid(survey.box, s.bits);
+  if (!grid.isOk()) return grid.status().withContext(s.input);
+  result.grid = *grid;
+  result.seconds.read = clock.lap();
+
+  // ---- memory plan
+  const uint64_t n_vertices = survey.vertex_count, n_triangles = survey.triangle_count;
+  const uint64_t in_memory_bytes = n_vertices * sizeof(VertexRecord) + n_triangles * (sizeof(SpilledTriangle) + sizeof(Triangle));
+  const bool in_memory = budget == 0 || in_memory_bytes <= budget / 2;
+  result.out_of_core = !in_memory;
+  uint64_t target = std::max<uint64_t>(1, s.tile_triangles);
+  if (budget > 0)  // tiles in flight must fit in a quarter of the budget, at least one per thread
+    target = std::min(target, std::max<uint64_t>(4096, budget / 4 / kTileBytesPerTriangle / result.threads));
+  std::optional<ScratchDir> scratch;
+  std::string scratch_path;
+  if (!in_memory) {
+    SP_ASSIGN_OR_RETURN(ScratchDir dir, ScratchDir::create(s.scratch_dir));
+    scratch.emplace(std::move(dir));
+    scratch_path = scratch->path();
+  }
+  auto scratchFile = [&](const char* name) { return scratch ? scratch->file(name) : std::string(); };
+
+  // ---- pass 2
+  if (progress) progress->stage("quantizing");
+  VertexStore store(scratchFile("vertices.bin"), in_memory ? UINT64_MAX / 2 : budget / 4);
+  TileHistogram histogram(result.grid.bits, n_triangles, target);
+  TriangleSpill spill(scratchFile("triangles.bin"), in_memory);
+  IngestSink ingest(result.grid, result.layout, store, histogram, spill);
+  if (survey.kept()) {
+    SP_RETURN_IF_ERROR(replay(survey.mesh, ingest, ReadOptions().chunk));
+    survey.mesh = Mesh();
+  } else {
+    auto again = readMesh(s.input, ingest);
+    if (!again.isOk()) return again.status();
+    if (again->vertices != n_vertices || again->triangles != n_triangles)
+      return makeError(ErrorCode::kIo, s.input + ": file changed between the two passes");
+  }
+  SP_RETURN_IF_ERROR(spill.finish());
+  result.quantize = ingest.stats;
+  result.quantize.unreferenced_vertices = n_vertices - ingest.referenced;
+  result.vertices = ingest.referenced;
+  result.faces = spill.size();
+  result.seconds.quantize = clock.lap();
+
+  // ---- tiling and binning
+  if (progress) progress->stage("tiling");
+  const TileIndex index = TileIndex::build(histogram);
+  const auto tiles = index.tiles();
+  std::vector<uint64_t> counts(tiles.size());
+  for (size_t t = 0; t < tiles.size(); ++t) counts[t] = tiles[t].triangles;
+  TileBins bins(scratchFile("bins.bin"), in_memory, counts, budget / 4);
+  {
+    std::vector<SpilledTriangle> chunk(1u << 16);
+    for (uint64_t first = 0; first < spill.size(); first += chunk.size()) {
+      const size_t n = static_cast<size_t>(std::min<uint64_t>(chunk.size(), spill.size() - first));
+      SP_RETURN_IF_ERROR(spill.read(first, std::span(chunk).first(n)));
+      for (size_t i = 0; i < n; ++i) {
+        const uint32_t tile = index.tileOf(chunk[i].centroid);
+        if (tile == UINT32_MAX) return makeError(ErrorCode::kInternal, "triangle centroid outside every tile");
+        SP_RETURN_IF_ERROR(bins.add(tile, chunk[i].t));
+      }
+    }
+  }
+  SP_RETURN_IF_ERROR(bins.finish());
+  spill.release();
+  SP_RETURN_IF_ERROR(store.finalize());
+  result.seconds.tile = clock.lap();
+
+  // ---- the flow graph
+  if (progress) progress->stage("encoding");
+  SP_ASSIGN_OR_RETURN(auto file, AtomicFile::create(s.output));
+  ContainerWriter writer(*file, result.grid, result.layout);
+  SP_RETURN_IF_ERROR(writer.begin());
+  const TileContext ctx{result.grid.bits, result.layout};
+  const uint32_t tile_count = static_cast<uint32_t>(tiles.size());
+  size_t in_flight = 2 * static_cast<size_t>(result.threads);
+  if (budget > 0)
+    in_flight = std::clamp<size_t>(budget / 4 / (target * kTileBytesPerTriangle), 1, in_flight);
+  Status write_status;
+  uint32_t written = 0;
+  uint64_t triangles_done = 0;
+  result.tiles.resize(tile_count);
+
+  auto runTile = [&](const TileJob& job) -> TileResult {
+    TileResult r;
+    r.tile = job.tile;
+    try {
+      TileMesh tm;
+      r.status = buildTileMesh(job.tile, bins, store, result.layout, tm);
+      // Per-tile stages run here in order (simplify, remesh: border vertices stay fixed, see engine/tile.h);
+      // the codec is the last stage.
+      if (r.status.isOk()) r.status = codec->encode(ctx, tm.mesh, r.payload);
+      r.vertices = static_cast<uint32_t>(tm.mesh.positions.size());
+      r.faces = static_cast<uint32_t>(tm.mesh.triangles.size());
+      r.border = static_cast<uint32_t>(std::count(tm.border.begin(), tm.border.end(), 1));
+      meshBounds(tm.mesh, r.lo, r.hi);
+    } catch (...) {
+      r.status = statusFromException();
+      r.payload.clear();
+    }
+    return r;
+  };
+  auto writeTile = [&](const TileResult& r) {
+    TileReport& rep = result.tiles[r.tile];
+    rep.id = r.tile;
+    rep.vertices = r.vertices;
+    rep.faces = r.faces;
+    rep.border_vertices = r.border;
+    rep.status = r.status;
+    if (!r.status.isOk()) {
+      ++result.failed_tiles;
+    } else if (write_status.isOk()) {
+      write_status = writer.addTile(r.tile, *codec, r.vertices, r.faces, r.lo, r.hi, r.payload);
+      rep.bytes = kChunkHeaderSize + r.payload.size();
+      result.tile_vertices += r.vertices;
+    }
+    ++written;
+    triangles_done += r.faces;
+    if (progress) progress->tiles(written, tile_count, triangles_done);
+  };
+
+  tbb::task_arena arena(result.threads);
+  arena.execute([&] {
+    namespace flow = tbb::flow;
+    flow::graph g;
+    uint32_t next = 0;
+    flow::input_node<TileJob> source(g, [&](tbb::flow_control& fc) -> TileJob {
+      if (next >= tile_count) {
+        fc.stop();
+        return TileJob{};
+      }
+      return TileJob{next++};
+    });
+    flow::limiter_node<TileJob> limiter(g, in_flight);
+    flow::function_node<TileJob, TileResult> work(g, flow::unlimited, runTile);
+    flow::sequencer_node<TileResult> order(g, [](const TileResult& r) { return static_cast<size_t>(r.tile); });
+    flow::function_node<TileResult, flow::continue_msg> sink(g, flow::serial, [&](const TileResult& r) {
+      writeTile(r);
+      return flow::continue_msg();
+    });
+    flow::make_edge(source, limiter);
+    flow::make_edge(limiter, work);
+    flow::make_edge(work, order);
+    flow::make_edge(order, sink);
+    flow::make_edge(sink, limiter.decrementer());
+    source.activate();
+    g.wait_for_all();
+  });
+  SP_RETURN_IF_ERROR(write_status);
+  result.seconds.encode = clock.lap();
+
+  SP_RETURN_IF_ERROR(writer.finish());
+  SP_RETURN_IF_ERROR(file->commit());
+  result.bytes = writer.bytesWritten();
+  result.seconds.write = clock.lap();
+  result.peak_rss = peakRss();
+  return result;
+}
+
+}  // namespace scanpress

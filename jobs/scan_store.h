@@ -1,0 +1,139 @@
+// Storage for one scan while it is tiled: the vertex store, the triangle spill and the per-tile bins. Each keeps
+// its data in memory when its share of the memory budget allows and in a file of the job's scratch directory
+// otherwise, with bounded buffers, so that a scan larger than memory streams through disk.
+//
+// Thread safety: filling (append, get, bump, set) is single-threaded. After finalize(), VertexStore::read and
+// TileBins::read may be called from many threads at once.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "engine/mesh.h"
+#include "engine/status.h"
+
+namespace scanpress {
+
+// A scratch directory, removed with its contents when the object dies (on success and on failure).
+class ScratchDir {
+ public:
+  static Result<ScratchDir> create(const std::string& parent);  // parent empty: the system temp directory
+  ScratchDir() = default;
+  ScratchDir(ScratchDir&& o) noexcept : path_(std::move(o.path_)) { o.path_.clear(); }
+  ScratchDir& operator=(ScratchDir&&) = delete;
+  ~ScratchDir();
+  std::string file(const std::string& name) const { return path_ + "/" + name; }
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+};
+
+// Raw positional file I/O that maps errors to kIo / kDiskFull.
+class ScratchFile {
+ public:
+  ScratchFile() = default;
+  ScratchFile(const ScratchFile&) = delete;
+  ScratchFile& operator=(const ScratchFile&) = delete;
+  ~ScratchFile();
+  Status open(const std::string& path);
+  bool isOpen() const { return fd_ >= 0; }
+  Status writeAt(uint64_t offset, const void* data, size_t n);
+  Status readAt(uint64_t offset, void* data, size_t n) const;
+
+ private:
+  int fd_ = -1;
+  std::string path_;
+};
+
+struct VertexRecord {
+  Vec3u q{0, 0, 0};
+  uint32_t valence = 0;  // triangles (kept after quantization) that use the vertex
+  OctNormal normal{0, 0};
+  Rgba8 color{255, 255, 255, 255};
+};
+static_assert(sizeof(VertexRecord) == 24);
+
+class VertexStore {
+ public:
+  VertexStore(std::string path, uint64_t cache_bytes);
+  Status append(const VertexRecord& r);
+  Status get(uint64_t i, VertexRecord& r);
+  Status bumpValence(uint64_t i, bool& first_use);
+  Status setNormal(uint64_t i, const OctNormal& n);
+  // Ends filling: writes dirty blocks if anything was ever spilled, then frees the cache.
+  Status finalize();
+  // Records for sorted, unique ids (thread-safe after finalize).
+  Status read(std::span<const uint32_t> sorted_ids, std::vector<VertexRecord>& out) const;
+  uint64_t size() const { return size_; }
+  bool spilled() const { return file_.isOpen(); }
+
+ private:
+  static constexpr uint64_t kBlockRecords = 1u << 14;
+  struct Slot {
+    uint64_t block = UINT64_MAX;
+    uint64_t last_use = 0;
+    bool dirty = false;
+    std::vector<VertexRecord> records;
+  };
+  Result<VertexRecord*> at(uint64_t i);
+  Result<Slot*> slotFor(uint64_t block, bool load);
+
+  std::string path_;
+  size_t max_slots_;
+  std::vector<Slot> slots_;
+  std::vector<int32_t> slot_of_block_;  // -1: not cached
+  uint64_t size_ = 0;
+  uint64_t clock_ = 0;
+  ScratchFile file_;
+  bool finalized_ = false;
+};
+
+// Triangles with their centroid, in input order, between the ingest pass and binning.
+struct SpilledTriangle {
+  Triangle t;
+  Vec3u centroid;
+};
+
+class TriangleSpill {
+ public:
+  TriangleSpill(std::string path, bool in_memory) : path_(std::move(path)), in_memory_(in_memory) {}
+  Status append(const SpilledTriangle& t);
+  Status finish();
+  uint64_t size() const { return size_; }
+  // Reads records [first, first + out.size()).
+  Status read(uint64_t first, std::span<SpilledTriangle> out) const;
+  void release();
+
+ private:
+  std::string path_;
+  bool in_memory_;
+  std::vector<SpilledTriangle> memory_;
+  std::vector<SpilledTriangle> buffer_;
+  ScratchFile file_;
+  uint64_t size_ = 0, written_ = 0;
+};
+
+// Triangles grouped by tile: a counting sort into one array (memory) or one file (disk) where each tile's
+// triangles are contiguous, in input order.
+class TileBins {
+ public:
+  TileBins(std::string path, bool in_memory, std::span<const uint64_t> tile_counts, uint64_t buffer_bytes);
+  Status add(uint32_t tile, const Triangle& t);
+  Status finish();
+  Status read(uint32_t tile, std::vector<Triangle>& out) const;  // thread-safe after finish
+
+ private:
+  Status flushTile(uint32_t tile);
+  std::string path_;
+  bool in_memory_;
+  std::vector<uint64_t> begin_, cursor_;
+  std::vector<Triangle> memory_;
+  std::vector<std::vector<Triangle>> buffers_;
+  size_t buffer_capacity_ = 0;
+  ScratchFile file_;
+};
+
+}  // namespace scanpress
