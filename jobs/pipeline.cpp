@@ -32,6 +32,7 @@
 #include "engine/octahedral.h"
 #include "engine/tile.h"
 #include "jobs/commands.h"
+#include "jobs/config.h"
 #include "jobs/file_io.h"
 #include "jobs/scan_store.h"
 #include "spatial/tiling.h"
@@ -288,9 +289,7 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
   const uint64_t in_memory_bytes = n_vertices * sizeof(VertexRecord) + n_triangles * (sizeof(SpilledTriangle) + sizeof(Triangle));
   const bool in_memory = budget == 0 || in_memory_bytes <= budget / 2;
   result.out_of_core = !in_memory;
-  uint64_t target = std::max<uint64_t>(1, s.tile_triangles);
-  if (budget > 0)  // tiles in flight must fit in a quarter of the budget, at least one per thread
-    target = std::min(target, std::max<uint64_t>(4096, budget / 4 / kTileBytesPerTriangle / result.threads));
+  const uint64_t target = effectiveTileTarget(s);  // independent of the thread count: so are the bytes
   std::optional<ScratchDir> scratch;
   std::string scratch_path;
   if (!in_memory) {
@@ -303,9 +302,9 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
   // ---- pass 2
   if (progress) progress->stage("quantizing");
   VertexStore store(scratchFile("vertices.bin"), in_memory ? UINT64_MAX / 2 : budget / 4);
-  TileHistogram histogram(result.grid.bits, n_triangles, target);
+  std::optional<TileHistogram> histogram(std::in_place, result.grid.bits, n_triangles, target);
   TriangleSpill spill(scratchFile("triangles.bin"), in_memory);
-  IngestSink ingest(result.grid, result.layout, store, histogram, spill);
+  IngestSink ingest(result.grid, result.layout, store, *histogram, spill);
   if (survey.kept()) {
     SP_RETURN_IF_ERROR(replay(survey.mesh, ingest, ReadOptions().chunk));
     survey.mesh = Mesh();
@@ -324,23 +323,33 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
 
   // ---- tiling and binning
   if (progress) progress->stage("tiling");
-  const TileIndex index = TileIndex::build(histogram);
+  std::vector<SpilledTriangle> chunk(1u << 16);
+  auto forEachSpilled = [&](auto&& fn) -> Status {
+    for (uint64_t first = 0; first < spill.size(); first += chunk.size()) {
+      const size_t n = static_cast<size_t>(std::min<uint64_t>(chunk.size(), spill.size() - first));
+      SP_RETURN_IF_ERROR(spill.read(first, std::span(chunk).first(n)));
+      for (size_t i = 0; i < n; ++i) SP_RETURN_IF_ERROR(fn(chunk[i]));
+    }
+    return Status::ok();
+  };
+  // Cells denser than the target are counted again at finer levels (a few rounds at most).
+  while (histogram->beginRefinement())
+    SP_RETURN_IF_ERROR(forEachSpilled([&](const SpilledTriangle& t) {
+      histogram->addRefined(t.centroid);
+      return Status::ok();
+    }));
+  const TileIndex index = TileIndex::build(*histogram);
+  histogram.reset();
   const auto tiles = index.tiles();
   std::vector<uint64_t> counts(tiles.size());
   for (size_t t = 0; t < tiles.size(); ++t) counts[t] = tiles[t].triangles;
   TileBins bins(scratchFile("bins.bin"), in_memory, counts, budget / 4);
-  {
-    std::vector<SpilledTriangle> chunk(1u << 16);
-    for (uint64_t first = 0; first < spill.size(); first += chunk.size()) {
-      const size_t n = static_cast<size_t>(std::min<uint64_t>(chunk.size(), spill.size() - first));
-      SP_RETURN_IF_ERROR(spill.read(first, std::span(chunk).first(n)));
-      for (size_t i = 0; i < n; ++i) {
-        const uint32_t tile = index.tileOf(chunk[i].centroid);
-        if (tile == UINT32_MAX) return makeError(ErrorCode::kInternal, "triangle centroid outside every tile");
-        SP_RETURN_IF_ERROR(bins.add(tile, chunk[i].t));
-      }
-    }
-  }
+  SP_RETURN_IF_ERROR(forEachSpilled([&](const SpilledTriangle& t) {
+    const uint32_t tile = index.tileOf(t.centroid);
+    if (tile == UINT32_MAX) return makeError(ErrorCode::kInternal, "triangle centroid outside every tile");
+    return bins.add(tile, t.t);
+  }));
+  chunk = {};
   SP_RETURN_IF_ERROR(bins.finish());
   spill.release();
   SP_RETURN_IF_ERROR(store.finalize());

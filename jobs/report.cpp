@@ -1,5 +1,7 @@
 #include "jobs/report.h"
 
+#include "jobs/batch.h"
+
 #include <nlohmann/json.hpp>
 
 #include <sstream>
@@ -24,8 +26,10 @@ json layoutJson(const AttributeLayout& l) {
 
 }  // namespace
 
-nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& r) {
+nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& r, const std::string& fingerprint) {
   json j;
+  j["complete"] = r.failed_tiles == 0;
+  if (!fingerprint.empty()) j["fingerprint"] = fingerprint;
   j["input"] = settings.input;
   j["output"] = settings.output;
   j["format"] = r.read.format_detail;
@@ -63,8 +67,47 @@ nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& 
   return j;
 }
 
-std::string encodeReportJson(const EncodeSettings& settings, const EncodeResult& result) {
-  return encodeReport(settings, result).dump(2) + "\n";
+std::string encodeReportJson(const EncodeSettings& settings, const EncodeResult& result,
+                             const std::string& fingerprint) {
+  return encodeReport(settings, result, fingerprint).dump(2) + "\n";
+}
+
+std::string batchSummaryJson(const std::string& config_path, const BatchResult& batch) {
+  json j;
+  j["job"] = config_path;
+  json files = json::array();
+  uint64_t ok = 0, skipped = 0, failed = 0, bytes = 0, vertices = 0;
+  double seconds = 0;
+  for (const auto& f : batch.files) {
+    json e = {{"input", f.input}, {"output", f.output}, {"report", f.report}, {"seconds", f.seconds}};
+    switch (f.state) {
+      case FileOutcome::State::kOk: e["status"] = "ok", ++ok; break;
+      case FileOutcome::State::kSkipped: e["status"] = "skipped", ++skipped; break;
+      case FileOutcome::State::kFailed: e["status"] = "failed", ++failed; break;
+    }
+    if (!f.error.isOk()) {
+      e["error"] = f.error.toString();
+      e["exit_code"] = exitCodeFor(f.error.code());
+    }
+    if (f.has_result) {
+      e["vertices"] = f.result.vertices;
+      e["faces"] = f.result.faces;
+      e["bytes"] = f.result.bytes;
+      e["bpv"] = f.result.bitsPerVertex();
+      e["tiles"] = f.result.tiles.size();
+      e["failed_tiles"] = f.result.failed_tiles;
+      bytes += f.result.bytes;
+      vertices += f.result.vertices;
+    }
+    seconds += f.seconds;
+    files.push_back(std::move(e));
+  }
+  j["files"] = std::move(files);
+  j["totals"] = {{"files", batch.files.size()}, {"ok", ok}, {"skipped", skipped}, {"failed", failed},
+                 {"bytes", bytes}, {"vertices", vertices}, {"bpv", vertices ? 8.0 * bytes / vertices : 0.0},
+                 {"seconds", seconds}};
+  j["exit_code"] = batch.exitCode();
+  return j.dump(2) + "\n";
 }
 
 std::string containerInfoJson(const ContainerFile& file) {

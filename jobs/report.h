@@ -10,7 +10,12 @@ namespace scanpress {
 
 // The encode report as JSON text (pretty-printed): counts, drops, bytes, bits per vertex, seconds per stage,
 // threads, memory, and one entry per tile.
-std::string encodeReportJson(const EncodeSettings& settings, const EncodeResult& result);
+// `fingerprint` (settingsFingerprint) is stored for resume when the output is complete (no failed tile).
+std::string encodeReportJson(const EncodeSettings& settings, const EncodeResult& result,
+                             const std::string& fingerprint = "");
+// The batch summary: one entry per input with status, sizes, bits per vertex, time and error.
+struct BatchResult;
+std::string batchSummaryJson(const std::string& config_path, const BatchResult& batch);
 // `info --json`: grid, counts, bytes and one entry per tile.
 std::string containerInfoJson(const ContainerFile& file);
 // `info` for people.

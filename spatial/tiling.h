@@ -4,8 +4,13 @@
 // corners falls in exactly one fine cell (cells are half-open cubes of 2^shift grid units), and every fine cell
 // belongs to one tile. Tiles come from an octree over the grid: a node is split while it holds more than the
 // target triangle count, so dense regions get smaller tiles and empty space costs nothing; small sibling leaves
-// are merged greedily in Morton order up to the target, so a split does not leave a spray of tiny tiles. A fine
-// cell is never split, so a tile can exceed the target only when one fine cell alone does.
+// are merged greedily in Morton order up to the target, so a split does not leave a spray of tiny tiles.
+//
+// The histogram is multi-resolution: its first level has cells sized from the triangle count; a cell that holds
+// more than the target is refined (16x finer per axis) and the centroids inside it are counted again at the finer
+// level (the caller feeds them once more per round, from its spill). A scan with a dense detail patch thus gets
+// small tiles there without paying for fine cells everywhere. A tile exceeds the target only when one cell at the
+// finest level (2^(bits-21) grid units) alone does.
 //
 // OpenVDB grids (sparse, hierarchical) hold the histogram of centroids per fine cell and the tile index (fine
 // cell -> tile id); they stay inside tiling.cpp. The same histogram gives the same tiles: tile ids follow the
@@ -42,8 +47,12 @@ class TileHistogram {
   TileHistogram& operator=(TileHistogram&&) noexcept;
 
   void add(const Vec3u& centroid);
+  // Refinement round: marks the overfull cells of the finest level as refined and opens a finer level. Returns
+  // false when there is nothing to refine; otherwise the caller passes every centroid to addRefined once.
+  bool beginRefinement();
+  void addRefined(const Vec3u& centroid);
   int gridBits() const { return grid_bits_; }
-  int fineShift() const { return shift_; }  // fine cell edge = 2^shift grid units
+  int fineShift() const { return shift_; }  // first-level cell edge = 2^shift grid units
   uint64_t target() const { return target_; }
   uint64_t total() const { return total_; }
 
@@ -74,14 +83,12 @@ class TileIndex {
   // Tile of a triangle centroid; UINT32_MAX for a cell that held no centroid when the index was built.
   uint32_t tileOf(const Vec3u& centroid) const;
   std::span<const TileInfo> tiles() const { return tiles_; }
-  int fineShift() const { return shift_; }
 
  private:
   TileIndex() = default;
   struct Impl;
   std::unique_ptr<Impl> impl_;
   std::vector<TileInfo> tiles_;
-  int shift_ = 0;
 };
 
 }  // namespace scanpress

@@ -10,10 +10,14 @@
 #include <vector>
 
 #include "engine/codecs/codec.h"
+#include "jobs/batch.h"
 #include "jobs/commands.h"
+#include "jobs/config.h"
 #include "jobs/container_file.h"
 #include "jobs/file_io.h"
+#include "jobs/progress.h"
 #include "jobs/report.h"
+#include "jobs/synth.h"
 
 namespace scanpress {
 namespace {
@@ -25,9 +29,11 @@ constexpr const char* kMainHelp = R"(scanpress: parallel batch compression for l
 usage: scanpress <command> [options]
 
 commands:
+  run      run a JSON job file: many scans, one container and report each, a batch summary
   encode   compress a mesh file (PLY, OBJ, STL, OFF; optionally .zst) into a .spz container
   decode   decompress a container (or some of its tiles) into a PLY or OBJ file
   info     describe a container
+  synth    write a deterministic scan-like mesh of N triangles (for tests and benchmarks)
 
 'scanpress <command> --help' shows a command's options.
 exit codes: 0 ok, 1 usage or config error, 2 bad input data, 3 environment (I/O, disk full), 4 internal error
@@ -44,8 +50,39 @@ options:
   --normal-bits N     octahedral bits per normal component, 4..16 (default 12)
   --no-normals        drop normals
   --no-colors         drop colors
-  --report R.json     write a JSON report (counts, bytes, bits per vertex, seconds per stage, dropped elements)
-  --quiet             print nothing on success
+  --tile-triangles N  target triangles per tile (default 131072; tiles adapt to density around it)
+  --threads N         worker threads (default: all cores); the output is the same at any count
+  --memory-budget S   bound the memory for tile data, e.g. 512M or 2G (default unit MiB; 0: no limit);
+                      larger scans stream through scratch files
+  --scratch-dir DIR   where scratch files go (default: the system temp directory)
+  --report R.json     write a JSON report (counts, bytes, bits per vertex, seconds per stage, tiles)
+  --quiet             print nothing on success (progress shows only on a terminal anyway)
+)";
+
+constexpr const char* kRunHelp = R"(usage: scanpress run JOB.json [options]
+
+Runs a job file: every input scan (files, directories, globs) is encoded to its own container and report in the
+output directory, and a batch summary is written. A bad file is reported and the others still run. Re-running a
+finished job skips outputs that are complete and were made with the same settings. configs/REFERENCE.md lists
+every key.
+
+options:
+  --threads N   override the job's thread count
+  --force       redo every input, even complete ones
+  --quiet       no progress and no per-file lines
+exit codes: 0 all ok, 1 invalid job file, else the most severe failure (2 bad data, 3 environment, 4 internal)
+)";
+
+constexpr const char* kSynthHelp = R"(usage: scanpress synth OUT.ply --triangles N [options]
+
+Writes a deterministic scan-like mesh of exactly N triangles (PLY binary little endian), streaming: a base mesh
+subdivided and displaced by multi-scale noise.
+
+options:
+  --triangles N   number of triangles (required)
+  --seed S        noise seed (default 1)
+  --from SCAN     base mesh (default: a built-in bumpy icosphere)
+  --quiet         print nothing on success
 )";
 
 constexpr const char* kDecodeHelp = R"(usage: scanpress decode IN.spz OUT.(ply|obj) [options]
@@ -152,7 +189,9 @@ std::string codecList() {
 int runEncode(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {"--codec", "--bits", "--normal-bits", "--report"},
+  if (!parseArgs(argc, argv, 2,
+                 {"--codec", "--bits", "--normal-bits", "--report", "--tile-triangles", "--threads", "--memory-budget",
+                  "--scratch-dir"},
                  {"--no-normals", "--no-colors", "--quiet", "--help"}, args, error))
     return usage(error, "encode");
   if (args.has("--help")) {
@@ -170,18 +209,37 @@ int runEncode(int argc, char** argv) {
     return usage(error, "encode");
   s.keep_normals = !args.has("--no-normals");
   s.keep_colors = !args.has("--no-colors");
-  auto result = encodeFile(s);
+  int tile = static_cast<int>(s.tile_triangles);
+  if (!parseIntOption(args, "--tile-triangles", 1024, 1 << 30, tile, error) ||
+      !parseIntOption(args, "--threads", 0, 4096, s.threads, error))
+    return usage(error, "encode");
+  s.tile_triangles = static_cast<uint64_t>(tile);
+  if (const auto* b = args.get("--memory-budget")) {
+    if (!parseByteSize(*b, s.memory_budget) || (s.memory_budget != 0 && s.memory_budget < (16u << 20)))
+      return usage("--memory-budget must be 0 or a size of at least 16M, e.g. 512M or 2G, got '" + *b + "'",
+                   "encode");
+  }
+  if (const auto* d = args.get("--scratch-dir")) s.scratch_dir = *d;
+  TerminalProgress progress(args.has("--quiet"));
+  if (progress.enabled()) progress.file(0, 1, s.input);
+  auto result = encodeFile(s, progress.enabled() ? &progress : nullptr);
+  progress.clear();
   if (!result.isOk()) return fail(result.status());
   if (const auto* report = args.get("--report")) {
-    const std::string text = encodeReportJson(s, *result);
+    const std::string text = encodeReportJson(s, *result, settingsFingerprint(s));
     Status w = writeFileAtomically(*report, std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
     if (!w.isOk()) return fail(w);
   }
   if (!args.has("--quiet"))
-    std::printf("%s -> %s: %llu vertices, %llu faces, %llu bytes, %.3f bpv (%s, %d bits)\n", s.input.c_str(),
-                s.output.c_str(), static_cast<unsigned long long>(result->vertices),
+    std::printf("%s -> %s: %llu vertices, %llu faces, %llu bytes, %.3f bpv (%s, %d bits, %zu tiles)\n",
+                s.input.c_str(), s.output.c_str(), static_cast<unsigned long long>(result->vertices),
                 static_cast<unsigned long long>(result->faces), static_cast<unsigned long long>(result->bytes),
-                result->bitsPerVertex(), result->codec.c_str(), s.bits);
+                result->bitsPerVertex(), result->codec.c_str(), s.bits, result->tiles.size());
+  if (result->failed_tiles > 0) {
+    for (const auto& t : result->tiles)
+      if (!t.status.isOk()) std::fprintf(stderr, "scanpress: error: tile %u: %s\n", t.id, t.status.toString().c_str());
+    return 2;
+  }
   return 0;
 }
 
@@ -242,6 +300,55 @@ int runInfo(int argc, char** argv) {
   return 0;
 }
 
+int runJobCommand(int argc, char** argv) {
+  Args args;
+  std::string error;
+  if (!parseArgs(argc, argv, 2, {"--threads"}, {"--force", "--quiet", "--help"}, args, error))
+    return usage(error, "run");
+  if (args.has("--help")) return std::fputs(kRunHelp, stdout), 0;
+  if (args.positional.size() != 1) return usage("run needs one JOB.json", "run");
+  RunOptions options;
+  options.force = args.has("--force");
+  options.quiet = args.has("--quiet");
+  if (!parseIntOption(args, "--threads", 0, 4096, options.threads, error)) return usage(error, "run");
+  if (!args.has("--threads")) options.threads = -1;
+  auto job = loadJobConfig(args.positional[0]);
+  if (!job.isOk()) return fail(job.status());
+  auto batch = runJob(*job, options);
+  if (!batch.isOk()) return fail(batch.status());
+  return batch->exitCode();
+}
+
+int runSynth(int argc, char** argv) {
+  Args args;
+  std::string error;
+  if (!parseArgs(argc, argv, 2, {"--triangles", "--seed", "--from"}, {"--quiet", "--help"}, args, error))
+    return usage(error, "synth");
+  if (args.has("--help")) return std::fputs(kSynthHelp, stdout), 0;
+  if (args.positional.size() != 1 || !args.has("--triangles")) return usage("synth needs OUT.ply and --triangles N", "synth");
+  SynthSettings s;
+  s.output = args.positional[0];
+  auto parseU64 = [&](const char* name, uint64_t& out) {
+    const std::string* v = args.get(name);
+    if (!v) return true;
+    char* end = nullptr;
+    errno = 0;
+    const unsigned long long x = std::strtoull(v->c_str(), &end, 10);
+    if (v->empty() || (*v)[0] == '-' || *end != '\0' || errno != 0) return error = std::string(name) + " must be a non-negative integer", false;
+    out = x;
+    return true;
+  };
+  if (!parseU64("--triangles", s.triangles) || !parseU64("--seed", s.seed)) return usage(error, "synth");
+  if (const auto* f = args.get("--from")) s.from = *f;
+  auto r = synthesize(s);
+  if (!r.isOk()) return fail(r.status());
+  if (!args.has("--quiet"))
+    std::printf("%s: %llu vertices, %llu triangles (%llu base triangles, %u segments per edge)\n", s.output.c_str(),
+                static_cast<unsigned long long>(r->vertices), static_cast<unsigned long long>(r->triangles),
+                static_cast<unsigned long long>(r->base_triangles), r->segments);
+  return 0;
+}
+
 int run(int argc, char** argv) {
   if (argc < 2) return std::fputs(kMainHelp, stderr), 1;
   const std::string cmd = argv[1];
@@ -251,6 +358,8 @@ int run(int argc, char** argv) {
       if (sub == "encode") return std::printf(kEncodeHelp, codecList().c_str()), 0;
       if (sub == "decode") return std::fputs(kDecodeHelp, stdout), 0;
       if (sub == "info") return std::fputs(kInfoHelp, stdout), 0;
+      if (sub == "run") return std::fputs(kRunHelp, stdout), 0;
+      if (sub == "synth") return std::fputs(kSynthHelp, stdout), 0;
     }
     return std::fputs(kMainHelp, stdout), 0;
   }
@@ -258,6 +367,8 @@ int run(int argc, char** argv) {
   if (cmd == "encode") return runEncode(argc, argv);
   if (cmd == "decode") return runDecode(argc, argv);
   if (cmd == "info") return runInfo(argc, argv);
+  if (cmd == "run") return runJobCommand(argc, argv);
+  if (cmd == "synth") return runSynth(argc, argv);
   std::fprintf(stderr, "scanpress: error: unknown command '%s'\n\n%s", cmd.c_str(), kMainHelp);
   return 1;
 }

@@ -1,0 +1,205 @@
+#include "jobs/batch.h"
+
+#include <fnmatch.h>
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <set>
+
+#include "jobs/container_file.h"
+#include "jobs/file_io.h"
+#include "jobs/progress.h"
+#include "jobs/report.h"
+
+namespace scanpress {
+namespace {
+
+namespace fs = std::filesystem;
+
+bool isMeshFile(const fs::path& p) { return formatFromName(p.filename().string()) != MeshFormat::kUnknown; }
+
+bool hasWildcard(const std::string& s) { return s.find_first_of("*?[") != std::string::npos; }
+
+Status writeText(const std::string& path, const std::string& text) {
+  return writeFileAtomically(path, std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+}
+
+uint64_t fnv1a(const std::string& s) {
+  uint64_t h = 0xcbf29ce484222325ull;
+  for (unsigned char c : s) h = (h ^ c) * 0x100000001b3ull;
+  return h;
+}
+
+}  // namespace
+
+int BatchResult::exitCode() const {
+  // Severity: internal (4) > environment (3) > bad data (2). A usage code cannot come from a file.
+  int worst = 0;
+  for (const auto& f : files)
+    if (f.state == FileOutcome::State::kFailed)
+      worst = std::max(worst, f.error.isOk() ? 2 : std::max(2, exitCodeFor(f.error.code())));
+  return worst;
+}
+
+Result<std::vector<std::string>> expandInputs(const JobSettings& job) {
+  std::set<std::string> files;
+  const std::string where = job.config_path.empty() ? "inputs" : job.config_path;
+  for (size_t i = 0; i < job.inputs.size(); ++i) {
+    const std::string& in = job.inputs[i];
+    const std::string pointer = where + ": /inputs/" + std::to_string(i);
+    std::error_code ec;
+    const fs::path p(in);
+    size_t found = 0;
+    if (hasWildcard(p.filename().string())) {
+      if (hasWildcard(p.parent_path().string()))
+        return makeError(ErrorCode::kInvalidArgument, pointer + ": wildcards are allowed in the file name only");
+      const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
+      for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+        if (!it->is_regular_file(ec)) continue;
+        if (::fnmatch(p.filename().c_str(), it->path().filename().c_str(), 0) == 0) {
+          files.insert(it->path().lexically_normal().string());
+          ++found;
+        }
+      }
+      if (found == 0) return makeError(ErrorCode::kInvalidArgument, pointer + ": '" + in + "' matches no file");
+    } else if (fs::is_directory(p, ec)) {
+      auto add = [&](const fs::directory_entry& e) {
+        std::error_code e2;
+        if (e.is_regular_file(e2) && isMeshFile(e.path())) {
+          files.insert(e.path().lexically_normal().string());
+          ++found;
+        }
+      };
+      if (job.recursive) {
+        for (fs::recursive_directory_iterator it(p, ec), end; !ec && it != end; it.increment(ec)) add(*it);
+      } else {
+        for (fs::directory_iterator it(p, ec), end; !ec && it != end; it.increment(ec)) add(*it);
+      }
+      if (found == 0)
+        return makeError(ErrorCode::kInvalidArgument, pointer + ": directory '" + in + "' holds no mesh file");
+    } else {
+      files.insert(p.lexically_normal().string());  // a missing file fails as its own entry
+    }
+  }
+  return std::vector<std::string>(files.begin(), files.end());
+}
+
+std::string outputName(const std::string& pattern, const std::string& input) {
+  const std::string name = fs::path(input).filename().string();
+  std::string stem = name;
+  auto strip = [&](const char* ext) {
+    const size_t n = std::string(ext).size();
+    if (stem.size() > n) {
+      std::string tail = stem.substr(stem.size() - n);
+      std::transform(tail.begin(), tail.end(), tail.begin(), [](unsigned char c) { return std::tolower(c); });
+      if (tail == ext) {
+        stem.resize(stem.size() - n);
+        return true;
+      }
+    }
+    return false;
+  };
+  strip(".zst");
+  for (const char* ext : {".ply", ".obj", ".stl", ".off"})
+    if (strip(ext)) break;
+  std::string out;
+  for (size_t i = 0; i < pattern.size(); ++i) {
+    if (pattern.compare(i, 6, "{stem}") == 0) out += stem, i += 5;
+    else if (pattern.compare(i, 6, "{name}") == 0) out += name, i += 5;
+    else out += pattern[i];
+  }
+  return out;
+}
+
+std::string settingsFingerprint(const EncodeSettings& s) {
+  std::string key = "scanpress-v1|codec=" + s.codec + "|bits=" + std::to_string(s.bits) +
+                    "|normal_bits=" + std::to_string(s.normal_bits) + "|normals=" + std::to_string(s.keep_normals) +
+                    "|colors=" + std::to_string(s.keep_colors) + "|tile=" + std::to_string(effectiveTileTarget(s)) +
+                    "|input=" + fs::absolute(s.input).lexically_normal().string();
+  struct stat st {};
+  if (::stat(s.input.c_str(), &st) == 0)
+    key += "|size=" + std::to_string(st.st_size) + "|mtime=" + std::to_string(st.st_mtim.tv_sec) + "." +
+           std::to_string(st.st_mtim.tv_nsec);
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(fnv1a(key)));
+  return hex;
+}
+
+Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
+  SP_ASSIGN_OR_RETURN(std::vector<std::string> inputs, expandInputs(job));
+  // Two inputs must not write the same output.
+  std::set<std::string> outputs;
+  for (const auto& in : inputs) {
+    const std::string out = outputName(job.output_name, in);
+    if (!outputs.insert(out).second)
+      return makeError(ErrorCode::kInvalidArgument, (job.config_path.empty() ? "" : job.config_path + ": ") +
+                                                        "/output/name: two inputs map to the output '" + out + "'");
+  }
+  std::error_code ec;
+  fs::create_directories(job.output_directory, ec);
+  if (ec) return makeError(ErrorCode::kIo, job.output_directory + ": cannot create output directory: " + ec.message());
+
+  BatchResult batch;
+  TerminalProgress progress(options.quiet);
+  for (size_t i = 0; i < inputs.size(); ++i) {
+    FileOutcome f;
+    f.input = inputs[i];
+    f.output = (fs::path(job.output_directory) / outputName(job.output_name, f.input)).string();
+    if (!job.report_name.empty())
+      f.report = (fs::path(job.output_directory) / outputName(job.report_name, f.input)).string();
+    EncodeSettings s = job.encode;
+    s.input = f.input;
+    s.output = f.output;
+    if (options.threads >= 0) s.threads = options.threads;
+    const std::string fingerprint = settingsFingerprint(s);
+    const auto start = std::chrono::steady_clock::now();
+    if (job.resume && !options.force && !f.report.empty() && completeReportFingerprint(f.report) == fingerprint &&
+        ContainerFile::open(f.output).isOk()) {
+      f.state = FileOutcome::State::kSkipped;
+      batch.files.push_back(std::move(f));
+      continue;
+    }
+    progress.file(i, inputs.size(), fs::path(f.input).filename().string());
+    auto result = encodeFile(s, progress.enabled() ? &progress : nullptr);
+    if (result.isOk()) {
+      f.has_result = true;
+      f.result = std::move(result).value();
+      f.state = f.result.failed_tiles == 0 ? FileOutcome::State::kOk : FileOutcome::State::kFailed;
+      if (f.result.failed_tiles)
+        for (const auto& t : f.result.tiles)
+          if (!t.status.isOk()) {
+            f.error = t.status.withContext(f.input + ": tile " + std::to_string(t.id) + " (" +
+                                           std::to_string(f.result.failed_tiles) + " tiles failed)");
+            break;
+          }
+      if (!f.report.empty()) {
+        Status w = writeText(f.report, encodeReportJson(s, f.result, fingerprint));
+        if (!w.isOk()) f.state = FileOutcome::State::kFailed, f.error = w;
+      }
+    } else {
+      f.state = FileOutcome::State::kFailed;
+      f.error = result.status();
+    }
+    f.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    progress.clear();
+    if (!options.quiet) {
+      if (f.state == FileOutcome::State::kFailed) std::fprintf(stderr, "scanpress: error: %s\n", f.error.toString().c_str());
+      else
+        std::printf("%s -> %s: %llu triangles, %llu bytes, %.3f bpv, %zu tiles, %.2f s\n", f.input.c_str(),
+                    f.output.c_str(), static_cast<unsigned long long>(f.result.faces),
+                    static_cast<unsigned long long>(f.result.bytes), f.result.bitsPerVertex(), f.result.tiles.size(),
+                    f.seconds);
+    }
+    batch.files.push_back(std::move(f));
+  }
+  if (!job.summary_name.empty()) {
+    const std::string path = (fs::path(job.output_directory) / job.summary_name).string();
+    SP_RETURN_IF_ERROR(writeText(path, batchSummaryJson(job.config_path, batch)));
+  }
+  return batch;
+}
+
+}  // namespace scanpress

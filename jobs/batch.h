@@ -1,0 +1,50 @@
+// Batch runs: a job over many scans. Each input gets its own container and report; a bad file becomes a failed
+// entry of the summary and the others still run. Outputs appear all-or-nothing. With `resume`, an input whose
+// container is complete and whose report carries the same settings fingerprint (settings that change the bytes,
+// plus the input's path, size and modification time) is skipped; `force` redoes it.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "jobs/commands.h"
+#include "jobs/config.h"
+
+namespace scanpress {
+
+struct RunOptions {
+  bool force = false;
+  bool quiet = false;
+  int threads = -1;  // >= 0 overrides the job's threads
+};
+
+struct FileOutcome {
+  enum class State { kOk, kSkipped, kFailed };
+  std::string input, output, report;
+  State state = State::kFailed;
+  Status error;
+  bool has_result = false;
+  EncodeResult result;
+  double seconds = 0;
+};
+
+struct BatchResult {
+  std::vector<FileOutcome> files;
+  // 0 when every file is ok or skipped; else the most severe failure: 4 internal > 3 environment > 2 bad data.
+  int exitCode() const;
+};
+
+// Files named by the job's inputs, sorted, without duplicates. Errors (kInvalidArgument, naming /inputs/N) for
+// a glob or directory that yields no mesh file; a plain file name is taken as it is (a missing file fails later,
+// as that file's entry).
+Result<std::vector<std::string>> expandInputs(const JobSettings& job);
+
+// `{stem}` / `{name}` substitution; stem is the file name without .zst and the mesh extension.
+std::string outputName(const std::string& pattern, const std::string& input);
+
+// Hex fingerprint of what determines an output's bytes, for resume.
+std::string settingsFingerprint(const EncodeSettings& settings);
+
+Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options);
+
+}  // namespace scanpress

@@ -1,0 +1,257 @@
+#include "jobs/config.h"
+
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+namespace scanpress {
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+// Reads one JSON object, tracking which keys were consumed so the rest can be reported as unknown.
+class ObjectReader {
+ public:
+  ObjectReader(const json& j, std::string pointer, const std::string& file, Status& error)
+      : j_(j), pointer_(std::move(pointer)), file_(file), error_(error) {
+    if (!j_.is_object()) fail(pointer_.empty() ? "/" : pointer_, "must be an object");
+  }
+
+  bool ok() const { return error_.isOk(); }
+
+  void integer(const char* key, int64_t lo, int64_t hi, int64_t& out) {
+    const json* v = take(key);
+    if (!v) return;
+    if (!v->is_number_integer()) return fail(path(key), "must be an integer, got " + typeName(*v));
+    const int64_t x = v->get<int64_t>();
+    if (v->is_number_unsigned() && v->get<uint64_t>() > uint64_t(INT64_MAX)) return fail(path(key), "out of range");
+    if (x < lo || x > hi)
+      return fail(path(key), "must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
+                                 std::to_string(x));
+    out = x;
+  }
+  template <typename T>
+  void integerAs(const char* key, int64_t lo, int64_t hi, T& out) {
+    int64_t x = static_cast<int64_t>(out);
+    integer(key, lo, hi, x);
+    out = static_cast<T>(x);
+  }
+  void boolean(const char* key, bool& out) {
+    const json* v = take(key);
+    if (!v) return;
+    if (!v->is_boolean()) return fail(path(key), "must be true or false, got " + typeName(*v));
+    out = v->get<bool>();
+  }
+  void string(const char* key, std::string& out, bool allow_empty = true) {
+    const json* v = take(key);
+    if (!v) return;
+    if (!v->is_string()) return fail(path(key), "must be a string, got " + typeName(*v));
+    out = v->get<std::string>();
+    if (!allow_empty && out.empty()) fail(path(key), "must not be empty");
+  }
+  void stringList(const char* key, std::vector<std::string>& out) {
+    const json* v = take(key);
+    if (!v) return;
+    if (v->is_string()) {
+      out = {v->get<std::string>()};
+      return;
+    }
+    if (!v->is_array()) return fail(path(key), "must be a string or an array of strings, got " + typeName(*v));
+    out.clear();
+    for (size_t i = 0; i < v->size(); ++i) {
+      if (!(*v)[i].is_string())
+        return fail(path(key) + "/" + std::to_string(i), "must be a string, got " + typeName((*v)[i]));
+      out.push_back((*v)[i].get<std::string>());
+    }
+  }
+  // A nested object; returns nullptr when absent.
+  const json* object(const char* key) { return take(key); }
+  std::string path(const std::string& key) const { return pointer_ + "/" + escape(key); }
+
+  // Reports the first key that nobody asked for.
+  void finish() {
+    if (!ok() || !j_.is_object()) return;
+    for (auto it = j_.begin(); it != j_.end(); ++it)
+      if (!taken_.count(it.key())) return fail(path(it.key()), "unknown key");
+  }
+  void fail(const std::string& pointer, const std::string& message) {
+    if (error_.isOk()) error_ = makeError(ErrorCode::kInvalidArgument, file_ + ": " + pointer + ": " + message);
+  }
+
+ private:
+  const json* take(const char* key) {
+    if (!ok() || !j_.is_object()) return nullptr;
+    taken_.insert(key);
+    auto it = j_.find(key);
+    return it == j_.end() ? nullptr : &*it;
+  }
+  static std::string escape(const std::string& key) {  // RFC 6901
+    std::string out;
+    for (char c : key) {
+      if (c == '~') out += "~0";
+      else if (c == '/') out += "~1";
+      else out += c;
+    }
+    return out;
+  }
+  static std::string typeName(const json& v) {
+    if (v.is_null()) return "null";
+    if (v.is_boolean()) return "a boolean";
+    if (v.is_number()) return "a number";
+    if (v.is_string()) return "a string";
+    if (v.is_array()) return "an array";
+    return "an object";
+  }
+
+  const json& j_;
+  std::string pointer_;
+  const std::string& file_;
+  Status& error_;
+  std::set<std::string> taken_;
+};
+
+bool validPattern(const std::string& p) {
+  for (size_t i = 0; i < p.size(); ++i)
+    if (p[i] == '{') {
+      const size_t e = p.find('}', i);
+      if (e == std::string::npos) return false;
+      const std::string name = p.substr(i + 1, e - i - 1);
+      if (name != "stem" && name != "name") return false;
+      i = e;
+    }
+  return true;
+}
+
+}  // namespace
+
+uint64_t effectiveTileTarget(const EncodeSettings& s) {
+  constexpr uint64_t kTileBytesPerTriangle = 160;  // as in pipeline.cpp
+  uint64_t target = std::max<uint64_t>(1, s.tile_triangles);
+  if (s.memory_budget > 0) target = std::min(target, std::max<uint64_t>(4096, s.memory_budget / 8 / kTileBytesPerTriangle));
+  return target;
+}
+
+bool parseByteSize(const std::string& text, uint64_t& bytes) {
+  if (text.empty()) return false;
+  size_t i = 0;
+  uint64_t v = 0;
+  while (i < text.size() && std::isdigit(static_cast<unsigned char>(text[i]))) {
+    if (v > (UINT64_MAX - 9) / 10) return false;
+    v = v * 10 + static_cast<uint64_t>(text[i++] - '0');
+  }
+  if (i == 0) return false;
+  uint64_t unit = 1ull << 20;
+  if (i < text.size()) {
+    const std::string suffix = text.substr(i);
+    if (suffix == "K" || suffix == "k" || suffix == "KiB") unit = 1ull << 10;
+    else if (suffix == "M" || suffix == "m" || suffix == "MiB") unit = 1ull << 20;
+    else if (suffix == "G" || suffix == "g" || suffix == "GiB") unit = 1ull << 30;
+    else return false;
+  }
+  if (v > UINT64_MAX / unit) return false;
+  bytes = v * unit;
+  return true;
+}
+
+std::vector<std::string> knownConfigKeys() {
+  return {"/inputs",          "/recursive",          "/output/directory", "/output/name",
+          "/output/report",   "/output/summary",     "/codec/name",       "/codec/bits",
+          "/codec/normal_bits", "/codec/normals",    "/codec/colors",     "/tiling/target_triangles",
+          "/threads",         "/memory_budget_mb",   "/scratch_directory", "/resume"};
+}
+
+Result<JobSettings> parseJobConfig(const std::string& text, const std::string& config_path) {
+  json root;
+  try {
+    root = json::parse(text);
+  } catch (const json::parse_error& e) {
+    return makeError(ErrorCode::kInvalidArgument,
+                     config_path + ": byte " + std::to_string(e.byte) + ": invalid JSON: " + e.what());
+  }
+  JobSettings s;
+  s.config_path = config_path;
+  Status error;
+  ObjectReader top(root, "", config_path, error);
+  top.stringList("inputs", s.inputs);
+  top.boolean("recursive", s.recursive);
+  if (const json* out = top.object("output")) {
+    ObjectReader o(*out, "/output", config_path, error);
+    o.string("directory", s.output_directory, false);
+    o.string("name", s.output_name, false);
+    o.string("report", s.report_name);
+    o.string("summary", s.summary_name);
+    o.finish();
+    if (error.isOk() && !validPattern(s.output_name)) o.fail("/output/name", "unknown placeholder (use {stem} or {name})");
+    if (error.isOk() && !validPattern(s.report_name)) o.fail("/output/report", "unknown placeholder (use {stem} or {name})");
+    if (error.isOk() && s.output_name.find('/') != std::string::npos) o.fail("/output/name", "must be a file name");
+  }
+  if (const json* codec = top.object("codec")) {
+    ObjectReader c(*codec, "/codec", config_path, error);
+    c.string("name", s.encode.codec, false);
+    c.integerAs("bits", kMinGridBits, kMaxGridBits, s.encode.bits);
+    c.integerAs("normal_bits", 4, 16, s.encode.normal_bits);
+    c.boolean("normals", s.encode.keep_normals);
+    c.boolean("colors", s.encode.keep_colors);
+    c.finish();
+    if (error.isOk() && !findCodec(s.encode.codec)) {
+      std::string names;
+      for (const auto& info : allCodecs()) names += (names.empty() ? "" : ", ") + std::string(info.name);
+      c.fail("/codec/name", "unknown codec '" + s.encode.codec + "' (available: " + names + ")");
+    }
+  }
+  if (const json* tiling = top.object("tiling")) {
+    ObjectReader t(*tiling, "/tiling", config_path, error);
+    t.integerAs("target_triangles", 1024, int64_t(1) << 31, s.encode.tile_triangles);
+    t.finish();
+  }
+  top.integerAs("threads", 0, 4096, s.encode.threads);
+  int64_t budget_mb = 0;
+  top.integer("memory_budget_mb", 0, int64_t(1) << 30, budget_mb);
+  if (budget_mb > 0 && budget_mb < 16) top.fail("/memory_budget_mb", "must be 0 (no limit) or at least 16");
+  s.encode.memory_budget = static_cast<uint64_t>(budget_mb) << 20;
+  top.string("scratch_directory", s.encode.scratch_dir);
+  top.boolean("resume", s.resume);
+  top.finish();
+  if (error.isOk() && s.inputs.empty()) top.fail("/inputs", "must name at least one file, directory or glob");
+  for (size_t i = 0; error.isOk() && i < s.inputs.size(); ++i)
+    if (s.inputs[i].empty()) top.fail("/inputs/" + std::to_string(i), "must not be empty");
+  if (!error.isOk()) return error;
+
+  // Relative paths are relative to the job file's directory.
+  const fs::path base = fs::path(config_path).parent_path();
+  auto resolve = [&](std::string& p) {
+    if (!p.empty() && fs::path(p).is_relative()) p = (base / p).lexically_normal().string();
+  };
+  for (auto& in : s.inputs) resolve(in);
+  resolve(s.output_directory);
+  resolve(s.encode.scratch_dir);
+  return s;
+}
+
+std::string completeReportFingerprint(const std::string& report_path) {
+  std::ifstream f(report_path, std::ios::binary);
+  if (!f) return {};
+  try {
+    const json j = json::parse(f);
+    if (!j.is_object() || !j.value("complete", false)) return {};
+    auto it = j.find("fingerprint");
+    return it != j.end() && it->is_string() ? it->get<std::string>() : std::string();
+  } catch (const std::exception&) {
+    return {};
+  }
+}
+
+Result<JobSettings> loadJobConfig(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return makeError(ErrorCode::kInvalidArgument, path + ": cannot open job file");
+  std::stringstream ss;
+  ss << f.rdbuf();
+  if (f.bad()) return makeError(ErrorCode::kIo, path + ": read failed");
+  return parseJobConfig(ss.str(), path);
+}
+
+}  // namespace scanpress

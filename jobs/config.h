@@ -1,0 +1,46 @@
+// Job files: JSON parsed and validated into typed settings. This is the only place scanpress parses JSON.
+//
+// Every error names the file and the JSON pointer of the offending value (e.g. `job.json: /codec/bits: must be
+// an integer in [8, 24], got 30`), or the byte offset of a syntax error; errors are kInvalidArgument (exit 1).
+// Unknown keys are errors (a typo must not silently fall back to a default). Relative paths in a job file are
+// relative to the directory of the job file. configs/REFERENCE.md lists every key with its default and meaning.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "engine/status.h"
+#include "jobs/commands.h"
+
+namespace scanpress {
+
+struct JobSettings {
+  std::string config_path;           // the job file ("" when built from the command line)
+  std::vector<std::string> inputs;   // files, directories and globs (`*`, `?` in the last path component)
+  bool recursive = false;            // directories: descend into subdirectories
+  std::string output_directory = ".";
+  std::string output_name = "{stem}.spz";           // {stem}: file name without mesh extensions; {name}: file name
+  std::string report_name = "{stem}.report.json";  // "" for no per-file report (then resume is off)
+  std::string summary_name = "summary.json";       // batch summary in the output directory; "" for none
+  bool resume = true;  // skip inputs whose output is complete and was made with the same settings
+  EncodeSettings encode;  // input and output are filled in per file
+};
+
+Result<JobSettings> parseJobConfig(const std::string& json_text, const std::string& config_path);
+Result<JobSettings> loadJobConfig(const std::string& path);
+
+// Every key the parser knows, as JSON pointers (for the reference test).
+std::vector<std::string> knownConfigKeys();
+
+// The target triangles per tile that an encode with these settings uses: the configured target, lowered when a
+// memory budget could not hold the tiles in flight. Independent of the thread count, so the output is too.
+uint64_t effectiveTileTarget(const EncodeSettings& s);
+
+// The fingerprint stored in an encode report when it describes a complete output; empty when the report is
+// missing, unreadable, incomplete or has none (resume then redoes the file).
+std::string completeReportFingerprint(const std::string& report_path);
+
+// Parses "512", "512M", "2G", "64K" (default unit MiB) into bytes; false on anything else.
+bool parseByteSize(const std::string& text, uint64_t& bytes);
+
+}  // namespace scanpress

@@ -1,0 +1,204 @@
+// Job files and batch runs.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "jobs/batch.h"
+#include "jobs/config.h"
+#include "jobs/mesh_io/mesh_writer.h"
+#include "test_util.h"
+
+namespace scanpress {
+namespace {
+
+namespace fs = std::filesystem;
+
+int run(const std::string& args, std::string* out = nullptr) {
+  FILE* p = ::popen((std::string("'") + SCANPRESS_BIN + "' " + args + " 2>&1").c_str(), "r");
+  std::string text;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) text.append(buf, n);
+  const int status = ::pclose(p);
+  if (out) *out = text;
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+struct BadConfig {
+  const char* name;
+  std::string json;
+  const char* pointer;  // expected in the message
+};
+
+TEST(JobConfig, InvalidFilesNameThePointerExitOneWriteNothing) {
+  testing::TempDir dir;
+  const std::string bunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
+  const std::string in = "\"inputs\": [\"" + bunny + "\"], \"output\": {\"directory\": \"out\"}";
+  const std::vector<BadConfig> cases = {
+      {"syntax", "{\"inputs\": [", "byte "},
+      {"not_object", "[1, 2]", "/: must be an object"},
+      {"unknown_top_key", "{" + in + ", \"colour\": 1}", "/colour: unknown key"},
+      {"missing_inputs", "{\"output\": {\"directory\": \"out\"}}", "/inputs"},
+      {"inputs_type", "{\"inputs\": 5, \"output\": {\"directory\": \"out\"}}", "/inputs: must be"},
+      {"inputs_element_type", "{\"inputs\": [\"" + bunny + "\", 3], \"output\": {\"directory\": \"out\"}}", "/inputs/1"},
+      {"inputs_empty_string", "{\"inputs\": [\"\"], \"output\": {\"directory\": \"out\"}}", "/inputs/0"},
+      {"bits_too_high", "{" + in + ", \"codec\": {\"bits\": 30}}", "/codec/bits: must be an integer in [8, 24], got 30"},
+      {"bits_string", "{" + in + ", \"codec\": {\"bits\": \"16\"}}", "/codec/bits: must be an integer"},
+      {"bits_fraction", "{" + in + ", \"codec\": {\"bits\": 12.5}}", "/codec/bits"},
+      {"unknown_codec", "{" + in + ", \"codec\": {\"name\": \"zip\"}}", "/codec/name: unknown codec"},
+      {"codec_unknown_key", "{" + in + ", \"codec\": {\"level\": 9}}", "/codec/level: unknown key"},
+      {"normal_bits_low", "{" + in + ", \"codec\": {\"normal_bits\": 2}}", "/codec/normal_bits"},
+      {"normals_not_bool", "{" + in + ", \"codec\": {\"normals\": \"yes\"}}", "/codec/normals: must be true or false"},
+      {"output_not_object", "{\"inputs\": [\"" + bunny + "\"], \"output\": \"out\"}", "/output: must be an object"},
+      {"output_name_slash", "{" + in.substr(0, in.size() - 1) + ", \"name\": \"a/{stem}.spz\"}}", "/output/name"},
+      {"output_name_placeholder", "{" + in.substr(0, in.size() - 1) + ", \"name\": \"{foo}.spz\"}}", "/output/name"},
+      {"tile_target_small", "{" + in + ", \"tiling\": {\"target_triangles\": 10}}", "/tiling/target_triangles"},
+      {"threads_negative", "{" + in + ", \"threads\": -1}", "/threads"},
+      {"budget_too_small", "{" + in + ", \"memory_budget_mb\": 8}", "/memory_budget_mb"},
+      {"resume_number", "{" + in + ", \"resume\": 1}", "/resume"},
+      {"escaped_key", "{" + in + ", \"a/b\": 1}", "/a~1b: unknown key"},
+      {"glob_matches_nothing", "{\"inputs\": [\"" + dir.path() + "/*.nothing\"], \"output\": {\"directory\": \"out\"}}", "/inputs/0"},
+      {"output_collision", "{\"inputs\": [\"" + bunny + "\", \"" + dir.path() + "/bun_zipper.obj\"], \"output\": {\"directory\": \"out\"}}", "/output/name"},
+  };
+  ASSERT_GE(cases.size(), 15u);
+  testing::writeBytes(dir.file("bun_zipper.obj"), "v 0 0 0\n");
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.name);
+    const std::string path = dir.file(std::string(c.name) + ".json");
+    testing::writeBytes(path, c.json);
+    std::string out;
+    EXPECT_EQ(run("run '" + path + "'", &out), 1) << out;
+    EXPECT_NE(out.find(path), std::string::npos) << out;
+    EXPECT_NE(out.find(c.pointer), std::string::npos) << "expected '" << c.pointer << "' in: " << out;
+    EXPECT_FALSE(fs::exists(dir.file("out"))) << "something was written";
+  }
+}
+
+TEST(JobConfig, EveryExampleParsesAndTheReferenceListsEveryKey) {
+  size_t parsed = 0;
+  for (const auto& e : fs::directory_iterator(SCANPRESS_CONFIGS)) {
+    if (e.path().extension() != ".json") continue;
+    SCOPED_TRACE(e.path().string());
+    auto job = loadJobConfig(e.path().string());
+    EXPECT_TRUE(job.isOk()) << job.status().toString();
+    ++parsed;
+  }
+  EXPECT_GE(parsed, 4u);
+  const std::string ref_md = slurp(std::string(SCANPRESS_CONFIGS) + "/REFERENCE.md");
+  const auto ref_json = nlohmann::json::parse(slurp(std::string(SCANPRESS_CONFIGS) + "/reference.json"));
+  for (const auto& key : knownConfigKeys()) {
+    EXPECT_NE(ref_md.find("`" + key + "`"), std::string::npos) << key << " missing from REFERENCE.md";
+    EXPECT_TRUE(ref_json.contains(nlohmann::json::json_pointer(key))) << key << " missing from reference.json";
+  }
+  // Defaults in reference.json are the parser's defaults.
+  auto ref = loadJobConfig(std::string(SCANPRESS_CONFIGS) + "/reference.json");
+  ASSERT_TRUE(ref.isOk());
+  const JobSettings defaults;
+  EXPECT_EQ(ref->encode.bits, defaults.encode.bits);
+  EXPECT_EQ(ref->encode.normal_bits, defaults.encode.normal_bits);
+  EXPECT_EQ(ref->encode.tile_triangles, defaults.encode.tile_triangles);
+  EXPECT_EQ(ref->resume, defaults.resume);
+  EXPECT_EQ(ref->output_name, defaults.output_name);
+  EXPECT_EQ(ref->report_name, defaults.report_name);
+  EXPECT_EQ(ref->summary_name, defaults.summary_name);
+}
+
+TEST(JobConfig, RelativePathsAreRelativeToTheJobFile) {
+  auto job = parseJobConfig(R"({"inputs": ["scans/a.ply"], "output": {"directory": "../out"}})", "/x/jobs/j.json");
+  ASSERT_TRUE(job.isOk()) << job.status().toString();
+  EXPECT_EQ(job->inputs[0], "/x/jobs/scans/a.ply");
+  EXPECT_EQ(job->output_directory, "/x/out");
+}
+
+TEST(Batch, BadFileIsReportedOthersCompleteResumeSkipsForceRedoes) {
+  testing::TempDir dir;
+  fs::create_directories(dir.file("scans"));
+  fs::copy_file(std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst", dir.file("scans/bunny.ply.zst"));
+  ASSERT_TRUE(writeObj(dir.file("scans/octa.obj"), testing::octahedron()).isOk());
+  testing::writeBytes(dir.file("scans/broken.ply"), "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n");
+  testing::writeBytes(dir.file("scans/notes.txt"), "not a mesh");
+  const std::string job = dir.file("job.json");
+  auto writeJob = [&](int bits) {
+    testing::writeBytes(job, "{\"inputs\": [\"scans\"], \"output\": {\"directory\": \"out\"}, \"codec\": {\"bits\": " +
+                                 std::to_string(bits) + "}}");
+  };
+  writeJob(16);
+  std::string out;
+  EXPECT_EQ(run("run '" + job + "' --quiet", &out), 2) << out;
+  auto summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  ASSERT_EQ(summary["files"].size(), 3u);
+  std::map<std::string, std::string> status;
+  for (const auto& f : summary["files"]) status[fs::path(f["input"].get<std::string>()).filename()] = f["status"];
+  EXPECT_EQ(status["bunny.ply.zst"], "ok");
+  EXPECT_EQ(status["octa.obj"], "ok");
+  EXPECT_EQ(status["broken.ply"], "failed");
+  for (const auto& f : summary["files"])
+    if (f["status"] == "failed") {
+      EXPECT_NE(f["error"].get<std::string>().find("broken.ply"), std::string::npos);
+      EXPECT_EQ(f["exit_code"], 2);
+    } else {
+      EXPECT_GT(f["bpv"].get<double>(), 0);
+    }
+  EXPECT_TRUE(fs::exists(dir.file("out/bunny.spz")));
+  EXPECT_TRUE(fs::exists(dir.file("out/octa.report.json")));
+  EXPECT_FALSE(fs::exists(dir.file("out/broken.spz")));
+  const auto first_time = fs::last_write_time(dir.file("out/bunny.spz"));
+
+  // Resume: complete outputs with the same settings are skipped.
+  EXPECT_EQ(run("run '" + job + "' --quiet", &out), 2);
+  summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  for (const auto& f : summary["files"])
+    if (fs::path(f["input"].get<std::string>()).filename() != "broken.ply") EXPECT_EQ(f["status"], "skipped");
+  EXPECT_EQ(fs::last_write_time(dir.file("out/bunny.spz")), first_time);
+
+  // A truncated container is not complete: it is redone.
+  fs::resize_file(dir.file("out/octa.spz"), 40);
+  EXPECT_EQ(run("run '" + job + "' --quiet", &out), 2);
+  summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  for (const auto& f : summary["files"])
+    if (fs::path(f["input"].get<std::string>()).filename() == "octa.obj") EXPECT_EQ(f["status"], "ok");
+
+  // Other settings: redone. --force: redone.
+  writeJob(12);
+  EXPECT_EQ(run("run '" + job + "' --quiet", &out), 2);
+  summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  EXPECT_EQ(summary["totals"]["ok"], 2);
+  EXPECT_EQ(run("run '" + job + "' --quiet --force", &out), 2);
+  summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  EXPECT_EQ(summary["totals"]["ok"], 2);
+  EXPECT_EQ(summary["totals"]["skipped"], 0);
+  for (const auto& e : fs::directory_iterator(dir.file("out")))
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos);
+
+  // Without the bad file the job succeeds.
+  fs::remove(dir.file("scans/broken.ply"));
+  EXPECT_EQ(run("run '" + job + "' --quiet", &out), 0) << out;
+}
+
+TEST(Batch, OutputNames) {
+  EXPECT_EQ(outputName("{stem}.spz", "/a/b/scan.ply.zst"), "scan.spz");
+  EXPECT_EQ(outputName("{stem}.spz", "/a/b/SCAN.PLY"), "SCAN.spz");
+  EXPECT_EQ(outputName("{name}.spz", "/a/b/scan.obj"), "scan.obj.spz");
+  EXPECT_EQ(outputName("x-{stem}-{stem}.spz", "scan.stl"), "x-scan-scan.spz");
+  uint64_t bytes = 0;
+  EXPECT_TRUE(parseByteSize("512", bytes));
+  EXPECT_EQ(bytes, 512ull << 20);
+  EXPECT_TRUE(parseByteSize("2G", bytes));
+  EXPECT_EQ(bytes, 2ull << 30);
+  EXPECT_FALSE(parseByteSize("2T", bytes));
+  EXPECT_FALSE(parseByteSize("-1", bytes));
+}
+
+}  // namespace
+}  // namespace scanpress
