@@ -27,6 +27,9 @@ struct EncodeSettings {
   int threads = 0;                   // 0: all cores
   uint64_t memory_budget = 0;        // bytes; 0: no limit (the scan is processed in memory)
   std::string scratch_dir;           // parent of the temporary tile bins; empty: the system temp directory
+  // Fault injection for tests only (not reachable from the CLI or job files): these tiles fail with kInternal,
+  // to exercise the handling of a failed tile.
+  std::vector<uint32_t> fail_tiles;
 };
 
 struct StageSeconds {

@@ -20,6 +20,7 @@
 #include <oneapi/tbb/task_arena.h>
 
 #include <algorithm>
+#include <bit>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -209,42 +210,57 @@ struct TileResult {
   Vec3u lo{0, 0, 0}, hi{0, 0, 0};
 };
 
-// Builds the tile's local mesh (sorted global ids, local triangles, border flags) from the bins and the store.
+// Builds the tile's local mesh from the bins and the store: local vertex ids in order of first use (an
+// open-addressing hash from global to local id), records read in global-id order (runs of nearby ids become one
+// read when the store is on disk), border flags from the valence inside the tile against the global valence.
 Status buildTileMesh(uint32_t tile, const TileBins& bins, const VertexStore& store, const AttributeLayout& layout,
                      TileMesh& out) {
   std::vector<Triangle> tris;
   SP_RETURN_IF_ERROR(bins.read(tile, tris));
+  size_t cap = 16;
+  while (cap < 3 * tris.size()) cap <<= 1;  // load factor <= 1/2 even if every corner is a distinct vertex
+  const int shift = 64 - std::countr_zero(cap);
+  std::vector<uint32_t> keys(cap, UINT32_MAX), vals(cap);
   std::vector<uint32_t>& ids = out.local_to_global;
   ids.clear();
-  ids.reserve(tris.size() * 3);
-  for (const auto& t : tris) ids.insert(ids.end(), t.begin(), t.end());
-  std::sort(ids.begin(), ids.end());
-  ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
-  std::vector<VertexRecord> records;
-  SP_RETURN_IF_ERROR(store.read(ids, records));
-  out.tile_id = tile;
   QuantizedMesh& m = out.mesh;
-  m.positions.resize(ids.size());
-  for (size_t i = 0; i < ids.size(); ++i) m.positions[i] = records[i].q;
-  if (layout.hasNormals()) {
-    m.normals.resize(ids.size());
-    for (size_t i = 0; i < ids.size(); ++i) m.normals[i] = records[i].normal;
-  }
-  if (layout.hasColors()) {
-    m.colors.resize(ids.size());
-    for (size_t i = 0; i < ids.size(); ++i) m.colors[i] = records[i].color;
-  }
-  std::vector<uint32_t> local_valence(ids.size(), 0);
   m.triangles.resize(tris.size());
+  std::vector<uint32_t> local_valence;
   for (size_t t = 0; t < tris.size(); ++t)
     for (int k = 0; k < 3; ++k) {
-      const uint32_t local =
-          static_cast<uint32_t>(std::lower_bound(ids.begin(), ids.end(), tris[t][k]) - ids.begin());
-      m.triangles[t][k] = local;
-      ++local_valence[local];
+      const uint32_t g = tris[t][k];
+      size_t h = static_cast<size_t>((uint64_t(g) * 0x9E3779B97F4A7C15ull) >> shift);
+      while (keys[h] != UINT32_MAX && keys[h] != g) h = (h + 1) & (cap - 1);
+      if (keys[h] == UINT32_MAX) {
+        keys[h] = g;
+        vals[h] = static_cast<uint32_t>(ids.size());
+        ids.push_back(g);
+        local_valence.push_back(0);
+      }
+      m.triangles[t][k] = vals[h];
+      ++local_valence[vals[h]];
     }
+  // Read the records in global order, then scatter them to their local slots.
+  std::vector<std::pair<uint32_t, uint32_t>> order(ids.size());
+  for (uint32_t i = 0; i < ids.size(); ++i) order[i] = {ids[i], i};
+  std::sort(order.begin(), order.end());
+  std::vector<uint32_t> sorted(ids.size());
+  for (size_t i = 0; i < order.size(); ++i) sorted[i] = order[i].first;
+  std::vector<VertexRecord> records;
+  SP_RETURN_IF_ERROR(store.read(sorted, records));
+  out.tile_id = tile;
+  m.positions.resize(ids.size());
+  if (layout.hasNormals()) m.normals.resize(ids.size());
+  if (layout.hasColors()) m.colors.resize(ids.size());
   out.border.resize(ids.size());
-  for (size_t i = 0; i < ids.size(); ++i) out.border[i] = local_valence[i] < records[i].valence ? 1 : 0;
+  for (size_t i = 0; i < order.size(); ++i) {
+    const uint32_t local = order[i].second;
+    const VertexRecord& r = records[i];
+    m.positions[local] = r.q;
+    if (layout.hasNormals()) m.normals[local] = r.normal;
+    if (layout.hasColors()) m.colors[local] = r.color;
+    out.border[local] = local_valence[local] < r.valence ? 1 : 0;
+  }
   return Status::ok();
 }
 
@@ -378,6 +394,8 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
       r.status = buildTileMesh(job.tile, bins, store, result.layout, tm);
       // Per-tile stages run here in order (simplify, remesh: border vertices stay fixed, see engine/tile.h);
       // the codec is the last stage.
+      if (r.status.isOk() && std::find(s.fail_tiles.begin(), s.fail_tiles.end(), job.tile) != s.fail_tiles.end())
+        r.status = makeError(ErrorCode::kInternal, "injected failure (test)");
       if (r.status.isOk()) r.status = codec->encode(ctx, tm.mesh, r.payload);
       r.vertices = static_cast<uint32_t>(tm.mesh.positions.size());
       r.faces = static_cast<uint32_t>(tm.mesh.triangles.size());

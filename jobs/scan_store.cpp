@@ -105,6 +105,7 @@ Result<VertexStore::Slot*> VertexStore::slotFor(uint64_t block, bool load) {
           file_.writeAt(s->block * kBlockRecords * sizeof(VertexRecord), s->records.data(), kBlockRecords * sizeof(VertexRecord)));
     }
     slot_of_block_[s->block] = -1;
+    if (s->block == last_block_) last_block_ = UINT64_MAX;
   }
   s->block = block;
   s->dirty = false;
@@ -119,43 +120,42 @@ Result<VertexStore::Slot*> VertexStore::slotFor(uint64_t block, bool load) {
   return s;
 }
 
-Result<VertexRecord*> VertexStore::at(uint64_t i) {
+Result<VertexRecord*> VertexStore::atSlow(uint64_t i, bool write) {
   if (i >= size_) return makeError(ErrorCode::kInternal, "vertex store index out of range");
   SP_ASSIGN_OR_RETURN(Slot * s, slotFor(i / kBlockRecords, true));
+  last_block_ = i / kBlockRecords;
+  last_slot_ = static_cast<size_t>(s - slots_.data());
+  if (write) s->dirty = true;
   return &s->records[i % kBlockRecords];
 }
 
 Status VertexStore::append(const VertexRecord& r) {
   const uint64_t i = size_++;
-  const uint64_t block = i / kBlockRecords;
   if (i % kBlockRecords == 0) {  // a new block: nothing of it is on disk, so claim a slot without reading
-    auto s = slotFor(block, false);
+    auto s = slotFor(i / kBlockRecords, false);
     if (!s.isOk()) return s.status();
   }
-  SP_ASSIGN_OR_RETURN(VertexRecord * rec, at(i));
+  SP_ASSIGN_OR_RETURN(VertexRecord * rec, at(i, true));
   *rec = r;
-  slots_[static_cast<size_t>(slot_of_block_[block])].dirty = true;
   return Status::ok();
 }
 
 Status VertexStore::get(uint64_t i, VertexRecord& r) {
-  SP_ASSIGN_OR_RETURN(VertexRecord * rec, at(i));
+  SP_ASSIGN_OR_RETURN(VertexRecord * rec, at(i, false));
   r = *rec;
   return Status::ok();
 }
 
 Status VertexStore::bumpValence(uint64_t i, bool& first_use) {
-  SP_ASSIGN_OR_RETURN(VertexRecord * rec, at(i));
+  SP_ASSIGN_OR_RETURN(VertexRecord * rec, at(i, true));
   first_use = rec->valence == 0;
   ++rec->valence;
-  slots_[static_cast<size_t>(slot_of_block_[i / kBlockRecords])].dirty = true;
   return Status::ok();
 }
 
 Status VertexStore::setNormal(uint64_t i, const OctNormal& n) {
-  SP_ASSIGN_OR_RETURN(VertexRecord * rec, at(i));
+  SP_ASSIGN_OR_RETURN(VertexRecord * rec, at(i, true));
   rec->normal = n;
-  slots_[static_cast<size_t>(slot_of_block_[i / kBlockRecords])].dirty = true;
   return Status::ok();
 }
 
@@ -171,6 +171,7 @@ Status VertexStore::finalize() {
   slots_.clear();
   slots_.shrink_to_fit();
   slot_of_block_.clear();
+  last_block_ = UINT64_MAX;
   return Status::ok();
 }
 

@@ -71,14 +71,24 @@ class VertexStore {
   bool spilled() const { return file_.isOpen(); }
 
  private:
-  static constexpr uint64_t kBlockRecords = 1u << 14;
+  static constexpr int kBlockShift = 14;
+  static constexpr uint64_t kBlockRecords = uint64_t(1) << kBlockShift;
   struct Slot {
     uint64_t block = UINT64_MAX;
     uint64_t last_use = 0;
     bool dirty = false;
     std::vector<VertexRecord> records;
   };
-  Result<VertexRecord*> at(uint64_t i);
+  // The record of vertex i, marking its block dirty when `write`.
+  Result<VertexRecord*> at(uint64_t i, bool write) {
+    // Fast path: scan files reference vertices with strong locality, so most accesses hit the last block.
+    if ((i >> kBlockShift) == last_block_ && i < size_) {
+      if (write) slots_[last_slot_].dirty = true;
+      return &slots_[last_slot_].records[i & (kBlockRecords - 1)];
+    }
+    return atSlow(i, write);
+  }
+  Result<VertexRecord*> atSlow(uint64_t i, bool write);
   Result<Slot*> slotFor(uint64_t block, bool load);
 
   std::string path_;
@@ -89,6 +99,8 @@ class VertexStore {
   uint64_t clock_ = 0;
   ScratchFile file_;
   bool finalized_ = false;
+  uint64_t last_block_ = UINT64_MAX;
+  size_t last_slot_ = 0;
 };
 
 // Triangles with their centroid, in input order, between the ingest pass and binning.

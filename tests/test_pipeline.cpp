@@ -125,6 +125,53 @@ TEST(Pipeline, SameBytesAtAnyThreadCountAndMemoryMode) {
   for (const char* other : {"t2.spz", "t8.spz", "disk.spz"}) EXPECT_TRUE(testing::readBytes(dir.file(other)) == reference) << other;
 }
 
+TEST(Pipeline, FailedTileIsReportedAndTheOthersAreKept) {
+  const std::string path = dataFile("igea.ply.zst");
+  if (!fs::exists(path)) GTEST_SKIP() << "shared data not found: " << path;
+  testing::TempDir dir;
+  EncodeSettings s;
+  s.input = path;
+  s.output = dir.file("f.spz");
+  s.tile_triangles = 16384;
+  s.fail_tiles = {3};
+  auto r = encodeFile(s);
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  EXPECT_EQ(r->failed_tiles, 1u);
+  EXPECT_EQ(r->tiles[3].status.code(), ErrorCode::kInternal);
+  auto file = ContainerFile::open(s.output);
+  ASSERT_TRUE(file.isOk());
+  EXPECT_EQ(file->tiles().size(), r->tiles.size() - 1);
+  EXPECT_EQ(file->findTile(3), nullptr);
+  EXPECT_NE(file->findTile(4), nullptr);
+  auto decoded = decodeContainer(s.output, std::nullopt);
+  ASSERT_TRUE(decoded.isOk());
+  EXPECT_EQ(decoded->triangles.size(), 268686u - r->tiles[3].faces);
+}
+
+TEST(Pipeline, ScratchFilesAreRemovedWhenAnEncodeFails) {
+  testing::TempDir dir;
+  SynthSettings synth;
+  synth.output = dir.file("s.ply");
+  synth.triangles = 400000;  // ~14 MB of tile data: out of core under a 16 MiB budget
+  ASSERT_TRUE(synthesize(synth).isOk());
+  fs::create_directories(dir.file("scratch"));
+  EncodeSettings s;
+  s.input = synth.output;
+  s.output = dir.file("missing/dir/s.spz");  // fails after the bins are written
+  s.memory_budget = 16u << 20;
+  s.scratch_dir = dir.file("scratch");
+  auto r = encodeFile(s);
+  ASSERT_FALSE(r.isOk());
+  EXPECT_EQ(exitCodeFor(r.status().code()), 3) << r.status().toString();
+  EXPECT_TRUE(fs::is_empty(dir.file("scratch"))) << "scratch files left behind";
+  // The same scan with a writable output goes through scratch files.
+  s.output = dir.file("s.spz");
+  auto ok = encodeFile(s);
+  ASSERT_TRUE(ok.isOk()) << ok.status().toString();
+  EXPECT_TRUE(ok->out_of_core);
+  EXPECT_TRUE(fs::is_empty(dir.file("scratch")));
+}
+
 // Runs the scanpress binary and returns its exit status and peak RSS in bytes.
 std::pair<int, uint64_t> runMeasured(const std::vector<std::string>& args) {
   std::vector<char*> argv;

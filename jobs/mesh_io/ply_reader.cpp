@@ -423,18 +423,61 @@ class PlyParser {
           return placeError(ErrorCode::kLimitExceeded, "face " + std::to_string(r) + " has " + std::to_string(n) +
                                                            " vertices (limit " +
                                                            std::to_string(kMaxPolygonCorners) + ")");
-        poly.clear();
-        for (uint64_t i = 0; i < n; ++i) {
-          int64_t idx = 0;
-          SP_RETURN_IF_ERROR(readIndex(p.type, idx));
-          SP_RETURN_IF_ERROR(checkIndex(idx, r));
-          poly.push_back(static_cast<uint32_t>(idx));
-        }
+        SP_RETURN_IF_ERROR(readIndexList(p.type, n, r, poly));
         if (n > 3) ++stats_.polygons;
         for (size_t i = 1; i + 1 < poly.size(); ++i) SP_RETURN_IF_ERROR(out_->addTriangle({poly[0], poly[i], poly[i + 1]}));
       }
     }
     return out_->flushTriangles();
+  }
+
+  // Reads a face's n indices into `poly`, checking each. Binary lists are read in one call and converted with the
+  // type dispatch outside the loop (the common `list uchar int` face costs one read).
+  Status readIndexList(PlyType t, uint64_t n, uint64_t record, std::vector<uint32_t>& poly) {
+    poly.resize(n);
+    if (encoding_ == Encoding::kAscii) {
+      for (uint64_t i = 0; i < n; ++i) {
+        int64_t idx = 0;
+        SP_RETURN_IF_ERROR(readIndex(t, idx));
+        SP_RETURN_IF_ERROR(checkIndex(idx, record));
+        poly[i] = static_cast<uint32_t>(idx);
+      }
+      return Status::ok();
+    }
+    const size_t size = typeSize(t);
+    list_bytes_.resize(n * size);
+    SP_RETURN_IF_ERROR(in_.read(list_bytes_.data(), list_bytes_.size()));
+    const bool swap = encoding_ == Encoding::kBig;
+    auto convert = [&](auto tag) -> Status {
+      using T = decltype(tag);
+      for (uint64_t i = 0; i < n; ++i) {
+        T v;
+        std::memcpy(&v, list_bytes_.data() + i * sizeof(T), sizeof(T));
+        if (swap) v = byteswap(v);
+        const int64_t idx = static_cast<int64_t>(v);
+        if (idx < 0 || static_cast<uint64_t>(idx) >= vertex_count_) return checkIndex(idx, record);
+        poly[i] = static_cast<uint32_t>(idx);
+      }
+      return Status::ok();
+    };
+    switch (t) {
+      case PlyType::kInt8: return convert(int8_t{});
+      case PlyType::kUint8: return convert(uint8_t{});
+      case PlyType::kInt16: return convert(int16_t{});
+      case PlyType::kUint16: return convert(uint16_t{});
+      case PlyType::kInt32: return convert(int32_t{});
+      case PlyType::kUint32: return convert(uint32_t{});
+      default: return placeError(ErrorCode::kMalformed, "face indices must be integers");
+    }
+  }
+
+  template <typename T>
+  static T byteswap(T v) {
+    uint8_t b[sizeof(T)];
+    std::memcpy(b, &v, sizeof(T));
+    std::reverse(b, b + sizeof(T));
+    std::memcpy(&v, b, sizeof(T));
+    return v;
   }
 
   // A strip v0 v1 v2 v3 ... gives (v0 v1 v2), (v2 v1 v3), (v2 v3 v4), ...: odd triangles are flipped so that all
@@ -476,6 +519,7 @@ class PlyParser {
   ReadStats stats_;
   std::string_view line_;
   Tokenizer tokens_{std::string_view()};
+  std::vector<uint8_t> list_bytes_;
 };
 
 }  // namespace
