@@ -1,0 +1,53 @@
+// Surface distance between two meshes, Metro-style: area-weighted samples on each surface, exact closest-point
+// distances to the other (Embree), in both directions. Distances are computed in parallel and accumulated in
+// sample order, so the numbers are the same at any thread count.
+#pragma once
+
+#include <memory>
+#include <span>
+#include <string>
+
+#include "engine/mesh.h"
+#include "engine/metro.h"
+#include "engine/status.h"
+
+namespace scanpress {
+
+class EmbreeDevice;
+class SurfaceIndex;
+
+struct MeasureSettings {
+  bool enabled = false;             // in jobs: measure every encode (decode in memory, measure, discard)
+  double samples_per_triangle = 2;  // sampling density: this many samples per triangle of the original, on average
+  uint64_t samples = 0;             // if > 0: about this many samples per direction instead
+  uint64_t seed = 1;
+  bool stratified = true;  // stratified within each triangle (else Monte-Carlo)
+  bool vertices = true;    // vertices are samples too
+  // Pictures (jobs): a render of the decoded scan colored by distance to the original.
+  bool render = false;
+  int render_width = 800, render_height = 600;
+  double view_azimuth = 30, view_elevation = 20;  // degrees
+};
+
+struct MeasureResult {
+  double diagonal = 0;  // of the original's bounding box
+  ErrorStats forward;   // original -> decoded
+  ErrorStats backward;  // decoded -> original
+  ErrorStats symmetric;
+};
+
+// Samples per unit area for a surface of `triangles` triangles and `area` (settings: per triangle or total).
+double samplingDensity(const MeasureSettings& s, uint64_t triangles, double area);
+
+// Distances from `samples` to the surface, accumulated in sample order (parallel queries).
+ErrorAccumulator distancesTo(const SurfaceIndex& surface, std::span<const Vec3d> samples);
+
+// Measures `decoded` against `original` (whole meshes in memory).
+Result<MeasureResult> measureMeshes(const Mesh& original, const Mesh& decoded, const MeasureSettings& settings,
+                                    std::shared_ptr<EmbreeDevice> device);
+
+// {"diagonal", "samples", "forward": {"mean","rms","max","samples","mean_relative","rms_relative","max_relative"},
+//  "backward": {...}, "symmetric": {...}} as JSON text.
+std::string measureJson(const MeasureResult& r);
+
+}  // namespace scanpress

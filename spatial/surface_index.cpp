@@ -1,0 +1,202 @@
+#include "spatial/surface_index.h"
+
+#include <embree3/rtcore.h>
+
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <vector>
+
+#include "engine/geometry.h"
+
+namespace scanpress {
+
+struct EmbreeDevice::ErrorSlot {
+  std::mutex mutex;
+  std::string message;
+};
+
+namespace {
+
+void onEmbreeError(void* user, RTCError code, const char* str) {
+  auto* slot = static_cast<EmbreeDevice::ErrorSlot*>(user);
+  std::lock_guard<std::mutex> lock(slot->mutex);
+  slot->message = "Embree error " + std::to_string(static_cast<int>(code)) + ": " + (str ? str : "");
+}
+
+}  // namespace
+
+Result<std::shared_ptr<EmbreeDevice>> EmbreeDevice::create() {
+  std::shared_ptr<EmbreeDevice> d(new EmbreeDevice());
+  d->error_ = std::make_unique<ErrorSlot>();
+  RTCDevice device = rtcNewDevice(nullptr);
+  if (!device)
+    return makeError(ErrorCode::kIo, "cannot create an Embree device (error " +
+                                         std::to_string(static_cast<int>(rtcGetDeviceError(nullptr))) + ")");
+  rtcSetDeviceErrorFunction(device, onEmbreeError, d->error_.get());
+  d->device_ = device;
+  return d;
+}
+
+EmbreeDevice::~EmbreeDevice() {
+  if (device_) rtcReleaseDevice(static_cast<RTCDevice>(device_));
+}
+
+std::string EmbreeDevice::lastError() const {
+  std::lock_guard<std::mutex> lock(error_->mutex);
+  return error_->message;
+}
+
+struct SurfaceIndex::Impl {
+  std::shared_ptr<EmbreeDevice> device;
+  RTCScene scene = nullptr;
+  std::span<const Vec3d> positions;
+  std::span<const Triangle> triangles;
+  std::vector<float> vertices;  // float xyz relative to origin, padded for Embree's 16-byte loads
+  Vec3d origin{0, 0, 0};
+  float slack = 0;  // absolute float rounding of the vertices: added to every search radius
+  ~Impl() {
+    if (scene) rtcReleaseScene(scene);
+  }
+};
+
+SurfaceIndex::SurfaceIndex(SurfaceIndex&&) noexcept = default;
+SurfaceIndex& SurfaceIndex::operator=(SurfaceIndex&&) noexcept = default;
+SurfaceIndex::~SurfaceIndex() = default;
+
+size_t SurfaceIndex::triangleCount() const { return impl_->triangles.size(); }
+
+Result<SurfaceIndex> SurfaceIndex::build(std::shared_ptr<EmbreeDevice> device, std::span<const Vec3d> positions,
+                                         std::span<const Triangle> triangles) {
+  SurfaceIndex index;
+  index.impl_ = std::make_unique<Impl>();
+  Impl& m = *index.impl_;
+  m.device = std::move(device);
+  m.positions = positions;
+  m.triangles = triangles;
+  for (const auto& t : triangles)
+    for (uint32_t v : t)
+      if (v >= positions.size()) return makeError(ErrorCode::kInvalidArgument, "triangle index out of range");
+  // Origin at the bounding-box center keeps float coordinates small and precise.
+  Vec3d lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+  for (const auto& p : positions)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+  double extent = 0;
+  if (!positions.empty())
+    for (int a = 0; a < 3; ++a) m.origin[a] = 0.5 * (lo[a] + hi[a]), extent = std::max(extent, hi[a] - lo[a]);
+  m.slack = static_cast<float>(extent * 4.0 * std::numeric_limits<float>::epsilon()) + 1e-30f;
+  m.vertices.resize(positions.size() * 3 + 4);
+  for (size_t i = 0; i < positions.size(); ++i)
+    for (int a = 0; a < 3; ++a) m.vertices[3 * i + a] = static_cast<float>(positions[i][a] - m.origin[a]);
+
+  RTCDevice dev = static_cast<RTCDevice>(m.device->handle());
+  m.scene = rtcNewScene(dev);
+  rtcSetSceneFlags(m.scene, RTC_SCENE_FLAG_ROBUST);
+  rtcSetSceneBuildQuality(m.scene, RTC_BUILD_QUALITY_MEDIUM);
+  if (!triangles.empty()) {
+    RTCGeometry geom = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_TRIANGLE);
+    rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, m.vertices.data(), 0,
+                               3 * sizeof(float), positions.size());
+    // Triangle is std::array<uint32_t, 3>: tightly packed, shared with Embree as it is.
+    static_assert(sizeof(Triangle) == 3 * sizeof(uint32_t));
+    rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, triangles.data(), 0,
+                               sizeof(Triangle), triangles.size());
+    rtcCommitGeometry(geom);
+    rtcAttachGeometry(m.scene, geom);
+    rtcReleaseGeometry(geom);
+  }
+  rtcCommitScene(m.scene);
+  if (rtcGetDeviceError(dev) != RTC_ERROR_NONE)
+    return makeError(ErrorCode::kInternal, "building the Embree scene failed: " + m.device->lastError());
+  return index;
+}
+
+namespace {
+
+struct ClosestQuery {
+  const SurfaceIndex::Impl* impl;
+  Vec3d p;
+  double best_d2;
+  Vec3d best;
+  uint32_t triangle;
+};
+
+}  // namespace
+
+static bool closestCallback(RTCPointQueryFunctionArguments* args) {
+  auto* q = static_cast<ClosestQuery*>(args->userPtr);
+  const auto& impl = *q->impl;
+  const Triangle& t = impl.triangles[args->primID];
+  const Vec3d c = closestPointOnTriangle(q->p, impl.positions[t[0]], impl.positions[t[1]], impl.positions[t[2]]);
+  const Vec3d d = vsub(c, q->p);
+  const double d2 = vdot(d, d);
+  if (d2 >= q->best_d2) return false;
+  q->best_d2 = d2;
+  q->best = c;
+  q->triangle = args->primID;
+  // Shrink Embree's (float) radius, never below the exact distance plus the vertices' float rounding.
+  const float r = static_cast<float>(std::sqrt(d2)) * (1.0f + 4 * std::numeric_limits<float>::epsilon()) + impl.slack;
+  if (r < args->query->radius) {
+    args->query->radius = r;
+    return true;
+  }
+  return false;
+}
+
+SurfaceIndex::Closest SurfaceIndex::closest(const Vec3d& p) const {
+  Closest out;
+  if (impl_->triangles.empty()) {
+    out.distance = std::numeric_limits<double>::infinity();
+    return out;
+  }
+  ClosestQuery q{impl_.get(), p, std::numeric_limits<double>::infinity(), p, UINT32_MAX};
+  RTCPointQuery query;
+  query.x = static_cast<float>(p[0] - impl_->origin[0]);
+  query.y = static_cast<float>(p[1] - impl_->origin[1]);
+  query.z = static_cast<float>(p[2] - impl_->origin[2]);
+  query.time = 0.f;
+  query.radius = std::numeric_limits<float>::infinity();
+  RTCPointQueryContext context;
+  rtcInitPointQueryContext(&context);
+  rtcPointQuery(impl_->scene, &query, &context, closestCallback, &q);
+  out.distance = std::sqrt(q.best_d2);
+  out.point = q.best;
+  out.triangle = q.triangle;
+  return out;
+}
+
+SurfaceIndex::Hit SurfaceIndex::intersect(const Vec3d& origin, const Vec3d& dir) const {
+  Hit out;
+  if (impl_->triangles.empty()) return out;
+  RTCRayHit rh;
+  rh.ray.org_x = static_cast<float>(origin[0] - impl_->origin[0]);
+  rh.ray.org_y = static_cast<float>(origin[1] - impl_->origin[1]);
+  rh.ray.org_z = static_cast<float>(origin[2] - impl_->origin[2]);
+  rh.ray.dir_x = static_cast<float>(dir[0]);
+  rh.ray.dir_y = static_cast<float>(dir[1]);
+  rh.ray.dir_z = static_cast<float>(dir[2]);
+  rh.ray.tnear = 0.f;
+  rh.ray.tfar = std::numeric_limits<float>::infinity();
+  rh.ray.time = 0.f;
+  rh.ray.mask = 0xFFFFFFFFu;
+  rh.ray.id = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  rtcIntersect1(impl_->scene, &context, &rh);
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return out;
+  out.hit = true;
+  out.t = rh.ray.tfar;
+  out.triangle = rh.hit.primID;
+  Vec3d n{rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z};
+  const double len = vlen(n);
+  n = len > 0 ? vmul(n, 1.0 / len) : Vec3d{0, 0, 1};
+  if (vdot(n, dir) > 0) n = vmul(n, -1.0);
+  out.normal = n;
+  return out;
+}
+
+}  // namespace scanpress

@@ -1,0 +1,69 @@
+// Closest-point and ray queries on a triangle mesh, with Embree 3.
+//
+// EmbreeDevice: one per job, passed to every index (Embree devices are thread-safe and expensive to create).
+// SurfaceIndex: an Embree scene over shared buffers. The caller's triangle array is given to Embree as it is
+// (rtcSetSharedGeometryBuffer, no copy); positions are converted once to Embree's float format relative to an
+// origin (the only conversion), and the caller's double positions are used for exact distances: the point-query
+// callback computes the closest point on each candidate triangle in double precision and shrinks Embree's float
+// search radius conservatively (inflated by the float rounding of the vertices), so the result is exact to
+// double precision, not to float. The spans given to build() must outlive the index.
+//
+// Thread safety: closest() and intersect() may be called from many threads at once.
+#pragma once
+
+#include <memory>
+#include <span>
+#include <string>
+
+#include "engine/mesh.h"
+#include "engine/status.h"
+
+namespace scanpress {
+
+class EmbreeDevice {
+ public:
+  static Result<std::shared_ptr<EmbreeDevice>> create();
+  ~EmbreeDevice();
+  void* handle() const { return device_; }  // RTCDevice
+  // The last error Embree reported on this device ("" if none).
+  std::string lastError() const;
+  struct ErrorSlot;  // defined in the .cpp (Embree's error callback writes it)
+
+ private:
+  EmbreeDevice() = default;
+  void* device_ = nullptr;
+  std::unique_ptr<ErrorSlot> error_;
+};
+
+class SurfaceIndex {
+ public:
+  static Result<SurfaceIndex> build(std::shared_ptr<EmbreeDevice> device, std::span<const Vec3d> positions,
+                                    std::span<const Triangle> triangles);
+  SurfaceIndex(SurfaceIndex&&) noexcept;
+  SurfaceIndex& operator=(SurfaceIndex&&) noexcept;
+  ~SurfaceIndex();
+
+  struct Closest {
+    double distance = 0;
+    Vec3d point{0, 0, 0};
+    uint32_t triangle = UINT32_MAX;  // UINT32_MAX when the mesh has no triangle
+  };
+  Closest closest(const Vec3d& p) const;
+
+  struct Hit {
+    bool hit = false;
+    double t = 0;
+    uint32_t triangle = 0;
+    Vec3d normal{0, 0, 1};  // geometric, unit length, facing the ray origin
+  };
+  Hit intersect(const Vec3d& origin, const Vec3d& direction) const;
+
+  size_t triangleCount() const;
+  struct Impl;  // defined in the .cpp (Embree's point-query callback reads it)
+
+ private:
+  SurfaceIndex() = default;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace scanpress

@@ -1,0 +1,179 @@
+// Surface distance measurement: exactness against analytic cases and an independent brute-force reference.
+#include <gtest/gtest.h>
+
+#include <oneapi/tbb/task_arena.h>
+
+#include <cmath>
+#include <map>
+#include <random>
+
+#include "engine/geometry.h"
+#include "jobs/measure.h"
+#include "spatial/surface_index.h"
+#include "test_util.h"
+
+namespace scanpress {
+namespace {
+
+std::shared_ptr<EmbreeDevice> device() {
+  static auto d = *EmbreeDevice::create();
+  return d;
+}
+
+Mesh grid(int n, double z, double size = 1.0) {
+  Mesh m;
+  for (int y = 0; y <= n; ++y)
+    for (int x = 0; x <= n; ++x) m.positions.push_back({size * x / n, size * y / n, z});
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) {
+      const uint32_t a = y * (n + 1) + x;
+      m.triangles.push_back({a, a + 1, a + n + 2});
+      m.triangles.push_back({a, a + n + 2, a + n + 1});
+    }
+  return m;
+}
+
+Mesh icosphere(int levels) {
+  const double t = (1.0 + std::sqrt(5.0)) / 2.0;
+  Mesh m;
+  m.positions = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
+                 {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  m.triangles = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+                 {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
+                 {3, 8, 9},  {4, 9, 5},  {2, 4, 11},  {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
+  auto unit = [](Vec3d p) { return vmul(p, 1.0 / vlen(p)); };
+  for (auto& p : m.positions) p = unit(p);
+  for (int l = 0; l < levels; ++l) {
+    std::map<std::pair<uint32_t, uint32_t>, uint32_t> mid;
+    auto midpoint = [&](uint32_t a, uint32_t b) {
+      auto key = std::minmax(a, b);
+      auto it = mid.find(key);
+      if (it != mid.end()) return it->second;
+      m.positions.push_back(unit(vmul(vadd(m.positions[a], m.positions[b]), 0.5)));
+      return mid[key] = static_cast<uint32_t>(m.positions.size() - 1);
+    };
+    std::vector<Triangle> next;
+    for (const auto& f : m.triangles) {
+      const uint32_t a = midpoint(f[0], f[1]), b = midpoint(f[1], f[2]), c = midpoint(f[2], f[0]);
+      next.insert(next.end(), {Triangle{f[0], a, c}, Triangle{f[1], b, a}, Triangle{f[2], c, b}, Triangle{a, b, c}});
+    }
+    m.triangles = std::move(next);
+  }
+  return m;
+}
+
+TEST(Measure, IdenticalMeshesGiveZero) {
+  const Mesh m = icosphere(3);
+  MeasureSettings s;
+  s.samples_per_triangle = 10;
+  auto r = measureMeshes(m, m, s, device());
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  EXPECT_LT(r->symmetric.max, 1e-12 * r->diagonal);
+  EXPECT_LT(r->symmetric.mean, 1e-13 * r->diagonal);
+  EXPECT_GT(r->forward.samples, 10u * m.triangles.size() / 2);
+}
+
+TEST(Measure, ParallelPlanesGiveTheOffset) {
+  const Mesh a = grid(20, 0.0), b = grid(7, 0.0125);
+  MeasureSettings s;
+  s.samples = 20000;
+  auto r = measureMeshes(a, b, s, device());
+  ASSERT_TRUE(r.isOk());
+  for (const ErrorStats& e : {r->forward, r->backward, r->symmetric}) {
+    EXPECT_NEAR(e.mean, 0.0125, 1e-12);
+    EXPECT_NEAR(e.rms, 0.0125, 1e-12);
+    EXPECT_NEAR(e.max, 0.0125, 1e-12);
+  }
+  EXPECT_NEAR(r->diagonal, std::sqrt(2.0), 1e-12);
+}
+
+TEST(Measure, SphereAgainstInscribedIcosahedron) {
+  // A fine icosphere (radius 1, 81920 faces; its own distance to the true sphere is below 1.3e-4) against the
+  // inscribed icosahedron: the largest gap is above the face centers, 1 - inradius.
+  const Mesh sphere = icosphere(6), ico = icosphere(0);
+  const double inradius = std::sqrt((5.0 + 2.0 * std::sqrt(5.0)) / 15.0);  // circumradius 1
+  MeasureSettings s;
+  s.samples = 400000;
+  auto r = measureMeshes(sphere, ico, s, device());
+  ASSERT_TRUE(r.isOk());
+  EXPECT_NEAR(r->backward.max, 1 - inradius, 2e-3);  // samples on the icosahedron, near face centers
+  EXPECT_NEAR(r->forward.max, 1 - inradius, 2e-3);   // samples on the sphere above face centers
+  EXPECT_LT(r->forward.mean, 1 - inradius);
+}
+
+// Independent reference: distance to the triangle's plane if the projection falls inside, else the distance to
+// the nearest edge segment.
+double referenceDistance(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+  auto segment = [&](const Vec3d& s, const Vec3d& e) {
+    const Vec3d d = vsub(e, s);
+    const double len2 = vdot(d, d);
+    const double t = len2 > 0 ? std::clamp(vdot(vsub(p, s), d) / len2, 0.0, 1.0) : 0.0;
+    return vlen(vsub(p, vadd(s, vmul(d, t))));
+  };
+  const Vec3d n = vcross(vsub(b, a), vsub(c, a));
+  const double n2 = vdot(n, n);
+  double best = std::min({segment(a, b), segment(b, c), segment(c, a)});
+  if (n2 > 0) {
+    const double dist = vdot(vsub(p, a), n) / std::sqrt(n2);
+    const Vec3d q = vsub(p, vmul(n, dist / std::sqrt(n2)));
+    const bool inside = vdot(vcross(vsub(b, a), vsub(q, a)), n) >= 0 && vdot(vcross(vsub(c, b), vsub(q, b)), n) >= 0 &&
+                        vdot(vcross(vsub(a, c), vsub(q, c)), n) >= 0;
+    if (inside) best = std::min(best, std::fabs(dist));
+  }
+  return best;
+}
+
+TEST(Measure, RandomMeshesMatchBruteForce) {
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int round = 0; round < 5; ++round) {
+    Mesh m;
+    for (int t = 0; t < 60; ++t) {
+      const Vec3d c{u(rng) * 3, u(rng) * 3, u(rng) * 3};
+      for (int k = 0; k < 3; ++k) m.positions.push_back({c[0] + u(rng), c[1] + u(rng), c[2] + u(rng)});
+      m.triangles.push_back({uint32_t(3 * t), uint32_t(3 * t + 1), uint32_t(3 * t + 2)});
+    }
+    auto index = SurfaceIndex::build(device(), m.positions, m.triangles);
+    ASSERT_TRUE(index.isOk());
+    for (int q = 0; q < 2000; ++q) {
+      const Vec3d p{u(rng) * 5, u(rng) * 5, u(rng) * 5};
+      double ref = 1e300;
+      for (const auto& t : m.triangles)
+        ref = std::min(ref, referenceDistance(p, m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]));
+      const auto got = index->closest(p);
+      ASSERT_NEAR(got.distance, ref, 1e-6 * ref + 1e-12) << "query " << q;
+      ASSERT_NEAR(vlen(vsub(got.point, p)), got.distance, 1e-12);
+    }
+  }
+}
+
+TEST(Measure, SameNumbersAtAnyThreadCount) {
+  const Mesh sphere = icosphere(4), ico = icosphere(1);
+  MeasureSettings s;
+  s.samples = 50000;
+  MeasureResult one, two;
+  tbb::task_arena(1).execute([&] { one = *measureMeshes(sphere, ico, s, device()); });
+  tbb::task_arena(2).execute([&] { two = *measureMeshes(sphere, ico, s, device()); });
+  EXPECT_EQ(one.forward.mean, two.forward.mean);
+  EXPECT_EQ(one.forward.rms, two.forward.rms);
+  EXPECT_EQ(one.backward.max, two.backward.max);
+  EXPECT_EQ(one.forward.samples, two.forward.samples);
+}
+
+TEST(Measure, CliJson) {
+  testing::TempDir dir;
+  const std::string bunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
+  const std::string cmd = std::string("'") + SCANPRESS_BIN + "' measure '" + bunny + "' '" + bunny + "' --json --samples 20000";
+  FILE* p = ::popen(cmd.c_str(), "r");
+  std::string text;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) text.append(buf, n);
+  ASSERT_EQ(::pclose(p), 0) << text;
+  for (const char* key : {"\"diagonal\"", "\"samples\"", "\"forward\"", "\"backward\"", "\"symmetric\"", "\"mean\"",
+                          "\"rms\"", "\"max\"", "\"max_relative\""})
+    EXPECT_NE(text.find(key), std::string::npos) << key;
+}
+
+}  // namespace
+}  // namespace scanpress
