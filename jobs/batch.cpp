@@ -13,6 +13,7 @@
 #include "jobs/file_io.h"
 #include "jobs/progress.h"
 #include "jobs/report.h"
+#include "spatial/surface_index.h"
 
 namespace scanpress {
 namespace {
@@ -119,6 +120,13 @@ std::string settingsFingerprint(const EncodeSettings& s) {
                     "|normal_bits=" + std::to_string(s.normal_bits) + "|normals=" + std::to_string(s.keep_normals) +
                     "|colors=" + std::to_string(s.keep_colors) + "|tile=" + std::to_string(effectiveTileTarget(s)) +
                     "|input=" + fs::absolute(s.input).lexically_normal().string();
+  const MeasureSettings& m = s.measure;  // changes the report, not the container
+  if (m.enabled)
+    key += "|measure=" + std::to_string(m.samples_per_triangle) + "," + std::to_string(m.samples) + "," +
+           std::to_string(m.seed) + "," + std::to_string(m.stratified) + "," + std::to_string(m.vertices) +
+           (m.render ? ",render=" + std::to_string(m.render_width) + "x" + std::to_string(m.render_height) + "@" +
+                           std::to_string(m.view_azimuth) + "," + std::to_string(m.view_elevation)
+                     : "");
   struct stat st {};
   if (::stat(s.input.c_str(), &st) == 0)
     key += "|size=" + std::to_string(st.st_size) + "|mtime=" + std::to_string(st.st_mtim.tv_sec) + "." +
@@ -144,6 +152,10 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
 
   BatchResult batch;
   TerminalProgress progress(options.quiet);
+  std::shared_ptr<EmbreeDevice> device;  // one per job, for measuring
+  if (job.encode.measure.enabled) {
+    SP_ASSIGN_OR_RETURN(device, EmbreeDevice::create());
+  }
   for (size_t i = 0; i < inputs.size(); ++i) {
     FileOutcome f;
     f.input = inputs[i];
@@ -163,7 +175,7 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
       continue;
     }
     progress.file(i, inputs.size(), fs::path(f.input).filename().string());
-    auto result = encodeFile(s, progress.enabled() ? &progress : nullptr);
+    auto result = encodeFile(s, progress.enabled() ? &progress : nullptr, device);
     if (result.isOk()) {
       f.has_result = true;
       f.result = std::move(result).value();

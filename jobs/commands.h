@@ -9,6 +9,7 @@
 
 #include "engine/container/container.h"
 #include "engine/quantize.h"
+#include "jobs/measure.h"
 #include "jobs/mesh_io/mesh_reader.h"
 
 namespace scanpress {
@@ -27,6 +28,7 @@ struct EncodeSettings {
   int threads = 0;                   // 0: all cores
   uint64_t memory_budget = 0;        // bytes; 0: no limit (the scan is processed in memory)
   std::string scratch_dir;           // parent of the temporary tile bins; empty: the system temp directory
+  MeasureSettings measure;           // error of the decoded result, per tile and overall
   // Fault injection for tests only (not reachable from the CLI or job files): these tiles fail with kInternal,
   // to exercise the handling of a failed tile.
   std::vector<uint32_t> fail_tiles;
@@ -47,6 +49,7 @@ struct TileReport {
   uint32_t border_vertices = 0;
   uint64_t bytes = 0;
   Status status;
+  ErrorStats forward, backward;  // when measured
 };
 
 struct EncodeResult {
@@ -63,6 +66,9 @@ struct EncodeResult {
   bool out_of_core = false;  // tile data went through scratch files
   int threads = 0;
   uint64_t peak_rss = 0;  // bytes, this process so far
+  bool measured = false;
+  double diagonal = 0;  // of the input's bounding box
+  ErrorAccumulator forward, backward;  // over all tiles: original -> decoded, decoded -> original
   StageSeconds seconds;
   std::string codec;
   double bitsPerVertex() const { return vertices ? 8.0 * bytes / vertices : 0.0; }
@@ -79,7 +85,9 @@ class ProgressListener {
 // Encodes one scan: tiling, the parallel per-tile pipeline, the container (jobs/pipeline.cpp). The container is
 // written even when some tiles fail (they are listed in the result); it is not written at all on a read or
 // write error.
-Result<EncodeResult> encodeFile(const EncodeSettings& settings, ProgressListener* progress = nullptr);
+// Measuring uses `device` (one per job); one is created when none is given.
+Result<EncodeResult> encodeFile(const EncodeSettings& settings, ProgressListener* progress = nullptr,
+                                std::shared_ptr<EmbreeDevice> device = nullptr);
 
 struct DecodeSettings {
   std::string input;

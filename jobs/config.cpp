@@ -2,6 +2,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -33,6 +34,39 @@ class ObjectReader {
       return fail(path(key), "must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
                                  std::to_string(x));
     out = x;
+  }
+  void number(const char* key, double lo, double hi, double& out) {
+    const json* v = take(key);
+    if (!v) return;
+    if (!v->is_number()) return fail(path(key), "must be a number, got " + typeName(*v));
+    const double x = v->get<double>();
+    if (!(x >= lo && x <= hi))
+      return fail(path(key), "must be a number in [" + fmt(lo) + ", " + fmt(hi) + "], got " + fmt(x));
+    out = x;
+  }
+  // [a, b] with both in range.
+  void integerPair(const char* key, int64_t lo, int64_t hi, std::vector<int64_t>& out) {
+    const json* v = take(key);
+    if (!v) return;
+    if (!v->is_array() || v->size() != 2) return fail(path(key), "must be an array of two integers");
+    for (size_t i = 0; i < 2; ++i) {
+      const json& x = (*v)[i];
+      if (!x.is_number_integer() || x.get<int64_t>() < lo || x.get<int64_t>() > hi)
+        return fail(path(key) + "/" + std::to_string(i),
+                    "must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+      out[i] = x.get<int64_t>();
+    }
+  }
+  void numberPair(const char* key, double lo, double hi, std::vector<double>& out) {
+    const json* v = take(key);
+    if (!v) return;
+    if (!v->is_array() || v->size() != 2) return fail(path(key), "must be an array of two numbers");
+    for (size_t i = 0; i < 2; ++i) {
+      const json& x = (*v)[i];
+      if (!x.is_number() || !(x.get<double>() >= lo && x.get<double>() <= hi))
+        return fail(path(key) + "/" + std::to_string(i), "must be a number in [" + fmt(lo) + ", " + fmt(hi) + "]");
+      out[i] = x.get<double>();
+    }
   }
   template <typename T>
   void integerAs(const char* key, int64_t lo, int64_t hi, T& out) {
@@ -98,6 +132,11 @@ class ObjectReader {
     }
     return out;
   }
+  static std::string fmt(double x) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%g", x);
+    return buf;
+  }
   static std::string typeName(const json& v) {
     if (v.is_null()) return "null";
     if (v.is_boolean()) return "a boolean";
@@ -161,7 +200,9 @@ std::vector<std::string> knownConfigKeys() {
   return {"/inputs",          "/recursive",          "/output/directory", "/output/name",
           "/output/report",   "/output/summary",     "/codec/name",       "/codec/bits",
           "/codec/normal_bits", "/codec/normals",    "/codec/colors",     "/tiling/target_triangles",
-          "/threads",         "/memory_budget_mb",   "/scratch_directory", "/resume"};
+          "/threads",         "/memory_budget_mb",   "/scratch_directory", "/resume",
+          "/measure/enabled", "/measure/samples_per_triangle", "/measure/samples", "/measure/seed",
+          "/measure/stratified", "/measure/vertices", "/measure/render", "/measure/render_size", "/measure/view"};
 }
 
 Result<JobSettings> parseJobConfig(const std::string& text, const std::string& config_path) {
@@ -207,6 +248,27 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     ObjectReader t(*tiling, "/tiling", config_path, error);
     t.integerAs("target_triangles", 1024, int64_t(1) << 31, s.encode.tile_triangles);
     t.finish();
+  }
+  if (const json* measure = top.object("measure")) {
+    ObjectReader m(*measure, "/measure", config_path, error);
+    MeasureSettings& ms = s.encode.measure;
+    m.boolean("enabled", ms.enabled);
+    m.number("samples_per_triangle", 1e-6, 1e6, ms.samples_per_triangle);
+    m.integerAs("samples", 0, int64_t(1) << 40, ms.samples);
+    m.integerAs("seed", 0, INT64_MAX, ms.seed);
+    m.boolean("stratified", ms.stratified);
+    m.boolean("vertices", ms.vertices);
+    m.boolean("render", ms.render);
+    std::vector<int64_t> size{ms.render_width, ms.render_height};
+    m.integerPair("render_size", 16, 8192, size);
+    ms.render_width = static_cast<int>(size[0]);
+    ms.render_height = static_cast<int>(size[1]);
+    std::vector<double> view{ms.view_azimuth, ms.view_elevation};
+    m.numberPair("view", -360, 360, view);
+    ms.view_azimuth = view[0];
+    ms.view_elevation = view[1];
+    m.finish();
+    if (error.isOk() && ms.render && !ms.enabled) m.fail("/measure/render", "needs /measure/enabled");
   }
   top.integerAs("threads", 0, 4096, s.encode.threads);
   int64_t budget_mb = 0;

@@ -30,12 +30,15 @@
 
 #include "engine/codecs/codec.h"
 #include "engine/container/container.h"
+#include "engine/geometry.h"
+#include "engine/metro.h"
 #include "engine/octahedral.h"
 #include "engine/tile.h"
 #include "jobs/commands.h"
 #include "jobs/config.h"
 #include "jobs/file_io.h"
 #include "jobs/scan_store.h"
+#include "spatial/surface_index.h"
 #include "spatial/tiling.h"
 
 namespace scanpress {
@@ -135,12 +138,14 @@ class IngestSink : public MeshSink {
   IngestSink(const Grid& grid, const AttributeLayout& layout, VertexStore& store, TileHistogram& hist,
              TriangleSpill& spill)
       : grid_(grid), layout_(layout), store_(store), hist_(hist), spill_(spill) {}
+  static Vec3d originalOf(const VertexRecord& r) { return {r.original[0], r.original[1], r.original[2]}; }
   Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c,
                   uint8_t) override {
     const OctNormal no_normal = encodeOctahedral({0, 0, 0}, layout_.hasNormals() ? layout_.normal_bits : 8);
     for (size_t i = 0; i < p.size(); ++i) {
       VertexRecord r;
       r.q = grid_.quantize(p[i]);
+      for (int a = 0; a < 3; ++a) r.original[a] = static_cast<float>(p[i][a] - grid_.origin[a]);
       if (layout_.hasNormals()) r.normal = n.empty() ? no_normal : encodeOctahedral(n[i], layout_.normal_bits);
       if (layout_.hasColors() && !c.empty()) r.color = c[i];
       SP_RETURN_IF_ERROR(store_.append(r));
@@ -160,6 +165,7 @@ class IngestSink : public MeshSink {
         SP_RETURN_IF_ERROR(store_.bumpValence(v, first));
         referenced += first;
       }
+      area += triangleArea(originalOf(r[0]), originalOf(r[1]), originalOf(r[2]));
       const Vec3u c = triangleCentroid(r[0].q, r[1].q, r[2].q);
       hist_.add(c);
       SP_RETURN_IF_ERROR(spill_.append({t, c}));
@@ -175,6 +181,7 @@ class IngestSink : public MeshSink {
 
   QuantizeStats stats;
   uint64_t referenced = 0;
+  double area = 0;  // of the kept triangles, original positions
 
  private:
   const Grid& grid_;
@@ -208,13 +215,14 @@ struct TileResult {
   std::vector<uint8_t> payload;
   uint32_t vertices = 0, faces = 0, border = 0;
   Vec3u lo{0, 0, 0}, hi{0, 0, 0};
+  ErrorAccumulator forward, backward;
 };
 
 // Builds the tile's local mesh from the bins and the store: local vertex ids in order of first use (an
 // open-addressing hash from global to local id), records read in global-id order (runs of nearby ids become one
 // read when the store is on disk), border flags from the valence inside the tile against the global valence.
 Status buildTileMesh(uint32_t tile, const TileBins& bins, const VertexStore& store, const AttributeLayout& layout,
-                     TileMesh& out) {
+                     TileMesh& out, std::vector<Vec3d>* originals) {
   std::vector<Triangle> tris;
   SP_RETURN_IF_ERROR(bins.read(tile, tris));
   size_t cap = 16;
@@ -253,9 +261,11 @@ Status buildTileMesh(uint32_t tile, const TileBins& bins, const VertexStore& sto
   if (layout.hasNormals()) m.normals.resize(ids.size());
   if (layout.hasColors()) m.colors.resize(ids.size());
   out.border.resize(ids.size());
+  if (originals) originals->resize(ids.size());
   for (size_t i = 0; i < order.size(); ++i) {
     const uint32_t local = order[i].second;
     const VertexRecord& r = records[i];
+    if (originals) (*originals)[local] = {r.original[0], r.original[1], r.original[2]};
     m.positions[local] = r.q;
     if (layout.hasNormals()) m.normals[local] = r.normal;
     if (layout.hasColors()) m.colors[local] = r.color;
@@ -276,9 +286,39 @@ Status statusFromException() {
   }
 }
 
+// Measures one tile: its original triangles against the decoded tile, both ways. Near tile borders the other
+// tile's surface is not considered, which can only make a distance larger (never hide an error).
+Status measureTile(const EncodeSettings& s, const CodecInfo& codec, const TileContext& ctx, const Grid& grid,
+                   double density, std::shared_ptr<EmbreeDevice> device, const TileMesh& tm,
+                   const std::vector<Vec3d>& originals, TileResult& r) {
+  SP_ASSIGN_OR_RETURN(QuantizedMesh decoded_q, codec.decode(ctx, codec.version, r.payload));
+  std::vector<Vec3d> decoded(decoded_q.positions.size());
+  for (size_t i = 0; i < decoded.size(); ++i) {
+    decoded[i] = grid.dequantize(decoded_q.positions[i]);
+    for (int a = 0; a < 3; ++a) decoded[i][a] -= grid.origin[a];  // same frame as the originals
+  }
+  SP_ASSIGN_OR_RETURN(SurfaceIndex to_original, SurfaceIndex::build(device, originals, tm.mesh.triangles));
+  SP_ASSIGN_OR_RETURN(SurfaceIndex to_decoded, SurfaceIndex::build(device, decoded, decoded_q.triangles));
+  SampleOptions opt;
+  opt.density = density;
+  opt.seed = s.measure.seed;
+  opt.stratified = s.measure.stratified;
+  opt.vertices = s.measure.vertices;
+  opt.stream = 2 * uint64_t(tm.tile_id);
+  std::vector<Vec3d> samples;
+  sampleSurface(originals, tm.mesh.triangles, opt, samples);
+  r.forward = distancesTo(to_decoded, samples);
+  samples.clear();
+  opt.stream += 1;
+  sampleSurface(decoded, decoded_q.triangles, opt, samples);
+  r.backward = distancesTo(to_original, samples);
+  return Status::ok();
+}
+
 }  // namespace
 
-Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progress) {
+Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progress,
+                                std::shared_ptr<EmbreeDevice> device) {
   const CodecInfo* codec = findCodec(s.codec);
   if (!codec) return makeError(ErrorCode::kInvalidArgument, "unknown codec '" + s.codec + "'");
   if (s.normal_bits < 4 || s.normal_bits > 16)
@@ -377,6 +417,12 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
   ContainerWriter writer(*file, result.grid, result.layout);
   SP_RETURN_IF_ERROR(writer.begin());
   const TileContext ctx{result.grid.bits, result.layout};
+  result.measured = s.measure.enabled;
+  result.diagonal = survey.box.diagonal();
+  const double density = samplingDensity(s.measure, result.faces, ingest.area);
+  if (result.measured && !device) {
+    SP_ASSIGN_OR_RETURN(device, EmbreeDevice::create());
+  }
   const uint32_t tile_count = static_cast<uint32_t>(tiles.size());
   size_t in_flight = 2 * static_cast<size_t>(result.threads);
   if (budget > 0)
@@ -391,12 +437,15 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
     r.tile = job.tile;
     try {
       TileMesh tm;
-      r.status = buildTileMesh(job.tile, bins, store, result.layout, tm);
+      std::vector<Vec3d> originals;
+      r.status = buildTileMesh(job.tile, bins, store, result.layout, tm, result.measured ? &originals : nullptr);
       // Per-tile stages run here in order (simplify, remesh: border vertices stay fixed, see engine/tile.h);
       // the codec is the last stage.
       if (r.status.isOk() && std::find(s.fail_tiles.begin(), s.fail_tiles.end(), job.tile) != s.fail_tiles.end())
         r.status = makeError(ErrorCode::kInternal, "injected failure (test)");
       if (r.status.isOk()) r.status = codec->encode(ctx, tm.mesh, r.payload);
+      if (r.status.isOk() && result.measured)  // decode in memory, measure, discard
+        r.status = measureTile(s, *codec, ctx, result.grid, density, device, tm, originals, r);
       r.vertices = static_cast<uint32_t>(tm.mesh.positions.size());
       r.faces = static_cast<uint32_t>(tm.mesh.triangles.size());
       r.border = static_cast<uint32_t>(std::count(tm.border.begin(), tm.border.end(), 1));
@@ -414,6 +463,10 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
     rep.faces = r.faces;
     rep.border_vertices = r.border;
     rep.status = r.status;
+    rep.forward = statsOf(r.forward);
+    rep.backward = statsOf(r.backward);
+    result.forward.merge(r.forward);
+    result.backward.merge(r.backward);
     if (!r.status.isOk()) {
       ++result.failed_tiles;
     } else if (write_status.isOk()) {

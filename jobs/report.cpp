@@ -20,6 +20,20 @@ json gridJson(const Grid& g) {
   return {{"origin", {g.origin[0], g.origin[1], g.origin[2]}}, {"cell", g.cell}, {"bits", g.bits}};
 }
 
+json errorSide(const ErrorStats& e, double diagonal) {
+  const double d = diagonal > 0 ? diagonal : 1.0;
+  return {{"mean", e.mean},       {"rms", e.rms},           {"max", e.max},
+          {"samples", e.samples}, {"mean_relative", e.mean / d}, {"rms_relative", e.rms / d},
+          {"max_relative", e.max / d}};
+}
+
+json errorJson(const ErrorStats& f, const ErrorStats& b, double diagonal) {
+  return {{"diagonal", diagonal},
+          {"forward", errorSide(f, diagonal)},
+          {"backward", errorSide(b, diagonal)},
+          {"symmetric", errorSide(symmetricOf(f, b), diagonal)}};
+}
+
 json layoutJson(const AttributeLayout& l) {
   return {{"normals", l.hasNormals()}, {"normal_bits", l.normal_bits}, {"color_channels", l.color_channels}};
 }
@@ -56,11 +70,20 @@ nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& 
                   {"encode", r.seconds.encode}, {"write", r.seconds.write},       {"total", total}};
   j["mtri_per_second"] = total > 0 ? r.faces / total / 1e6 : 0.0;
   j["failed_tiles"] = r.failed_tiles;
+  if (r.measured) {
+    j["error"] = errorJson(statsOf(r.forward), statsOf(r.backward), r.diagonal);
+    j["error"]["settings"] = {{"samples_per_triangle", settings.measure.samples_per_triangle},
+                              {"samples", settings.measure.samples},
+                              {"seed", settings.measure.seed},
+                              {"stratified", settings.measure.stratified},
+                              {"vertices", settings.measure.vertices}};
+  }
   json tiles = json::array();
   for (const auto& t : r.tiles) {
     json e = {{"id", t.id},   {"vertices", t.vertices}, {"faces", t.faces}, {"border_vertices", t.border_vertices},
               {"bytes", t.bytes}, {"status", t.status.isOk() ? "ok" : "failed"}};
-    if (!t.status.isOk()) e["error"] = t.status.toString();
+    if (!t.status.isOk()) e["failure"] = t.status.toString();
+    else if (r.measured) e["error"] = errorJson(t.forward, t.backward, r.diagonal);
     tiles.push_back(std::move(e));
   }
   j["tiles"] = std::move(tiles);

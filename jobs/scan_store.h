@@ -53,8 +53,9 @@ struct VertexRecord {
   uint32_t valence = 0;  // triangles (kept after quantization) that use the vertex
   OctNormal normal{0, 0};
   Rgba8 color{255, 255, 255, 255};
+  Vec3f original{0, 0, 0};  // input position relative to the grid origin (for measuring the error)
 };
-static_assert(sizeof(VertexRecord) == 24);
+static_assert(sizeof(VertexRecord) == 36);
 
 class VertexStore {
  public:

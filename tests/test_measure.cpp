@@ -4,11 +4,14 @@
 #include <oneapi/tbb/task_arena.h>
 
 #include <cmath>
+#include <filesystem>
 #include <map>
 #include <random>
 
 #include "engine/geometry.h"
+#include "jobs/commands.h"
 #include "jobs/measure.h"
+#include "jobs/mesh_io/mesh_reader.h"
 #include "spatial/surface_index.h"
 #include "test_util.h"
 
@@ -158,6 +161,46 @@ TEST(Measure, SameNumbersAtAnyThreadCount) {
   EXPECT_EQ(one.forward.rms, two.forward.rms);
   EXPECT_EQ(one.backward.max, two.backward.max);
   EXPECT_EQ(one.forward.samples, two.forward.samples);
+}
+
+TEST(Measure, EncodeReportsTheErrorPerTileAndOverall) {
+  const std::string path = testing::sharedDataDir() + "/igea.ply.zst";
+  if (!std::filesystem::exists(path)) GTEST_SKIP() << "shared data not found: " << path;
+  testing::TempDir dir;
+  EncodeSettings s;
+  s.input = path;
+  s.output = dir.file("m.spz");
+  s.bits = 12;
+  s.tile_triangles = 16384;
+  s.measure.enabled = true;
+  s.threads = 1;
+  auto one = encodeFile(s);
+  ASSERT_TRUE(one.isOk()) << one.status().toString();
+  s.threads = 2;
+  auto two = encodeFile(s);
+  ASSERT_TRUE(two.isOk());
+  EXPECT_EQ(one->forward.sum, two->forward.sum) << "same numbers at any thread count";
+  EXPECT_EQ(one->backward.max, two->backward.max);
+  ASSERT_TRUE(one->measured);
+  EXPECT_GE(one->tiles.size(), 16u);
+  // The whole-mesh measurement of the decoded file agrees (per tile can only be a little larger at borders).
+  auto original = readMeshFile(path);
+  ContainerHeader header;
+  auto decoded_q = decodeContainer(s.output, std::nullopt, &header);
+  ASSERT_TRUE(decoded_q.isOk());
+  const Mesh decoded = dequantizeMesh(*decoded_q, header.grid, header.layout);
+  auto whole = measureMeshes(*original, decoded, s.measure, device());
+  ASSERT_TRUE(whole.isOk());
+  const ErrorStats f = statsOf(one->forward);
+  EXPECT_NEAR(f.mean, whole->forward.mean, 0.03 * whole->forward.mean);
+  EXPECT_NEAR(f.rms, whole->forward.rms, 0.03 * whole->forward.rms);
+  EXPECT_NEAR(f.max, whole->forward.max, 0.15 * whole->forward.max);
+  // Quantization bound: at most half a cell per axis.
+  EXPECT_LE(f.max, header.grid.cell * std::sqrt(3.0) / 2 * (1 + 1e-9));
+  for (const auto& t : one->tiles) {
+    EXPECT_GT(t.forward.samples, 0u);
+    EXPECT_LE(t.forward.max, f.max);
+  }
 }
 
 TEST(Measure, CliJson) {

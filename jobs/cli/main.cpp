@@ -60,7 +60,9 @@ options:
   --memory-budget S   bound the memory for tile data, e.g. 512M or 2G (default unit MiB; 0: no limit);
                       larger scans stream through scratch files
   --scratch-dir DIR   where scratch files go (default: the system temp directory)
-  --report R.json     write a JSON report (counts, bytes, bits per vertex, seconds per stage, tiles)
+  --measure           measure the error of the decoded result (per tile and overall) into the report
+  --samples-per-triangle X   measurement sampling density (default 2)
+  --report R.json     write a JSON report (counts, bytes, bits per vertex, seconds per stage, tiles, error)
   --quiet             print nothing on success (progress shows only on a terminal anyway)
 )";
 
@@ -211,8 +213,8 @@ int runEncode(int argc, char** argv) {
   std::string error;
   if (!parseArgs(argc, argv, 2,
                  {"--codec", "--bits", "--normal-bits", "--report", "--tile-triangles", "--threads", "--memory-budget",
-                  "--scratch-dir"},
-                 {"--no-normals", "--no-colors", "--quiet", "--help"}, args, error))
+                  "--scratch-dir", "--samples-per-triangle"},
+                 {"--no-normals", "--no-colors", "--measure", "--quiet", "--help"}, args, error))
     return usage(error, "encode");
   if (args.has("--help")) {
     std::printf(kEncodeHelp, codecList().c_str());
@@ -240,6 +242,13 @@ int runEncode(int argc, char** argv) {
                    "encode");
   }
   if (const auto* d = args.get("--scratch-dir")) s.scratch_dir = *d;
+  s.measure.enabled = args.has("--measure");
+  if (const auto* x = args.get("--samples-per-triangle")) {
+    char* end = nullptr;
+    s.measure.samples_per_triangle = std::strtod(x->c_str(), &end);
+    if (x->empty() || *end != '\0' || !(s.measure.samples_per_triangle > 0) || s.measure.samples_per_triangle > 1e6)
+      return usage("--samples-per-triangle must be a number in (0, 1e6]", "encode");
+  }
   TerminalProgress progress(args.has("--quiet"));
   if (progress.enabled()) progress.file(0, 1, s.input);
   auto result = encodeFile(s, progress.enabled() ? &progress : nullptr);
@@ -249,6 +258,12 @@ int runEncode(int argc, char** argv) {
     const std::string text = encodeReportJson(s, *result, settingsFingerprint(s));
     Status w = writeFileAtomically(*report, std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
     if (!w.isOk()) return fail(w);
+  }
+  if (!args.has("--quiet") && result->measured) {
+    const ErrorStats sym = symmetricOf(statsOf(result->forward), statsOf(result->backward));
+    const double d = result->diagonal > 0 ? result->diagonal : 1;
+    std::printf("error (symmetric): mean %.3e d, rms %.3e d, max %.3e d (d = %.6g)\n", sym.mean / d, sym.rms / d,
+                sym.max / d, result->diagonal);
   }
   if (!args.has("--quiet"))
     std::printf("%s -> %s: %llu vertices, %llu faces, %llu bytes, %.3f bpv (%s, %d bits, %zu tiles)\n",
