@@ -12,6 +12,7 @@
 #include "jobs/container_file.h"
 #include "jobs/file_io.h"
 #include "jobs/progress.h"
+#include "jobs/render.h"
 #include "jobs/report.h"
 #include "spatial/surface_index.h"
 
@@ -32,6 +33,21 @@ uint64_t fnv1a(const std::string& s) {
   uint64_t h = 0xcbf29ce484222325ull;
   for (unsigned char c : s) h = (h ^ c) * 0x100000001b3ull;
   return h;
+}
+
+// The decoded scan (whole, from the container just written) colored by its distance to the original.
+Status renderErrorPicture(const EncodeSettings& s, const std::string& png, std::shared_ptr<EmbreeDevice> device) {
+  SP_ASSIGN_OR_RETURN(Mesh original, readMeshFile(s.input));
+  ContainerHeader header;
+  SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeContainer(s.output, std::nullopt, &header));
+  const Mesh decoded = dequantizeMesh(q, header.grid, header.layout);
+  RenderSettings rs;
+  rs.width = s.measure.render_width;
+  rs.height = s.measure.render_height;
+  rs.azimuth = s.measure.view_azimuth;
+  rs.elevation = s.measure.view_elevation;
+  SP_ASSIGN_OR_RETURN(RenderResult picture, renderMesh(decoded, rs, device, &original));
+  return writePng(png, picture.image);
 }
 
 }  // namespace
@@ -187,6 +203,11 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
                                            std::to_string(f.result.failed_tiles) + " tiles failed)");
             break;
           }
+      if (s.measure.render && f.state == FileOutcome::State::kOk) {
+        Status w = renderErrorPicture(s, (fs::path(job.output_directory) / outputName("{stem}.error.png", f.input)).string(),
+                                      device);
+        if (!w.isOk()) f.state = FileOutcome::State::kFailed, f.error = w;
+      }
       if (!f.report.empty()) {
         Status w = writeText(f.report, encodeReportJson(s, f.result, fingerprint));
         if (!w.isOk()) f.state = FileOutcome::State::kFailed, f.error = w;

@@ -3,7 +3,11 @@
 
 #include <oneapi/tbb/task_arena.h>
 
+#include <png.h>
+
+#include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <map>
 #include <random>
@@ -11,6 +15,7 @@
 #include "engine/geometry.h"
 #include "jobs/commands.h"
 #include "jobs/measure.h"
+#include "jobs/render.h"
 #include "jobs/mesh_io/mesh_reader.h"
 #include "spatial/surface_index.h"
 #include "test_util.h"
@@ -216,6 +221,76 @@ TEST(Measure, CliJson) {
   for (const char* key : {"\"diagonal\"", "\"samples\"", "\"forward\"", "\"backward\"", "\"symmetric\"", "\"mean\"",
                           "\"rms\"", "\"max\"", "\"max_relative\""})
     EXPECT_NE(text.find(key), std::string::npos) << key;
+}
+
+}  // namespace
+}  // namespace scanpress
+
+namespace scanpress {
+namespace {
+
+Image decodePng(const std::vector<uint8_t>& bytes) {
+  png_image img;
+  std::memset(&img, 0, sizeof img);
+  img.version = PNG_IMAGE_VERSION;
+  Image out;
+  if (!png_image_begin_read_from_memory(&img, bytes.data(), bytes.size())) return out;
+  img.format = PNG_FORMAT_RGB;
+  out.width = static_cast<int>(img.width);
+  out.height = static_cast<int>(img.height);
+  out.rgb.resize(PNG_IMAGE_SIZE(img));
+  if (!png_image_finish_read(&img, nullptr, out.rgb.data(), 0, nullptr)) out = Image();
+  return out;
+}
+
+TEST(Render, ShadedAndErrorColoredPicturesAreDeterministic) {
+  const Mesh sphere = icosphere(4), ico = icosphere(1);
+  RenderSettings s;
+  s.width = 160;
+  s.height = 120;
+  RenderResult one, two;
+  tbb::task_arena(1).execute([&] { one = *renderMesh(ico, s, device(), &sphere); });
+  tbb::task_arena(2).execute([&] { two = *renderMesh(ico, s, device(), &sphere); });
+  EXPECT_EQ(one.image.rgb, two.image.rgb);
+  EXPECT_GT(one.scale_max, 0);
+  EXPECT_LE(one.scale_max, 1 - std::sqrt((5.0 + 2.0 * std::sqrt(5.0)) / 15.0) + 1e-3);
+  auto png = encodePng(one.image);
+  ASSERT_TRUE(png.isOk());
+  const Image back = decodePng(*png);
+  ASSERT_EQ(back.width, 160);
+  ASSERT_EQ(back.height, 120);
+  EXPECT_EQ(back.rgb, one.image.rgb);
+  // Colored (not grey) pixels where the mesh is, background elsewhere.
+  size_t colored = 0, background = 0;
+  for (size_t i = 0; i < back.rgb.size(); i += 3) {
+    const uint8_t r = back.rgb[i], g = back.rgb[i + 1], b = back.rgb[i + 2];
+    if (r == 245 && g == 245 && b == 245) ++background;
+    else if (std::max({r, g, b}) - std::min({r, g, b}) > 40) ++colored;
+  }
+  EXPECT_GT(colored, 1000u);
+  EXPECT_GT(background, 1000u);
+  // Without a reference: grey shading only.
+  auto grey = renderMesh(ico, s, device());
+  ASSERT_TRUE(grey.isOk());
+  for (size_t i = 0; i < grey->image.rgb.size(); i += 3)
+    ASSERT_EQ(grey->image.rgb[i], grey->image.rgb[i + 2]);
+  EXPECT_FALSE(renderMesh(Mesh(), s, device()).isOk());
+}
+
+TEST(Render, JobWritesTheErrorPicture) {
+  testing::TempDir dir;
+  const std::string bunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
+  testing::writeBytes(dir.file("job.json"), "{\"inputs\": [\"" + bunny + "\"], \"output\": {\"directory\": \"out\"}, "
+                                            "\"codec\": {\"bits\": 9}, \"measure\": {\"enabled\": true, \"render\": "
+                                            "true, \"render_size\": [200, 150]}}");
+  const std::string cmd = std::string("'") + SCANPRESS_BIN + "' run '" + dir.file("job.json") + "' --quiet";
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  const Image img = decodePng(testing::readBytes(dir.file("out/bun_zipper.error.png")));
+  EXPECT_EQ(img.width, 200);
+  EXPECT_EQ(img.height, 150);
+  const std::string report(reinterpret_cast<const char*>(testing::readBytes(dir.file("out/bun_zipper.report.json")).data()),
+                           testing::readBytes(dir.file("out/bun_zipper.report.json")).size());
+  EXPECT_NE(report.find("\"max_relative\""), std::string::npos);
 }
 
 }  // namespace

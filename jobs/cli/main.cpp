@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <exception>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -20,6 +21,7 @@
 #include "jobs/mesh_io/mesh_reader.h"
 #include "spatial/surface_index.h"
 #include "jobs/progress.h"
+#include "jobs/render.h"
 #include "jobs/report.h"
 #include "jobs/synth.h"
 
@@ -38,6 +40,7 @@ commands:
   decode   decompress a container (or some of its tiles) into a PLY or OBJ file
   info     describe a container
   measure  surface distance between two meshes (Metro-style, both directions, Embree)
+  render   a PNG picture of a mesh, optionally colored by its distance to the original
   synth    write a deterministic scan-like mesh of N triangles (for tests and benchmarks)
 
 'scanpress <command> --help' shows a command's options.
@@ -93,6 +96,18 @@ options:
   --seed S                  sampling seed (default 1)
   --monte-carlo             random samples instead of stratified ones
   --json                    print JSON
+)";
+
+constexpr const char* kRenderHelp = R"(usage: scanpress render MESH OUT.png [options]
+
+Ray-casts MESH (Embree) with a headlight. With --against, the surface is colored by its distance to ORIGINAL,
+with a color scale bar labelled in units of ORIGINAL's bounding-box diagonal (the bar tops at the 99.5th
+percentile of the visible distances).
+
+options:
+  --against ORIGINAL   color by distance to this mesh
+  --view AZ,EL         camera azimuth and elevation in degrees (default 30,20; y is up)
+  --size W,H           picture size in pixels (default 800,600)
 )";
 
 constexpr const char* kSynthHelp = R"(usage: scanpress synth OUT.ply --triangles N [options]
@@ -401,6 +416,50 @@ int runMeasure(int argc, char** argv) {
   return 0;
 }
 
+bool parsePair(const std::string& text, double& a, double& b) {
+  const size_t comma = text.find(',');
+  if (comma == std::string::npos) return false;
+  char* end = nullptr;
+  const std::string first = text.substr(0, comma), second = text.substr(comma + 1);
+  a = std::strtod(first.c_str(), &end);
+  if (first.empty() || *end != '\0' || !std::isfinite(a)) return false;
+  b = std::strtod(second.c_str(), &end);
+  return !second.empty() && *end == '\0' && std::isfinite(b);
+}
+
+int runRender(int argc, char** argv) {
+  Args args;
+  std::string error;
+  if (!parseArgs(argc, argv, 2, {"--against", "--view", "--size"}, {"--help"}, args, error)) return usage(error, "render");
+  if (args.has("--help")) return std::fputs(kRenderHelp, stdout), 0;
+  if (args.positional.size() != 2) return usage("render needs MESH and OUT.png", "render");
+  RenderSettings s;
+  if (const auto* v = args.get("--view"))
+    if (!parsePair(*v, s.azimuth, s.elevation)) return usage("--view expects AZ,EL in degrees", "render");
+  if (const auto* v = args.get("--size")) {
+    double w = 0, h = 0;
+    if (!parsePair(*v, w, h) || w < 16 || h < 16 || w > 8192 || h > 8192 || w != std::floor(w) || h != std::floor(h))
+      return usage("--size expects W,H in 16..8192", "render");
+    s.width = static_cast<int>(w);
+    s.height = static_cast<int>(h);
+  }
+  auto mesh = readMeshFile(args.positional[0]);
+  if (!mesh.isOk()) return fail(mesh.status());
+  std::optional<Mesh> original;
+  if (const auto* a = args.get("--against")) {
+    auto m = readMeshFile(*a);
+    if (!m.isOk()) return fail(m.status());
+    original = std::move(m).value();
+  }
+  auto device = EmbreeDevice::create();
+  if (!device.isOk()) return fail(device.status());
+  auto r = renderMesh(*mesh, s, *device, original ? &*original : nullptr);
+  if (!r.isOk()) return fail(r.status());
+  Status w = writePng(args.positional[1], r->image);
+  if (!w.isOk()) return fail(w);
+  return 0;
+}
+
 int runSynth(int argc, char** argv) {
   Args args;
   std::string error;
@@ -443,6 +502,7 @@ int run(int argc, char** argv) {
       if (sub == "run") return std::fputs(kRunHelp, stdout), 0;
       if (sub == "synth") return std::fputs(kSynthHelp, stdout), 0;
       if (sub == "measure") return std::fputs(kMeasureHelp, stdout), 0;
+      if (sub == "render") return std::fputs(kRenderHelp, stdout), 0;
     }
     return std::fputs(kMainHelp, stdout), 0;
   }
@@ -453,6 +513,7 @@ int run(int argc, char** argv) {
   if (cmd == "run") return runJobCommand(argc, argv);
   if (cmd == "synth") return runSynth(argc, argv);
   if (cmd == "measure") return runMeasure(argc, argv);
+  if (cmd == "render") return runRender(argc, argv);
   std::fprintf(stderr, "scanpress: error: unknown command '%s'\n\n%s", cmd.c_str(), kMainHelp);
   return 1;
 }

@@ -1,0 +1,41 @@
+// Pictures of meshes: Embree ray casting with a headlight, optionally colored by the distance to another mesh
+// (the original), with a color scale bar labelled in units of the original's bounding-box diagonal. PNG output
+// (libpng), written all-or-nothing.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "engine/mesh.h"
+#include "engine/status.h"
+
+namespace scanpress {
+
+class EmbreeDevice;
+
+struct RenderSettings {
+  int width = 800, height = 600;
+  double azimuth = 30, elevation = 20;  // degrees; y is up
+};
+
+struct Image {
+  int width = 0, height = 0;
+  std::vector<uint8_t> rgb;  // row-major, 3 bytes per pixel
+};
+
+struct RenderResult {
+  Image image;
+  double scale_max = 0;  // distance at the top of the color bar (absolute units), when colored
+  double diagonal = 0;   // of the reference mesh
+};
+
+// Renders `mesh`; with `against`, colors each visible point by its distance to `against`.
+Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& settings, std::shared_ptr<EmbreeDevice> device,
+                                const Mesh* against = nullptr);
+
+Result<std::vector<uint8_t>> encodePng(const Image& image);
+Status writePng(const std::string& path, const Image& image);
+
+}  // namespace scanpress
