@@ -110,6 +110,7 @@ Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& s, std::
 
   std::vector<double> shade(size_t(s.width) * s.height, -1), error(size_t(s.width) * s.height, -1);
   tbb::parallel_for(0, s.height, [&](int y) {
+    uint32_t hint = UINT32_MAX;  // neighbouring pixels see nearby surface points
     for (int x = 0; x < view_w; ++x) {
       const double px = ((x + 0.5) / s.width * 2 - 1) * half_w, py = (1 - (y + 0.5) / s.height * 2) * half_h;
       Vec3d dir = vadd(forward, vadd(vmul(right, px), vmul(up, py)));
@@ -118,7 +119,11 @@ Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& s, std::
       if (!hit.hit) continue;
       const size_t i = size_t(y) * s.width + x;
       shade[i] = 0.25 + 0.75 * std::fabs(vdot(hit.normal, dir));
-      if (reference) error[i] = reference->closest(vadd(eye, vmul(dir, hit.t))).distance;
+      if (reference) {
+        const auto c = reference->closest(vadd(eye, vmul(dir, hit.t)), hint);
+        error[i] = c.distance;
+        hint = c.triangle;
+      }
     }
   });
   if (reference) {  // the bar tops at the 99.5th percentile of visible distances, so one outlier cannot wash it out

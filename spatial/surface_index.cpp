@@ -53,6 +53,7 @@ struct SurfaceIndex::Impl {
   std::span<const Vec3d> positions;
   std::span<const Triangle> triangles;
   std::vector<float> vertices;  // float xyz relative to origin, padded for Embree's 16-byte loads
+  std::vector<float> spheres;   // per triangle: bounding-sphere center (relative to origin) and radius
   Vec3d origin{0, 0, 0};
   float slack = 0;  // absolute float rounding of the vertices: added to every search radius
   ~Impl() {
@@ -89,6 +90,22 @@ Result<SurfaceIndex> SurfaceIndex::build(std::shared_ptr<EmbreeDevice> device, s
   for (size_t i = 0; i < positions.size(); ++i)
     for (int a = 0; a < 3; ++a) m.vertices[3 * i + a] = static_cast<float>(positions[i][a] - m.origin[a]);
 
+  // Bounding spheres (circumcenter of the bounding box of the corners), inflated by the float rounding: a
+  // candidate whose sphere is farther than the best distance so far is rejected without the exact test.
+  m.spheres.resize(triangles.size() * 4);
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    Vec3d c{0, 0, 0};
+    for (int a = 0; a < 3; ++a) {
+      double lo_a = 1e300, hi_a = -1e300;
+      for (uint32_t v : triangles[t]) lo_a = std::min(lo_a, positions[v][a]), hi_a = std::max(hi_a, positions[v][a]);
+      c[a] = 0.5 * (lo_a + hi_a);
+    }
+    double r = 0;
+    for (uint32_t v : triangles[t]) r = std::max(r, vlen(vsub(positions[v], c)));
+    for (int a = 0; a < 3; ++a) m.spheres[4 * t + a] = static_cast<float>(c[a] - m.origin[a]);
+    m.spheres[4 * t + 3] = static_cast<float>(r) * (1.0f + 8 * std::numeric_limits<float>::epsilon()) + 2 * m.slack;
+  }
+
   RTCDevice dev = static_cast<RTCDevice>(m.device->handle());
   m.scene = rtcNewScene(dev);
   rtcSetSceneFlags(m.scene, RTC_SCENE_FLAG_ROBUST);
@@ -119,6 +136,8 @@ struct ClosestQuery {
   double best_d2;
   Vec3d best;
   uint32_t triangle;
+  float px, py, pz;  // p relative to the origin, in float
+  float best_f;      // conservative (rounded up) float bound of the best distance
 };
 
 }  // namespace
@@ -126,6 +145,11 @@ struct ClosestQuery {
 static bool closestCallback(RTCPointQueryFunctionArguments* args) {
   auto* q = static_cast<ClosestQuery*>(args->userPtr);
   const auto& impl = *q->impl;
+  // Reject by bounding sphere: |p - c| - r > best means no point of the triangle can be closer.
+  const float* sp = &impl.spheres[4 * size_t(args->primID)];
+  const float dx = q->px - sp[0], dy = q->py - sp[1], dz = q->pz - sp[2];
+  const float reach = q->best_f + sp[3];
+  if (dx * dx + dy * dy + dz * dz > reach * reach * (1.0f + 8 * std::numeric_limits<float>::epsilon())) return false;
   const Triangle& t = impl.triangles[args->primID];
   const Vec3d c = closestPointOnTriangle(q->p, impl.positions[t[0]], impl.positions[t[1]], impl.positions[t[2]]);
   const Vec3d d = vsub(c, q->p);
@@ -136,6 +160,7 @@ static bool closestCallback(RTCPointQueryFunctionArguments* args) {
   q->triangle = args->primID;
   // Shrink Embree's (float) radius, never below the exact distance plus the vertices' float rounding.
   const float r = static_cast<float>(std::sqrt(d2)) * (1.0f + 4 * std::numeric_limits<float>::epsilon()) + impl.slack;
+  q->best_f = r;
   if (r < args->query->radius) {
     args->query->radius = r;
     return true;
@@ -143,19 +168,30 @@ static bool closestCallback(RTCPointQueryFunctionArguments* args) {
   return false;
 }
 
-SurfaceIndex::Closest SurfaceIndex::closest(const Vec3d& p) const {
+SurfaceIndex::Closest SurfaceIndex::closest(const Vec3d& p, uint32_t hint) const {
   Closest out;
   if (impl_->triangles.empty()) {
     out.distance = std::numeric_limits<double>::infinity();
     return out;
   }
-  ClosestQuery q{impl_.get(), p, std::numeric_limits<double>::infinity(), p, UINT32_MAX};
+  ClosestQuery q{impl_.get(), p, std::numeric_limits<double>::infinity(), p, UINT32_MAX, 0, 0, 0,
+                 std::numeric_limits<float>::infinity()};
   RTCPointQuery query;
-  query.x = static_cast<float>(p[0] - impl_->origin[0]);
-  query.y = static_cast<float>(p[1] - impl_->origin[1]);
-  query.z = static_cast<float>(p[2] - impl_->origin[2]);
+  query.x = q.px = static_cast<float>(p[0] - impl_->origin[0]);
+  query.y = q.py = static_cast<float>(p[1] - impl_->origin[1]);
+  query.z = q.pz = static_cast<float>(p[2] - impl_->origin[2]);
   query.time = 0.f;
   query.radius = std::numeric_limits<float>::infinity();
+  if (hint < impl_->triangles.size()) {
+    const Triangle& t = impl_->triangles[hint];
+    const Vec3d c = closestPointOnTriangle(p, impl_->positions[t[0]], impl_->positions[t[1]], impl_->positions[t[2]]);
+    const Vec3d d = vsub(c, p);
+    q.best_d2 = vdot(d, d);
+    q.best = c;
+    q.triangle = hint;
+    query.radius = q.best_f =
+        static_cast<float>(std::sqrt(q.best_d2)) * (1.0f + 4 * std::numeric_limits<float>::epsilon()) + impl_->slack;
+  }
   RTCPointQueryContext context;
   rtcInitPointQueryContext(&context);
   rtcPointQuery(impl_->scene, &query, &context, closestCallback, &q);

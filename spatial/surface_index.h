@@ -48,7 +48,9 @@ class SurfaceIndex {
     Vec3d point{0, 0, 0};
     uint32_t triangle = UINT32_MAX;  // UINT32_MAX when the mesh has no triangle
   };
-  Closest closest(const Vec3d& p) const;
+  // With a hint (a triangle likely near p, e.g. the previous answer for a nearby query), the search starts from
+  // the distance to that triangle instead of an unbounded radius: the same exact result, far fewer nodes.
+  Closest closest(const Vec3d& p, uint32_t hint = UINT32_MAX) const;
 
   struct Hit {
     bool hit = false;
