@@ -331,7 +331,10 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
 
   // ---- pass 1
   if (progress) progress->stage("reading");
-  SurveySink survey(budget == 0 ? UINT64_MAX : budget / 3);
+  // Pass 1 keeps the mesh for pass 2 only while it is small: a large mesh held in doubles costs more in memory
+  // traffic and page faults than parsing the file again (20M triangles: 5.7 s re-reading vs 8.1 s kept).
+  constexpr uint64_t kKeepLimit = 256ull << 20;
+  SurveySink survey(std::min(kKeepLimit, budget == 0 ? UINT64_MAX : budget / 3));
   SP_ASSIGN_OR_RETURN(result.read, readMesh(s.input, survey));
   if (s.keep_normals && survey.has_normals) result.layout.normal_bits = static_cast<uint8_t>(s.normal_bits);
   if (s.keep_colors && survey.colorChannels()) result.layout.color_channels = survey.colorChannels();
@@ -359,7 +362,7 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
   if (progress) progress->stage("quantizing");
   VertexStore store(scratchFile("vertices.bin"), in_memory ? UINT64_MAX / 2 : budget / 4);
   std::optional<TileHistogram> histogram(std::in_place, result.grid.bits, n_triangles, target);
-  TriangleSpill spill(scratchFile("triangles.bin"), in_memory);
+  TriangleSpill spill(scratchFile("triangles.bin"), in_memory, n_triangles);
   IngestSink ingest(result.grid, result.layout, store, *histogram, spill);
   if (survey.kept()) {
     SP_RETURN_IF_ERROR(replay(survey.mesh, ingest, ReadOptions().chunk));

@@ -112,7 +112,11 @@ struct SpilledTriangle {
 
 class TriangleSpill {
  public:
-  TriangleSpill(std::string path, bool in_memory) : path_(std::move(path)), in_memory_(in_memory) {}
+  // `expected` (the count from the first pass) sizes the in-memory array once instead of growing it.
+  TriangleSpill(std::string path, bool in_memory, uint64_t expected = 0)
+      : path_(std::move(path)), in_memory_(in_memory) {
+    if (in_memory_) memory_.reserve(expected);
+  }
   Status append(const SpilledTriangle& t);
   Status finish();
   uint64_t size() const { return size_; }
