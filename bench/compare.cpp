@@ -1,0 +1,291 @@
+// scanpress-compare: side-by-side comparison of every scanpress codec with Draco (edgebreaker, -cl 7 and -cl 10)
+// and meshoptimizer (vertex cache and fetch optimisation, index and vertex codecs; raw and with zstd -19 on top),
+// on the same quantized input, in one process.
+//
+// For each scan in a folder and each quantization, the scan is quantized once on scanpress's grid (cubic cells
+// over the largest extent, as Draco's -qp). Draco is given the cell centers: its lattice (largest extent of the
+// input / (2^bits - 1)) then coincides with the grid, so its output can be checked cell by cell. Every result is
+// decoded and compared with the input as the multiset of triangles over quantized positions (orientation kept):
+// "lossless" in the table means exactly equal. Times are the median of --runs runs, single-threaded.
+//
+// Writes JSON (--json) and a Markdown table (--markdown); see bench/RESULTS.md.
+#include <draco/compression/decode.h>
+#include <draco/compression/encode.h>
+#include <draco/mesh/mesh.h>
+#include <meshoptimizer.h>
+#include <zstd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "engine/codecs/codec.h"
+#include "engine/quantize.h"
+#include "jobs/mesh_io/mesh_reader.h"
+
+namespace scanpress {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+struct Row {
+  std::string scan, codec;
+  int bits = 0;
+  uint64_t vertices = 0, triangles = 0, bytes = 0;
+  double encode_mtri = 0, decode_mtri = 0;
+  bool lossless = false;
+  std::string note;
+};
+
+// Sorted triangles over positions, each rotated to start at its smallest corner.
+std::vector<std::array<Vec3u, 3>> canonical(const std::vector<Vec3u>& pos, const std::vector<Triangle>& tris) {
+  std::vector<std::array<Vec3u, 3>> out;
+  out.reserve(tris.size());
+  for (const auto& t : tris) {
+    std::array<Vec3u, 3> c{pos[t[0]], pos[t[1]], pos[t[2]]};
+    std::rotate(c.begin(), std::min_element(c.begin(), c.end()), c.end());
+    out.push_back(c);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : v[v.size() / 2];
+}
+
+// Runs encode and decode `runs` times; `encode` returns the byte count, `decode` fills positions/triangles.
+template <typename Enc, typename Dec>
+void timeCodec(int runs, size_t triangles, Enc&& encode, Dec&& decode, Row& row) {
+  std::vector<double> te, td;
+  for (int r = 0; r < runs; ++r) {
+    auto t0 = Clock::now();
+    row.bytes = encode();
+    auto t1 = Clock::now();
+    decode();
+    auto t2 = Clock::now();
+    te.push_back(std::chrono::duration<double>(t1 - t0).count());
+    td.push_back(std::chrono::duration<double>(t2 - t1).count());
+  }
+  row.encode_mtri = triangles / median(te) / 1e6;
+  row.decode_mtri = triangles / median(td) / 1e6;
+}
+
+void runScan(const std::string& path, int bits, int runs, std::vector<Row>& rows) {
+  auto mesh = readMeshFile(path);
+  if (!mesh.isOk()) {
+    std::fprintf(stderr, "skipping %s: %s\n", path.c_str(), mesh.status().toString().c_str());
+    return;
+  }
+  const Grid grid = *makeGrid(boundingBox(*mesh), bits);
+  const QuantizedMesh q = *quantizeMesh(*mesh, grid, {}, nullptr);  // positions only: all peers code them
+  const auto want = canonical(q.positions, q.triangles);
+  const std::string scan = fs::path(path).filename().string();
+  auto base = [&](const std::string& codec) {
+    Row r;
+    r.scan = scan;
+    r.codec = codec;
+    r.bits = bits;
+    r.vertices = q.positions.size();
+    r.triangles = q.triangles.size();
+    return r;
+  };
+
+  // scanpress codecs.
+  for (const auto& codec : allCodecs()) {
+    Row row = base(std::string("scanpress ") + std::string(codec.name));
+    const TileContext ctx{bits, {}};
+    std::vector<uint8_t> bytes;
+    QuantizedMesh out;
+    timeCodec(runs, q.triangles.size(), [&] {
+      bytes.clear();
+      (void)codec.encode(ctx, q, bytes);
+      return bytes.size();
+    }, [&] {
+      auto r = codec.decode(ctx, codec.version, bytes);
+      if (r.isOk()) out = std::move(r).value();
+    }, row);
+    row.lossless = canonical(out.positions, out.triangles) == want;
+    rows.push_back(row);
+  }
+
+  // Draco: cell centers in, its own quantization at the same bits.
+  draco::Mesh dm;
+  dm.set_num_points(static_cast<uint32_t>(q.positions.size()));
+  draco::GeometryAttribute ga;
+  ga.Init(draco::GeometryAttribute::POSITION, nullptr, 3, draco::DT_FLOAT32, false, 12, 0);
+  const int att = dm.AddAttribute(ga, true, static_cast<uint32_t>(q.positions.size()));
+  for (size_t i = 0; i < q.positions.size(); ++i) {
+    const Vec3d c = grid.dequantize(q.positions[i]);
+    const float f[3] = {static_cast<float>(c[0]), static_cast<float>(c[1]), static_cast<float>(c[2])};
+    dm.attribute(att)->SetAttributeValue(draco::AttributeValueIndex(static_cast<uint32_t>(i)), f);
+  }
+  for (const auto& t : q.triangles)
+    dm.AddFace({draco::PointIndex(t[0]), draco::PointIndex(t[1]), draco::PointIndex(t[2])});
+  for (int cl : {7, 10}) {
+    Row row = base("draco -cl " + std::to_string(cl));
+    draco::EncoderBuffer buffer;
+    std::unique_ptr<draco::Mesh> decoded;
+    timeCodec(runs, q.triangles.size(), [&] {
+      draco::Encoder enc;
+      enc.SetAttributeQuantization(draco::GeometryAttribute::POSITION, bits);
+      enc.SetSpeedOptions(10 - cl, 10 - cl);
+      enc.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
+      buffer.Clear();
+      if (!enc.EncodeMeshToBuffer(dm, &buffer).ok()) return size_t(0);
+      return buffer.size();
+    }, [&] {
+      draco::DecoderBuffer in;
+      in.Init(buffer.data(), buffer.size());
+      draco::Decoder dec;
+      auto r = dec.DecodeMeshFromBuffer(&in);
+      if (r.ok()) decoded = std::move(r).value();
+    }, row);
+    if (decoded) {
+      const draco::PointAttribute* pa = decoded->GetNamedAttribute(draco::GeometryAttribute::POSITION);
+      std::vector<Vec3u> pos(decoded->num_points());
+      for (uint32_t i = 0; i < decoded->num_points(); ++i) {
+        float f[3];
+        pa->GetMappedValue(draco::PointIndex(i), f);
+        pos[i] = grid.quantize({f[0], f[1], f[2]});
+      }
+      std::vector<Triangle> tris;
+      for (uint32_t f = 0; f < decoded->num_faces(); ++f) {
+        const auto& face = decoded->face(draco::FaceIndex(f));
+        tris.push_back({face[0].value(), face[1].value(), face[2].value()});
+      }
+      row.lossless = canonical(pos, tris) == want;
+    }
+    rows.push_back(row);
+  }
+
+  // meshoptimizer: positions as 4 x uint16 (bits <= 16), vertex cache + fetch order, index and vertex codecs.
+  if (bits <= 16) {
+    std::vector<uint32_t> idx;
+    for (const auto& t : q.triangles) idx.insert(idx.end(), t.begin(), t.end());
+    std::vector<std::array<uint16_t, 4>> verts(q.positions.size());
+    for (size_t i = 0; i < verts.size(); ++i)
+      verts[i] = {uint16_t(q.positions[i][0]), uint16_t(q.positions[i][1]), uint16_t(q.positions[i][2]), 0};
+    for (bool zstd : {false, true}) {
+      Row row = base(zstd ? "meshopt + zstd-19" : "meshopt");
+      std::vector<uint8_t> ib, vb, packed;
+      std::vector<uint32_t> out_idx(idx.size());
+      std::vector<std::array<uint16_t, 4>> out_verts(verts.size());
+      size_t vcount = verts.size();
+      timeCodec(runs, q.triangles.size(), [&] {
+        std::vector<uint32_t> opt(idx.size());
+        meshopt_optimizeVertexCache(opt.data(), idx.data(), idx.size(), verts.size());
+        std::vector<std::array<uint16_t, 4>> ordered(verts.size());
+        vcount = meshopt_optimizeVertexFetch(ordered.data(), opt.data(), opt.size(), verts.data(), verts.size(), 8);
+        ib.resize(meshopt_encodeIndexBufferBound(opt.size(), vcount));
+        ib.resize(meshopt_encodeIndexBuffer(ib.data(), ib.size(), opt.data(), opt.size()));
+        vb.resize(meshopt_encodeVertexBufferBound(vcount, 8));
+        vb.resize(meshopt_encodeVertexBuffer(vb.data(), vb.size(), ordered.data(), vcount, 8));
+        if (!zstd) return ib.size() + vb.size();
+        std::vector<uint8_t> both(ib);
+        both.insert(both.end(), vb.begin(), vb.end());
+        packed.resize(ZSTD_compressBound(both.size()));
+        packed.resize(ZSTD_compress(packed.data(), packed.size(), both.data(), both.size(), 19));
+        return packed.size();
+      }, [&] {
+        if (zstd) {
+          std::vector<uint8_t> both(ib.size() + vb.size());
+          ZSTD_decompress(both.data(), both.size(), packed.data(), packed.size());
+        }
+        meshopt_decodeIndexBuffer(out_idx.data(), out_idx.size(), 4, ib.data(), ib.size());
+        out_verts.resize(vcount);
+        meshopt_decodeVertexBuffer(out_verts.data(), vcount, 8, vb.data(), vb.size());
+      }, row);
+      std::vector<Vec3u> pos(vcount);
+      for (size_t i = 0; i < vcount; ++i) pos[i] = {out_verts[i][0], out_verts[i][1], out_verts[i][2]};
+      std::vector<Triangle> tris(out_idx.size() / 3);
+      for (size_t t = 0; t < tris.size(); ++t) tris[t] = {out_idx[3 * t], out_idx[3 * t + 1], out_idx[3 * t + 2]};
+      row.lossless = canonical(pos, tris) == want;
+      rows.push_back(row);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace scanpress
+
+int main(int argc, char** argv) {
+  using namespace scanpress;
+  std::string data = SCANPRESS_SHARED_DATA, json_path = "compare.json", md_path = "compare.md";
+  std::vector<int> bits = {12, 14};
+  int runs = 5;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string { return i + 1 < argc ? argv[++i] : ""; };
+    if (a == "--data") data = next();
+    else if (a == "--json") json_path = next();
+    else if (a == "--markdown") md_path = next();
+    else if (a == "--runs") runs = std::max(1, std::atoi(next().c_str()));
+    else if (a == "--bits") {
+      bits.clear();
+      std::string list = next();
+      for (size_t p = 0; p < list.size();) {
+        const size_t c = std::min(list.find(',', p), list.size());
+        bits.push_back(std::atoi(list.substr(p, c - p).c_str()));
+        p = c + 1;
+      }
+    } else {
+      std::fprintf(stderr, "usage: scanpress-compare [--data DIR] [--bits 12,14] [--runs 5] [--json F] [--markdown F]\n");
+      return 1;
+    }
+  }
+  std::vector<std::string> scans;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(data, ec))
+    if (e.is_regular_file() && formatFromName(e.path().filename().string()) != MeshFormat::kUnknown)
+      scans.push_back(e.path().string());
+  std::sort(scans.begin(), scans.end());
+  if (scans.empty()) {
+    std::fprintf(stderr, "no scans in %s\n", data.c_str());
+    return 1;
+  }
+  std::vector<Row> rows;
+  for (const auto& s : scans)
+    for (int b : bits) {
+      std::fprintf(stderr, "%s at %d bits\n", fs::path(s).filename().c_str(), b);
+      runScan(s, b, runs, rows);
+    }
+  nlohmann::json j = nlohmann::json::array();
+  for (const auto& r : rows)
+    j.push_back({{"scan", r.scan}, {"codec", r.codec}, {"bits", r.bits}, {"vertices", r.vertices},
+                 {"triangles", r.triangles}, {"bytes", r.bytes}, {"bpv", 8.0 * r.bytes / r.vertices},
+                 {"encode_mtri_s", r.encode_mtri}, {"decode_mtri_s", r.decode_mtri}, {"lossless", r.lossless}});
+  std::ofstream(json_path) << j.dump(2) << "\n";
+  std::ofstream md(md_path);
+  md << "| scan | bits | codec | bytes | bpv | encode Mtri/s | decode Mtri/s | lossless |\n|---|---:|---|---:|---:|---:|---:|---|\n";
+  char line[512];
+  for (const auto& r : rows) {
+    std::snprintf(line, sizeof line, "| %s | %d | %s | %llu | %.2f | %.2f | %.2f | %s |\n", r.scan.c_str(), r.bits,
+                  r.codec.c_str(), static_cast<unsigned long long>(r.bytes), 8.0 * r.bytes / r.vertices, r.encode_mtri,
+                  r.decode_mtri, r.lossless ? "yes" : "NO");
+    md << line;
+  }
+  // Median bpv per codec and bits, over the scans.
+  md << "\n| codec | bits | median bpv | median encode Mtri/s | median decode Mtri/s | all lossless |\n|---|---:|---:|---:|---:|---|\n";
+  std::map<std::pair<std::string, int>, std::vector<const Row*>> by;
+  for (const auto& r : rows) by[{r.codec, r.bits}].push_back(&r);
+  for (const auto& [key, v] : by) {
+    std::vector<double> bpv, enc, dec;
+    bool all = true;
+    for (const Row* r : v) bpv.push_back(8.0 * r->bytes / r->vertices), enc.push_back(r->encode_mtri), dec.push_back(r->decode_mtri), all &= r->lossless;
+    std::snprintf(line, sizeof line, "| %s | %d | %.2f | %.2f | %.2f | %s |\n", key.first.c_str(), key.second,
+                  median(bpv), median(enc), median(dec), all ? "yes" : "NO");
+    md << line;
+  }
+  std::fprintf(stderr, "wrote %s and %s\n", json_path.c_str(), md_path.c_str());
+  return 0;
+}
