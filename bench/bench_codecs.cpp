@@ -9,6 +9,7 @@
 #include "engine/codecs/codec.h"
 #include "engine/quantize.h"
 #include "jobs/mesh_io/mesh_reader.h"
+#include "spatial/tiling.h"
 
 namespace scanpress {
 namespace {
@@ -82,9 +83,34 @@ void BM_Read(benchmark::State& state, std::string scan) {
                                                    benchmark::Counter::kIsRate);
 }
 
+// Tiling building block: histogram of centroids, refinement, octree tiles, and one lookup per triangle.
+void BM_Tiling(benchmark::State& state, std::string scan) {
+  const Prepared& p = prepared(scan, 16);
+  std::vector<Vec3u> centroids;
+  for (const auto& t : p.mesh.triangles)
+    centroids.push_back(triangleCentroid(p.mesh.positions[t[0]], p.mesh.positions[t[1]], p.mesh.positions[t[2]]));
+  size_t tiles = 0;
+  for (auto _ : state) {
+    TileHistogram h(16, centroids.size(), static_cast<uint64_t>(state.range(0)));
+    for (const auto& c : centroids) h.add(c);
+    while (h.beginRefinement())
+      for (const auto& c : centroids) h.addRefined(c);
+    const TileIndex index = TileIndex::build(h);
+    uint64_t sum = 0;
+    for (const auto& c : centroids) sum += index.tileOf(c);
+    benchmark::DoNotOptimize(sum);
+    tiles = index.tiles().size();
+  }
+  state.counters["Mtri/s"] =
+      benchmark::Counter(double(centroids.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["tiles"] = double(tiles);
+}
+
 const char* kScans[] = {"igea.ply.zst", "bun_zipper.ply.zst", "rs1_normals.ply.zst", "gargo.ply.zst"};
 
 int registerAll() {
+  benchmark::RegisterBenchmark("Tiling/igea.ply.zst", BM_Tiling, std::string("igea.ply.zst"))
+      ->Arg(16384)->Arg(131072)->Unit(benchmark::kMillisecond);
   for (const char* scan : kScans) {
     benchmark::RegisterBenchmark((std::string("Read/") + scan).c_str(), BM_Read, std::string(scan))
         ->Unit(benchmark::kMillisecond);

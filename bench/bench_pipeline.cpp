@@ -1,6 +1,8 @@
 // Whole-pipeline throughput (read, quantize, tile, encode with `store`, write) at 1 and 2 threads, on the largest
 // scan of ../shared/data and on a synth scan of 20M triangles (generated once into $SCANPRESS_BENCH_DIR or the
-// temp directory): Mtri/s, peak RSS, and the 2-thread speedup measured as a ratio in the same iteration.
+// temp directory): Mtri/s, peak RSS, and the 2-thread speedup measured as a ratio in the same iteration; and
+// the scale series (synth 1M, 10M, 50M triangles, in memory and with a 512 MiB budget). The synth files take
+// about 20 + 190 + 380 + 950 MB of disk.
 //
 // Each measurement runs in a forked child, so that its peak RSS (wait4's ru_maxrss) is its own.
 #include <benchmark/benchmark.h>
@@ -118,7 +120,10 @@ void BM_Speedup(benchmark::State& state, std::string (*scan)()) {
 }
 
 std::string igea() { return largestScan(); }
+std::string synth1m() { return synthScan(1000000); }
+std::string synth10m() { return synthScan(10000000); }
 std::string synth20m() { return synthScan(20000000); }
+std::string synth50m() { return synthScan(50000000); }
 
 int registerAll() {
   for (int threads : {1, 2}) {
@@ -132,6 +137,14 @@ int registerAll() {
   benchmark::RegisterBenchmark("Pipeline/synth20M/threads:2/budget:256M", BM_Pipeline, &synth20m, 2,
                                uint64_t(256) << 20)
       ->UseManualTime()->Unit(benchmark::kMillisecond)->Iterations(2);
+  // Scale: cost per triangle should stay flat with size; with a budget, so should memory.
+  for (auto [name, fn] : {std::pair<const char*, std::string (*)()>{"1M", &synth1m}, {"10M", &synth10m}, {"50M", &synth50m}}) {
+    benchmark::RegisterBenchmark((std::string("Scale/synth") + name + "/threads:2").c_str(), BM_Pipeline, fn, 2, uint64_t(0))
+        ->UseManualTime()->Unit(benchmark::kMillisecond)->Iterations(1);
+    benchmark::RegisterBenchmark((std::string("Scale/synth") + name + "/threads:2/budget:512M").c_str(), BM_Pipeline, fn, 2,
+                                 uint64_t(512) << 20)
+        ->UseManualTime()->Unit(benchmark::kMillisecond)->Iterations(1);
+  }
   benchmark::RegisterBenchmark("Speedup/igea", BM_Speedup, &igea)->UseManualTime()->Unit(benchmark::kMillisecond)->Iterations(5);
   benchmark::RegisterBenchmark("Speedup/synth20M", BM_Speedup, &synth20m)->UseManualTime()->Unit(benchmark::kMillisecond)->Iterations(2);
   return 0;

@@ -20,6 +20,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <cstdlib>
 #include <functional>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -28,7 +29,9 @@
 
 #include "engine/codecs/codec.h"
 #include "engine/quantize.h"
+#include "jobs/measure.h"
 #include "jobs/mesh_io/mesh_reader.h"
+#include "spatial/surface_index.h"
 
 namespace scanpress {
 namespace {
@@ -42,7 +45,13 @@ struct Row {
   uint64_t vertices = 0, triangles = 0, bytes = 0;
   double encode_mtri = 0, decode_mtri = 0;
   bool lossless = false;
-  std::string note;
+  double rms_rel = -1, max_rel = -1;  // symmetric error relative to the diagonal (--rd)
+};
+
+struct Options {
+  int runs = 5;
+  bool rd = false;
+  std::shared_ptr<EmbreeDevice> device;
 };
 
 // Sorted triangles over positions, each rotated to start at its smallest corner.
@@ -80,7 +89,23 @@ void timeCodec(int runs, size_t triangles, Enc&& encode, Dec&& decode, Row& row)
   row.decode_mtri = triangles / median(td) / 1e6;
 }
 
-void runScan(const std::string& path, int bits, int runs, std::vector<Row>& rows) {
+// Symmetric error of a decoded result (quantized positions, triangles) against the original scan.
+void measureRow(const Mesh& original, const Grid& grid, const std::vector<Vec3u>& pos, const std::vector<Triangle>& tris,
+                const Options& opt, Row& row) {
+  if (!opt.rd) return;
+  Mesh decoded;
+  for (const auto& p : pos) decoded.positions.push_back(grid.dequantize(p));
+  decoded.triangles = tris;
+  MeasureSettings ms;
+  ms.samples_per_triangle = 1;
+  auto r = measureMeshes(original, decoded, ms, opt.device);
+  if (!r.isOk()) return;
+  row.rms_rel = r->symmetric.rms / r->diagonal;
+  row.max_rel = r->symmetric.max / r->diagonal;
+}
+
+void runScan(const std::string& path, int bits, const Options& opt, std::vector<Row>& rows) {
+  const int runs = opt.runs;
   auto mesh = readMeshFile(path);
   if (!mesh.isOk()) {
     std::fprintf(stderr, "skipping %s: %s\n", path.c_str(), mesh.status().toString().c_str());
@@ -115,6 +140,7 @@ void runScan(const std::string& path, int bits, int runs, std::vector<Row>& rows
       if (r.isOk()) out = std::move(r).value();
     }, row);
     row.lossless = canonical(out.positions, out.triangles) == want;
+    measureRow(*mesh, grid, out.positions, out.triangles, opt, row);
     rows.push_back(row);
   }
 
@@ -164,6 +190,7 @@ void runScan(const std::string& path, int bits, int runs, std::vector<Row>& rows
         tris.push_back({face[0].value(), face[1].value(), face[2].value()});
       }
       row.lossless = canonical(pos, tris) == want;
+      measureRow(*mesh, grid, pos, tris, opt, row);
     }
     rows.push_back(row);
   }
@@ -210,6 +237,7 @@ void runScan(const std::string& path, int bits, int runs, std::vector<Row>& rows
       std::vector<Triangle> tris(out_idx.size() / 3);
       for (size_t t = 0; t < tris.size(); ++t) tris[t] = {out_idx[3 * t], out_idx[3 * t + 1], out_idx[3 * t + 2]};
       row.lossless = canonical(pos, tris) == want;
+      measureRow(*mesh, grid, pos, tris, opt, row);
       rows.push_back(row);
     }
   }
@@ -220,16 +248,18 @@ void runScan(const std::string& path, int bits, int runs, std::vector<Row>& rows
 
 int main(int argc, char** argv) {
   using namespace scanpress;
-  std::string data = SCANPRESS_SHARED_DATA, json_path = "compare.json", md_path = "compare.md";
+  std::string data = SCANPRESS_SHARED_DATA, json_path = "compare.json", md_path = "compare.md", plot_dir;
   std::vector<int> bits = {12, 14};
-  int runs = 5;
+  Options opt;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string { return i + 1 < argc ? argv[++i] : ""; };
     if (a == "--data") data = next();
     else if (a == "--json") json_path = next();
     else if (a == "--markdown") md_path = next();
-    else if (a == "--runs") runs = std::max(1, std::atoi(next().c_str()));
+    else if (a == "--runs") opt.runs = std::max(1, std::atoi(next().c_str()));
+    else if (a == "--rd") opt.rd = true;
+    else if (a == "--plots") plot_dir = next();
     else if (a == "--bits") {
       bits.clear();
       std::string list = next();
@@ -239,7 +269,9 @@ int main(int argc, char** argv) {
         p = c + 1;
       }
     } else {
-      std::fprintf(stderr, "usage: scanpress-compare [--data DIR] [--bits 12,14] [--runs 5] [--json F] [--markdown F]\n");
+      std::fprintf(stderr,
+                   "usage: scanpress-compare [--data DIR] [--bits 12,14] [--runs 5] [--json F] [--markdown F]\n"
+                   "                         [--rd [--plots DIR]]   rate-distortion: error per result, bpv-error plots\n");
       return 1;
     }
   }
@@ -253,17 +285,23 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "no scans in %s\n", data.c_str());
     return 1;
   }
+  if (opt.rd) {
+    auto device = EmbreeDevice::create();
+    if (!device.isOk()) return std::fprintf(stderr, "%s\n", device.status().toString().c_str()), 1;
+    opt.device = *device;
+  }
   std::vector<Row> rows;
   for (const auto& s : scans)
     for (int b : bits) {
       std::fprintf(stderr, "%s at %d bits\n", fs::path(s).filename().c_str(), b);
-      runScan(s, b, runs, rows);
+      runScan(s, b, opt, rows);
     }
   nlohmann::json j = nlohmann::json::array();
   for (const auto& r : rows)
     j.push_back({{"scan", r.scan}, {"codec", r.codec}, {"bits", r.bits}, {"vertices", r.vertices},
                  {"triangles", r.triangles}, {"bytes", r.bytes}, {"bpv", 8.0 * r.bytes / r.vertices},
-                 {"encode_mtri_s", r.encode_mtri}, {"decode_mtri_s", r.decode_mtri}, {"lossless", r.lossless}});
+                 {"encode_mtri_s", r.encode_mtri}, {"decode_mtri_s", r.decode_mtri}, {"lossless", r.lossless},
+                 {"symmetric_rms_relative", r.rms_rel}, {"symmetric_max_relative", r.max_rel}});
   std::ofstream(json_path) << j.dump(2) << "\n";
   std::ofstream md(md_path);
   md << "| scan | bits | codec | bytes | bpv | encode Mtri/s | decode Mtri/s | lossless |\n|---|---:|---|---:|---:|---:|---:|---|\n";
@@ -285,6 +323,38 @@ int main(int argc, char** argv) {
     std::snprintf(line, sizeof line, "| %s | %d | %.2f | %.2f | %.2f | %s |\n", key.first.c_str(), key.second,
                   median(bpv), median(enc), median(dec), all ? "yes" : "NO");
     md << line;
+  }
+  if (opt.rd) {  // RD columns, and one bpv-vs-error plot per scan (gnuplot, when installed)
+    md << "\n| scan | codec | bits | bpv | symmetric RMS / diagonal | symmetric max / diagonal |\n|---|---|---:|---:|---:|---:|\n";
+    for (const auto& r : rows) {
+      std::snprintf(line, sizeof line, "| %s | %s | %d | %.2f | %.3e | %.3e |\n", r.scan.c_str(), r.codec.c_str(), r.bits,
+                    8.0 * r.bytes / r.vertices, r.rms_rel, r.max_rel);
+      md << line;
+    }
+    if (!plot_dir.empty()) {
+      fs::create_directories(plot_dir);
+      std::map<std::string, std::map<std::string, std::vector<const Row*>>> series;
+      for (const auto& r : rows) series[r.scan][r.codec].push_back(&r);
+      const std::string script = plot_dir + "/rd.gp";
+      std::ofstream gp(script);
+      for (const auto& [scan, codecs] : series) {
+        gp << "set terminal pngcairo size 900,600\nset output '" << plot_dir << "/" << scan << ".rd.png'\n"
+           << "set title 'Rate-distortion: " << scan << "'\nset logscale x\nset xlabel 'symmetric RMS error / "
+           << "bounding-box diagonal'\nset ylabel 'bits per vertex'\nset key outside right\nset grid\nplot ";
+        bool first = true;
+        for (const auto& [codec, pts] : codecs) {
+          const std::string dat = plot_dir + "/" + scan + "." + std::to_string(std::hash<std::string>()(codec)) + ".dat";
+          std::ofstream d(dat);
+          for (const Row* r : pts) d << r->rms_rel << " " << 8.0 * r->bytes / r->vertices << "\n";
+          gp << (first ? "" : ", ") << "'" << dat << "' with linespoints title '" << codec << "'";
+          first = false;
+        }
+        gp << "\n";
+      }
+      gp.close();
+      if (std::system(("command -v gnuplot >/dev/null && gnuplot '" + script + "'").c_str()) != 0)
+        std::fprintf(stderr, "gnuplot not found (scripts/install-bench-deps.sh): wrote %s only\n", script.c_str());
+    }
   }
   std::fprintf(stderr, "wrote %s and %s\n", json_path.c_str(), md_path.c_str());
   return 0;

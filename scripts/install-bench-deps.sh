@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Bench-only peers for side-by-side comparisons (never needed by scanpress itself): CGAL, meshoptimizer, Draco.
+# Bench-only peers for side-by-side comparisons (never needed by scanpress itself): CGAL, meshoptimizer, Draco,
+# and gnuplot for the rate-distortion plots.
 set -euo pipefail
 bash "$(dirname "$0")/install-deps.sh"
-PKGS=(libcgal-dev libmeshoptimizer-dev libdraco-dev)
+PKGS=(libcgal-dev libmeshoptimizer-dev libdraco-dev gnuplot-nox)
 missing=()
 for p in "${PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
