@@ -8,6 +8,7 @@
 #include <unordered_map>
 
 #include "engine/mesh.h"
+#include "engine/shapes.h"
 #include "jobs/file_io.h"
 #include "jobs/mesh_io/mesh_reader.h"
 
@@ -58,32 +59,9 @@ class Noise {
   uint64_t seed_;
 };
 
-Mesh icosphere(int levels, uint64_t seed) {
-  const double t = (1.0 + std::sqrt(5.0)) / 2.0;
-  Mesh m;
-  m.positions = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
-                 {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
-  m.triangles = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
-                 {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
-                 {3, 8, 9},  {4, 9, 5},  {2, 4, 11},  {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
-  for (auto& p : m.positions) p = normalized(p);
-  for (int l = 0; l < levels; ++l) {
-    std::map<std::pair<uint32_t, uint32_t>, uint32_t> mid;
-    auto midpoint = [&](uint32_t a, uint32_t b) {
-      auto key = std::minmax(a, b);
-      auto it = mid.find(key);
-      if (it != mid.end()) return it->second;
-      m.positions.push_back(normalized(mul(add(m.positions[a], m.positions[b]), 0.5)));
-      return mid[key] = static_cast<uint32_t>(m.positions.size() - 1);
-    };
-    std::vector<Triangle> next;
-    for (const auto& f : m.triangles) {
-      const uint32_t a = midpoint(f[0], f[1]), b = midpoint(f[1], f[2]), c = midpoint(f[2], f[0]);
-      next.insert(next.end(), {Triangle{f[0], a, c}, Triangle{f[1], b, a}, Triangle{f[2], c, b}, Triangle{a, b, c}});
-    }
-    m.triangles = std::move(next);
-  }
-  // Coarse bumps, so the blob is not a sphere: radius 1 +- 0.25.
+// The built-in base: an icosphere with coarse bumps, so the blob is not a sphere (radius 1 +- 0.25).
+Mesh bumpyIcosphere(int levels, uint64_t seed) {
+  Mesh m = icosphere(levels);
   Noise noise(seed ^ 0xB10Bull);
   for (auto& p : m.positions) p = mul(p, 1.0 + 0.25 * noise.value(mul(p, 1.7)) + 0.08 * noise.value(mul(p, 4.1)));
   return m;
@@ -118,7 +96,7 @@ Result<SynthResult> synthesize(const SynthSettings& s) {
     return makeError(ErrorCode::kInvalidArgument, "--triangles must be in [1, 2^31-1]");
   Mesh base;
   if (s.from.empty()) {
-    base = icosphere(4, s.seed);
+    base = bumpyIcosphere(4, s.seed);
   } else {
     SP_ASSIGN_OR_RETURN(base, readMeshFile(s.from));
   }

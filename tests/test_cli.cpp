@@ -13,17 +13,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-int run(const std::string& args, std::string* out = nullptr) {
-  const std::string cmd = std::string("'") + SCANPRESS_BIN + "' " + args;
-  FILE* p = ::popen((cmd + " 2>&1").c_str(), "r");
-  std::string text;
-  char buf[4096];
-  size_t n;
-  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) text.append(buf, n);
-  const int status = ::pclose(p);
-  if (out) *out = text;
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
+int run(const std::string& args, std::string* out = nullptr) { return testing::runScanpress(args, out); }
 
 // Files in `dir` whose names contain ".tmp-" (left-over temporaries).
 int temporaries(const std::string& dir) {

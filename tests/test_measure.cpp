@@ -13,6 +13,7 @@
 #include <random>
 
 #include "engine/geometry.h"
+#include "engine/shapes.h"
 #include "jobs/commands.h"
 #include "jobs/measure.h"
 #include "jobs/render.h"
@@ -38,35 +39,6 @@ Mesh grid(int n, double z, double size = 1.0) {
       m.triangles.push_back({a, a + 1, a + n + 2});
       m.triangles.push_back({a, a + n + 2, a + n + 1});
     }
-  return m;
-}
-
-Mesh icosphere(int levels) {
-  const double t = (1.0 + std::sqrt(5.0)) / 2.0;
-  Mesh m;
-  m.positions = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
-                 {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
-  m.triangles = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
-                 {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
-                 {3, 8, 9},  {4, 9, 5},  {2, 4, 11},  {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
-  auto unit = [](Vec3d p) { return vmul(p, 1.0 / vlen(p)); };
-  for (auto& p : m.positions) p = unit(p);
-  for (int l = 0; l < levels; ++l) {
-    std::map<std::pair<uint32_t, uint32_t>, uint32_t> mid;
-    auto midpoint = [&](uint32_t a, uint32_t b) {
-      auto key = std::minmax(a, b);
-      auto it = mid.find(key);
-      if (it != mid.end()) return it->second;
-      m.positions.push_back(unit(vmul(vadd(m.positions[a], m.positions[b]), 0.5)));
-      return mid[key] = static_cast<uint32_t>(m.positions.size() - 1);
-    };
-    std::vector<Triangle> next;
-    for (const auto& f : m.triangles) {
-      const uint32_t a = midpoint(f[0], f[1]), b = midpoint(f[1], f[2]), c = midpoint(f[2], f[0]);
-      next.insert(next.end(), {Triangle{f[0], a, c}, Triangle{f[1], b, a}, Triangle{f[2], c, b}, Triangle{a, b, c}});
-    }
-    m.triangles = std::move(next);
-  }
   return m;
 }
 
@@ -211,13 +183,8 @@ TEST(Measure, EncodeReportsTheErrorPerTileAndOverall) {
 TEST(Measure, CliJson) {
   testing::TempDir dir;
   const std::string bunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
-  const std::string cmd = std::string("'") + SCANPRESS_BIN + "' measure '" + bunny + "' '" + bunny + "' --json --samples 20000";
-  FILE* p = ::popen(cmd.c_str(), "r");
   std::string text;
-  char buf[4096];
-  size_t n;
-  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) text.append(buf, n);
-  ASSERT_EQ(::pclose(p), 0) << text;
+  ASSERT_EQ(testing::runScanpress("measure '" + bunny + "' '" + bunny + "' --json --samples 20000", &text), 0) << text;
   for (const char* key : {"\"diagonal\"", "\"samples\"", "\"forward\"", "\"backward\"", "\"symmetric\"", "\"mean\"",
                           "\"rms\"", "\"max\"", "\"max_relative\""})
     EXPECT_NE(text.find(key), std::string::npos) << key;

@@ -210,7 +210,11 @@ Status Scanner::consumePendingLineFeed() {
   return Status::ok();
 }
 
-bool parseDouble(std::string_view token, double& value) {
+namespace {
+
+// std::from_chars over the whole token (a leading '+' allowed, as C's strtod and the mesh formats allow).
+template <typename T>
+bool parseWhole(std::string_view token, T& value) {
   const char* b = token.data();
   const char* e = b + token.size();
   if (b != e && *b == '+') ++b;
@@ -218,12 +222,9 @@ bool parseDouble(std::string_view token, double& value) {
   return ec == std::errc() && ptr == e;
 }
 
-bool parseInt64(std::string_view token, int64_t& value) {
-  const char* b = token.data();
-  const char* e = b + token.size();
-  if (b != e && *b == '+') ++b;
-  auto [ptr, ec] = std::from_chars(b, e, value);
-  return ec == std::errc() && ptr == e;
-}
+}  // namespace
+
+bool parseDouble(std::string_view token, double& value) { return parseWhole(token, value); }
+bool parseInt64(std::string_view token, int64_t& value) { return parseWhole(token, value); }
 
 }  // namespace scanpress

@@ -1,0 +1,12 @@
+// Simple generated meshes: used by `synth` as a built-in base and by tests as analytic references.
+#pragma once
+
+#include "engine/mesh.h"
+
+namespace scanpress {
+
+// The icosahedron inscribed in the unit sphere, each triangle split in four `levels` times with the new vertices
+// pushed onto the sphere (20 * 4^levels triangles, consistently oriented outwards).
+Mesh icosphere(int levels);
+
+}  // namespace scanpress
