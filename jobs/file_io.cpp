@@ -28,9 +28,13 @@ Result<std::unique_ptr<AtomicFile>> AtomicFile::create(const std::string& path) 
   const fs::path dir = target.has_parent_path() ? target.parent_path() : fs::path(".");
   std::error_code ec;
   if (fs::is_directory(target, ec)) return makeError(ErrorCode::kIo, path + ": is a directory");
-  const std::string temp = (dir / ("." + target.filename().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
-                                   std::to_string(g_temp_counter++)))
-                               .string();
+  std::string name = ".";
+  name += target.filename().string();
+  name += ".tmp-";
+  name += std::to_string(::getpid());
+  name += "-";
+  name += std::to_string(g_temp_counter++);
+  const std::string temp = (dir / name).string();
   const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
   if (fd < 0) return errnoStatus(path, "cannot create output (temporary " + temp + ")", errno);
   return std::unique_ptr<AtomicFile>(new AtomicFile(fd, path, temp));

@@ -138,13 +138,14 @@ TEST(Batch, BadFileIsReportedOthersCompleteResumeSkipsForceRedoes) {
   EXPECT_EQ(status["bunny.ply.zst"], "ok");
   EXPECT_EQ(status["octa.obj"], "ok");
   EXPECT_EQ(status["broken.ply"], "failed");
-  for (const auto& f : summary["files"])
+  for (const auto& f : summary["files"]) {
     if (f["status"] == "failed") {
       EXPECT_NE(f["error"].get<std::string>().find("broken.ply"), std::string::npos);
       EXPECT_EQ(f["exit_code"], 2);
     } else {
       EXPECT_GT(f["bpv"].get<double>(), 0);
     }
+  }
   EXPECT_TRUE(fs::exists(dir.file("out/bunny.spz")));
   EXPECT_TRUE(fs::exists(dir.file("out/octa.report.json")));
   EXPECT_FALSE(fs::exists(dir.file("out/broken.spz")));
@@ -153,16 +154,22 @@ TEST(Batch, BadFileIsReportedOthersCompleteResumeSkipsForceRedoes) {
   // Resume: complete outputs with the same settings are skipped.
   EXPECT_EQ(run("run '" + job + "' --quiet", &out), 2);
   summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
-  for (const auto& f : summary["files"])
-    if (fs::path(f["input"].get<std::string>()).filename() != "broken.ply") EXPECT_EQ(f["status"], "skipped");
+  for (const auto& f : summary["files"]) {
+    if (fs::path(f["input"].get<std::string>()).filename() != "broken.ply") {
+      EXPECT_EQ(f["status"], "skipped");
+    }
+  }
   EXPECT_EQ(fs::last_write_time(dir.file("out/bunny.spz")), first_time);
 
   // A truncated container is not complete: it is redone.
   fs::resize_file(dir.file("out/octa.spz"), 40);
   EXPECT_EQ(run("run '" + job + "' --quiet", &out), 2);
   summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
-  for (const auto& f : summary["files"])
-    if (fs::path(f["input"].get<std::string>()).filename() == "octa.obj") EXPECT_EQ(f["status"], "ok");
+  for (const auto& f : summary["files"]) {
+    if (fs::path(f["input"].get<std::string>()).filename() == "octa.obj") {
+      EXPECT_EQ(f["status"], "ok");
+    }
+  }
 
   // Other settings: redone. --force: redone.
   writeJob(12);
@@ -173,8 +180,9 @@ TEST(Batch, BadFileIsReportedOthersCompleteResumeSkipsForceRedoes) {
   summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
   EXPECT_EQ(summary["totals"]["ok"], 2);
   EXPECT_EQ(summary["totals"]["skipped"], 0);
-  for (const auto& e : fs::directory_iterator(dir.file("out")))
+  for (const auto& e : fs::directory_iterator(dir.file("out"))) {
     EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos);
+  }
 
   // Without the bad file the job succeeds.
   fs::remove(dir.file("scans/broken.ply"));

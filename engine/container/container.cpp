@@ -67,6 +67,7 @@ class VectorSink : public ByteSink {
 
 std::vector<uint8_t> serializeHeader(const ContainerHeader& h) {
   std::vector<uint8_t> out;
+  out.reserve(kHeaderSize);
   ByteWriter w(out);
   w.bytes(kHeaderMagic);
   w.u32(h.version);
