@@ -8,9 +8,9 @@
 //   tiling  octree tiles from the histogram (spatial/tiling), then a counting sort of triangles into tile bins
 //   graph   source -> limiter -> tile task (parallel) -> sequencer (tile order) -> serial container writer
 //
-// Memory: with no budget everything stays in memory. With a budget, the store, the spill and the bins go to
-// scratch files when they would not fit in half of it, their buffers take about a quarter each, and the limiter
-// keeps the tiles in flight (and the tile size) within the rest. The output is byte-identical at any thread count:
+// Memory: the store, the spill and the bins go to scratch files when they would not fit in half of the budget
+// (2 GiB when none is set: beyond that, scratch files are faster too), their buffers take about a quarter each,
+// and with a budget the limiter keeps the tiles in flight (and the tile size) within the rest. The output is byte-identical at any thread count:
 // each tile's bytes depend only on its content, and the sequencer restores tile order.
 #include <sys/resource.h>
 
@@ -346,7 +346,12 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
   // ---- memory plan
   const uint64_t n_vertices = survey.vertex_count, n_triangles = survey.triangle_count;
   const uint64_t in_memory_bytes = n_vertices * sizeof(VertexRecord) + n_triangles * (sizeof(SpilledTriangle) + sizeof(Triangle));
-  const bool in_memory = budget == 0 || in_memory_bytes <= budget / 2;
+  // Without a budget, tile data up to kAutoStorageBudget / 2 stays in memory; beyond that, scratch files are
+  // faster as well as smaller (50M-triangle synth: 2.83 vs 2.28 Mtri/s, 262 MB vs 2.74 GB). Only where the data
+  // lives changes: the tiles, hence the bytes, depend on an explicit budget only.
+  constexpr uint64_t kAutoStorageBudget = 2ull << 30;
+  const uint64_t storage_budget = budget > 0 ? budget : kAutoStorageBudget;
+  const bool in_memory = in_memory_bytes <= storage_budget / 2;
   result.out_of_core = !in_memory;
   const uint64_t target = effectiveTileTarget(s);  // independent of the thread count: so are the bytes
   std::optional<ScratchDir> scratch;
@@ -360,7 +365,7 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
 
   // ---- pass 2
   if (progress) progress->stage("quantizing");
-  VertexStore store(scratchFile("vertices.bin"), in_memory ? UINT64_MAX / 2 : budget / 4);
+  VertexStore store(scratchFile("vertices.bin"), in_memory ? UINT64_MAX / 2 : storage_budget / 4);
   std::optional<TileHistogram> histogram(std::in_place, result.grid.bits, n_triangles, target);
   TriangleSpill spill(scratchFile("triangles.bin"), in_memory, n_triangles);
   IngestSink ingest(result.grid, result.layout, store, *histogram, spill);
@@ -402,7 +407,7 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
   const auto tiles = index.tiles();
   std::vector<uint64_t> counts(tiles.size());
   for (size_t t = 0; t < tiles.size(); ++t) counts[t] = tiles[t].triangles;
-  TileBins bins(scratchFile("bins.bin"), in_memory, counts, budget / 4);
+  TileBins bins(scratchFile("bins.bin"), in_memory, counts, storage_budget / 4);
   SP_RETURN_IF_ERROR(forEachSpilled([&](const SpilledTriangle& t) {
     const uint32_t tile = index.tileOf(t.centroid);
     if (tile == UINT32_MAX) return makeError(ErrorCode::kInternal, "triangle centroid outside every tile");
