@@ -17,9 +17,7 @@ namespace {
 
 template <typename T>
 std::string le(T v) {
-  std::string s(sizeof(T), '\0');
-  std::memcpy(s.data(), &v, sizeof(T));
-  return s;
+  return testing::bytesOf(v);
 }
 
 const std::string kPlyAsciiHead =

@@ -17,10 +17,7 @@ using testing::writeBytes;
 
 template <typename T>
 std::string bin(T v, bool big = false) {
-  std::string s(sizeof(T), '\0');
-  std::memcpy(s.data(), &v, sizeof(T));
-  if (big) std::reverse(s.begin(), s.end());
-  return s;
+  return testing::bytesOf(v, big);
 }
 
 Mesh readOk(const std::string& path, ReadStats* stats = nullptr) {

@@ -9,6 +9,7 @@
 
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -123,6 +124,15 @@ inline void writeBytes(const std::string& path, const std::string& bytes) {
 inline std::vector<uint8_t> readBytes(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
   return std::vector<uint8_t>(std::istreambuf_iterator<char>(f), {});
+}
+
+// The bytes of a value, little endian (or big endian), for building binary test files.
+template <typename T>
+std::string bytesOf(T v, bool big_endian = false) {
+  std::string s(sizeof(T), '\0');
+  std::memcpy(s.data(), &v, sizeof(T));
+  if (big_endian) std::reverse(s.begin(), s.end());
+  return s;
 }
 
 // A small closed mesh: an octahedron scaled by `s`.
