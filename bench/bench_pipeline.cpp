@@ -79,7 +79,6 @@ Measured encodeInChild(const std::string& input, int threads, uint64_t budget) {
 }
 
 uint64_t triangleCount(const std::string& path) {
-  ReadStats stats;
   struct Count : MeshSink {
     Status vertices(std::span<const Vec3d>, std::span<const Vec3f>, std::span<const Rgba8>, uint8_t) override {
       return Status::ok();

@@ -2,7 +2,6 @@
 
 #include <oneapi/tbb/parallel_for.h>
 
-#include <nlohmann/json.hpp>
 #include <vector>
 
 #include "engine/quantize.h"
@@ -32,48 +31,44 @@ ErrorAccumulator distancesTo(const SurfaceIndex& surface, std::span<const Vec3d>
   return acc;
 }
 
+Status measureSurfaces(std::span<const Vec3d> original_positions, std::span<const Triangle> original_triangles,
+                       std::span<const Vec3d> decoded_positions, std::span<const Triangle> decoded_triangles,
+                       const MeasureSettings& s, double density, uint64_t stream,
+                       std::shared_ptr<EmbreeDevice> device, ErrorAccumulator& forward, ErrorAccumulator& backward) {
+  SP_ASSIGN_OR_RETURN(SurfaceIndex to_original, SurfaceIndex::build(device, original_positions, original_triangles));
+  SP_ASSIGN_OR_RETURN(SurfaceIndex to_decoded, SurfaceIndex::build(device, decoded_positions, decoded_triangles));
+  SampleOptions opt;
+  opt.density = density;
+  opt.seed = s.seed;
+  opt.stratified = s.stratified;
+  opt.vertices = s.vertices;
+  opt.stream = stream;
+  std::vector<Vec3d> samples;
+  sampleSurface(original_positions, original_triangles, opt, samples);
+  forward = distancesTo(to_decoded, samples);
+  samples.clear();
+  opt.stream = stream + 1;
+  sampleSurface(decoded_positions, decoded_triangles, opt, samples);
+  backward = distancesTo(to_original, samples);
+  return Status::ok();
+}
+
 Result<MeasureResult> measureMeshes(const Mesh& original, const Mesh& decoded, const MeasureSettings& s,
                                     std::shared_ptr<EmbreeDevice> device) {
   if (original.triangles.empty() || decoded.triangles.empty())
     return makeError(ErrorCode::kInvalidArgument, "both meshes need triangles to measure a surface distance");
   MeasureResult r;
   r.diagonal = boundingBox(original).diagonal();
-  SP_ASSIGN_OR_RETURN(SurfaceIndex to_original, SurfaceIndex::build(device, original.positions, original.triangles));
-  SP_ASSIGN_OR_RETURN(SurfaceIndex to_decoded, SurfaceIndex::build(device, decoded.positions, decoded.triangles));
   // One density for both directions, from the original, so both sample the surfaces alike.
-  SampleOptions opt;
-  opt.density = samplingDensity(s, original.triangles.size(), surfaceArea(original.positions, original.triangles));
-  opt.seed = s.seed;
-  opt.stratified = s.stratified;
-  opt.vertices = s.vertices;
-  std::vector<Vec3d> samples;
-  sampleSurface(original.positions, original.triangles, opt, samples);
-  r.forward = statsOf(distancesTo(to_decoded, samples));
-  samples.clear();
-  opt.stream = 1;
-  sampleSurface(decoded.positions, decoded.triangles, opt, samples);
-  r.backward = statsOf(distancesTo(to_original, samples));
+  const double density =
+      samplingDensity(s, original.triangles.size(), surfaceArea(original.positions, original.triangles));
+  ErrorAccumulator forward, backward;
+  SP_RETURN_IF_ERROR(measureSurfaces(original.positions, original.triangles, decoded.positions, decoded.triangles, s,
+                                     density, 0, std::move(device), forward, backward));
+  r.forward = statsOf(forward);
+  r.backward = statsOf(backward);
   r.symmetric = symmetricOf(r.forward, r.backward);
   return r;
-}
-
-std::string measureJson(const MeasureResult& r) {
-  auto side = [&](const ErrorStats& e) {
-    const double d = r.diagonal > 0 ? r.diagonal : 1.0;
-    return nlohmann::json{{"mean", e.mean},
-                          {"rms", e.rms},
-                          {"max", e.max},
-                          {"samples", e.samples},
-                          {"mean_relative", e.mean / d},
-                          {"rms_relative", e.rms / d},
-                          {"max_relative", e.max / d}};
-  };
-  nlohmann::json j = {{"diagonal", r.diagonal},
-                      {"samples", r.forward.samples + r.backward.samples},
-                      {"forward", side(r.forward)},
-                      {"backward", side(r.backward)},
-                      {"symmetric", side(r.symmetric)}};
-  return j.dump(2) + "\n";
 }
 
 }  // namespace scanpress

@@ -42,12 +42,16 @@ double samplingDensity(const MeasureSettings& s, uint64_t triangles, double area
 // Distances from `samples` to the surface, accumulated in sample order (parallel queries).
 ErrorAccumulator distancesTo(const SurfaceIndex& surface, std::span<const Vec3d> samples);
 
+// The core of every measurement: samples on the original (stream `stream`) queried against the decoded surface,
+// and samples on the decoded surface (stream `stream + 1`) against the original, at `density` samples per unit
+// area. Accumulates into `forward` and `backward`.
+Status measureSurfaces(std::span<const Vec3d> original_positions, std::span<const Triangle> original_triangles,
+                       std::span<const Vec3d> decoded_positions, std::span<const Triangle> decoded_triangles,
+                       const MeasureSettings& settings, double density, uint64_t stream,
+                       std::shared_ptr<EmbreeDevice> device, ErrorAccumulator& forward, ErrorAccumulator& backward);
+
 // Measures `decoded` against `original` (whole meshes in memory).
 Result<MeasureResult> measureMeshes(const Mesh& original, const Mesh& decoded, const MeasureSettings& settings,
                                     std::shared_ptr<EmbreeDevice> device);
-
-// {"diagonal", "samples", "forward": {"mean","rms","max","samples","mean_relative","rms_relative","max_relative"},
-//  "backward": {...}, "symmetric": {...}} as JSON text.
-std::string measureJson(const MeasureResult& r);
 
 }  // namespace scanpress

@@ -44,8 +44,6 @@
 namespace scanpress {
 namespace {
 
-constexpr uint64_t kTileBytesPerTriangle = 160;  // measured peak of a tile task, generously rounded up
-
 class Stopwatch {
  public:
   double lap() {
@@ -75,61 +73,48 @@ class SurveySink : public MeshSink {
     vertex_count += p.size();
     has_normals |= !n.empty();
     if (!c.empty()) channels_ = std::max(channels_, channels);
-    if (keeping()) {
-      const size_t before = mesh.positions.size();
-      mesh.positions.insert(mesh.positions.end(), p.begin(), p.end());
-      if (!n.empty() || !mesh.normals.empty()) {
-        mesh.normals.resize(before, Vec3f{0, 0, 0});
-        if (n.empty()) mesh.normals.resize(before + p.size(), Vec3f{0, 0, 0});
-        else mesh.normals.insert(mesh.normals.end(), n.begin(), n.end());
-      }
-      if (!c.empty() || !mesh.colors.empty()) {
-        mesh.colors.resize(before, Rgba8{255, 255, 255, 255});
-        if (c.empty()) mesh.colors.resize(before + p.size(), Rgba8{255, 255, 255, 255});
-        else mesh.colors.insert(mesh.colors.end(), c.begin(), c.end());
-      }
-      checkLimit();
-    }
+    if (kept()) SP_RETURN_IF_ERROR(collector_.vertices(p, n, c, channels));
+    checkLimit();
     return Status::ok();
   }
   Status triangles(std::span<const Triangle> t) override {
     triangle_count += t.size();
-    if (keeping()) {
-      mesh.triangles.insert(mesh.triangles.end(), t.begin(), t.end());
-      checkLimit();
-    }
+    if (kept()) SP_RETURN_IF_ERROR(collector_.triangles(t));
+    checkLimit();
     return Status::ok();
   }
   Status vertexNormals(uint64_t first, std::span<const Vec3f> n) override {
     has_normals = true;
-    if (keeping()) {
-      mesh.normals.resize(mesh.positions.size(), Vec3f{0, 0, 0});
-      for (size_t i = 0; i < n.size(); ++i)
-        if (!std::isnan(n[i][0])) mesh.normals[first + i] = n[i];
-    }
-    return Status::ok();
+    return kept() ? collector_.vertexNormals(first, n) : Status::ok();
   }
   bool kept() const { return !dropped_; }
   uint8_t colorChannels() const { return channels_; }
+  // The kept mesh, with every attribute array covering every vertex (only when kept()).
+  Mesh& keptMesh() {
+    collector_.finish();
+    return mesh_;
+  }
+  void releaseMesh() { mesh_ = Mesh(); }
 
   BoundingBox box;
   uint64_t vertex_count = 0, triangle_count = 0;
   bool has_normals = false;
-  Mesh mesh;
 
  private:
-  bool keeping() const { return !dropped_; }
   void checkLimit() {
-    const uint64_t bytes = mesh.positions.size() * sizeof(Vec3d) + mesh.normals.size() * sizeof(Vec3f) +
-                           mesh.colors.size() * sizeof(Rgba8) + mesh.triangles.size() * sizeof(Triangle);
+    if (dropped_) return;
+    const uint64_t bytes = mesh_.positions.size() * sizeof(Vec3d) + mesh_.normals.size() * sizeof(Vec3f) +
+                           mesh_.colors.size() * sizeof(Rgba8) + mesh_.triangles.size() * sizeof(Triangle);
     if (bytes > keep_limit_) {
       dropped_ = true;
-      mesh = Mesh();
+      mesh_ = Mesh();
     }
   }
   uint64_t keep_limit_;
   bool dropped_ = false;
   uint8_t channels_ = 0;
+  Mesh mesh_;
+  MeshCollector collector_{mesh_};
 };
 
 // Pass 2: quantize into the store, drop degenerate triangles, valences, histogram, spill.
@@ -297,22 +282,8 @@ Status measureTile(const EncodeSettings& s, const CodecInfo& codec, const TileCo
     decoded[i] = grid.dequantize(decoded_q.positions[i]);
     for (int a = 0; a < 3; ++a) decoded[i][a] -= grid.origin[a];  // same frame as the originals
   }
-  SP_ASSIGN_OR_RETURN(SurfaceIndex to_original, SurfaceIndex::build(device, originals, tm.mesh.triangles));
-  SP_ASSIGN_OR_RETURN(SurfaceIndex to_decoded, SurfaceIndex::build(device, decoded, decoded_q.triangles));
-  SampleOptions opt;
-  opt.density = density;
-  opt.seed = s.measure.seed;
-  opt.stratified = s.measure.stratified;
-  opt.vertices = s.measure.vertices;
-  opt.stream = 2 * uint64_t(tm.tile_id);
-  std::vector<Vec3d> samples;
-  sampleSurface(originals, tm.mesh.triangles, opt, samples);
-  r.forward = distancesTo(to_decoded, samples);
-  samples.clear();
-  opt.stream += 1;
-  sampleSurface(decoded, decoded_q.triangles, opt, samples);
-  r.backward = distancesTo(to_original, samples);
-  return Status::ok();
+  return measureSurfaces(originals, tm.mesh.triangles, decoded, decoded_q.triangles, s.measure, density,
+                         2 * uint64_t(tm.tile_id), device, r.forward, r.backward);
 }
 
 }  // namespace
@@ -355,11 +326,9 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
   result.out_of_core = !in_memory;
   const uint64_t target = effectiveTileTarget(s);  // independent of the thread count: so are the bytes
   std::optional<ScratchDir> scratch;
-  std::string scratch_path;
   if (!in_memory) {
     SP_ASSIGN_OR_RETURN(ScratchDir dir, ScratchDir::create(s.scratch_dir));
     scratch.emplace(std::move(dir));
-    scratch_path = scratch->path();
   }
   auto scratchFile = [&](const char* name) { return scratch ? scratch->file(name) : std::string(); };
 
@@ -370,8 +339,8 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
   TriangleSpill spill(scratchFile("triangles.bin"), in_memory, n_triangles);
   IngestSink ingest(result.grid, result.layout, store, *histogram, spill);
   if (survey.kept()) {
-    SP_RETURN_IF_ERROR(replay(survey.mesh, ingest, ReadOptions().chunk));
-    survey.mesh = Mesh();
+    SP_RETURN_IF_ERROR(replay(survey.keptMesh(), ingest, ReadOptions().chunk));
+    survey.releaseMesh();
   } else {
     auto again = readMesh(s.input, ingest);
     if (!again.isOk()) return again.status();

@@ -95,6 +95,12 @@ std::string encodeReportJson(const EncodeSettings& settings, const EncodeResult&
   return encodeReport(settings, result, fingerprint).dump(2) + "\n";
 }
 
+std::string measureJson(const MeasureResult& r) {
+  json j = errorJson(r.forward, r.backward, r.diagonal);
+  j["samples"] = r.forward.samples + r.backward.samples;
+  return j.dump(2) + "\n";
+}
+
 std::string batchSummaryJson(const std::string& config_path, const BatchResult& batch) {
   json j;
   j["job"] = config_path;

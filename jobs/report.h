@@ -13,6 +13,9 @@ namespace scanpress {
 // `fingerprint` (settingsFingerprint) is stored for resume when the output is complete (no failed tile).
 std::string encodeReportJson(const EncodeSettings& settings, const EncodeResult& result,
                              const std::string& fingerprint = "");
+// `measure --json`: {"diagonal", "samples", "forward": {"mean", "rms", "max", "samples", "mean_relative",
+// "rms_relative", "max_relative"}, "backward": {...}, "symmetric": {...}}.
+std::string measureJson(const MeasureResult& r);
 // The batch summary: one entry per input with status, sizes, bits per vertex, time and error.
 struct BatchResult;
 std::string batchSummaryJson(const std::string& config_path, const BatchResult& batch);

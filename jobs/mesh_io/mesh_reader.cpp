@@ -62,46 +62,42 @@ MeshFormat sniffFormat(std::span<const uint8_t> head) {
   return MeshFormat::kUnknown;
 }
 
-class WholeMeshSink : public MeshSink {
- public:
-  explicit WholeMeshSink(Mesh& mesh) : mesh_(mesh) {}
-  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c,
-                  uint8_t channels) override {
-    const size_t before = mesh_.positions.size();
-    mesh_.positions.insert(mesh_.positions.end(), p.begin(), p.end());
-    if (!n.empty()) {
-      mesh_.normals.resize(before, Vec3f{0, 0, 0});
-      mesh_.normals.insert(mesh_.normals.end(), n.begin(), n.end());
-    }
-    if (!c.empty()) {
-      mesh_.colors.resize(before, Rgba8{255, 255, 255, 255});
-      mesh_.colors.insert(mesh_.colors.end(), c.begin(), c.end());
-      mesh_.color_channels = std::max(mesh_.color_channels, channels);
-    }
-    return Status::ok();
-  }
-  Status triangles(std::span<const Triangle> t) override {
-    mesh_.triangles.insert(mesh_.triangles.end(), t.begin(), t.end());
-    return Status::ok();
-  }
-  Status vertexNormals(uint64_t first, std::span<const Vec3f> n) override {
-    if (first + n.size() > mesh_.positions.size())
-      return makeError(ErrorCode::kInternal, "vertex normals past the vertex count");
-    mesh_.normals.resize(mesh_.positions.size(), Vec3f{0, 0, 0});
-    for (size_t i = 0; i < n.size(); ++i)
-      if (!std::isnan(n[i][0])) mesh_.normals[first + i] = n[i];
-    return Status::ok();
-  }
-  void finish() {  // attributes that started late cover every vertex
-    if (!mesh_.normals.empty()) mesh_.normals.resize(mesh_.positions.size(), Vec3f{0, 0, 0});
-    if (!mesh_.colors.empty()) mesh_.colors.resize(mesh_.positions.size(), Rgba8{255, 255, 255, 255});
-  }
-
- private:
-  Mesh& mesh_;
-};
-
 }  // namespace
+
+Status MeshCollector::vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c,
+                               uint8_t channels) {
+  const size_t before = mesh_.positions.size();
+  mesh_.positions.insert(mesh_.positions.end(), p.begin(), p.end());
+  if (!n.empty()) {
+    mesh_.normals.resize(before, Vec3f{0, 0, 0});
+    mesh_.normals.insert(mesh_.normals.end(), n.begin(), n.end());
+  }
+  if (!c.empty()) {
+    mesh_.colors.resize(before, Rgba8{255, 255, 255, 255});
+    mesh_.colors.insert(mesh_.colors.end(), c.begin(), c.end());
+    mesh_.color_channels = std::max(mesh_.color_channels, channels);
+  }
+  return Status::ok();
+}
+
+Status MeshCollector::triangles(std::span<const Triangle> t) {
+  mesh_.triangles.insert(mesh_.triangles.end(), t.begin(), t.end());
+  return Status::ok();
+}
+
+Status MeshCollector::vertexNormals(uint64_t first, std::span<const Vec3f> n) {
+  if (first + n.size() > mesh_.positions.size())
+    return makeError(ErrorCode::kInternal, "vertex normals past the vertex count");
+  mesh_.normals.resize(mesh_.positions.size(), Vec3f{0, 0, 0});
+  for (size_t i = 0; i < n.size(); ++i)
+    if (!std::isnan(n[i][0])) mesh_.normals[first + i] = n[i];
+  return Status::ok();
+}
+
+void MeshCollector::finish() {
+  if (!mesh_.normals.empty()) mesh_.normals.resize(mesh_.positions.size(), Vec3f{0, 0, 0});
+  if (!mesh_.colors.empty()) mesh_.colors.resize(mesh_.positions.size(), Rgba8{255, 255, 255, 255});
+}
 
 Result<ReadStats> readMesh(const std::string& path, MeshSink& sink, const ReadOptions& options) {
   SP_ASSIGN_OR_RETURN(auto source, InputSource::open(path));
@@ -124,7 +120,7 @@ Result<ReadStats> readMesh(const std::string& path, MeshSink& sink, const ReadOp
 
 Result<Mesh> readMeshFile(const std::string& path, ReadStats* stats) {
   Mesh mesh;
-  WholeMeshSink sink(mesh);
+  MeshCollector sink(mesh);
   SP_ASSIGN_OR_RETURN(ReadStats s, readMesh(path, sink));
   sink.finish();
   if (stats) *stats = s;

@@ -47,6 +47,22 @@ class MeshSink {
   virtual Status vertexNormals(uint64_t first, std::span<const Vec3f> normals) = 0;
 };
 
+// Collects everything a reader delivers into a Mesh. Attributes that start late (a first chunk without colors,
+// OBJ normals from faces) are padded: missing normals are (0,0,0), missing colors white; call finish() after the
+// read so every attribute array covers every vertex.
+class MeshCollector : public MeshSink {
+ public:
+  explicit MeshCollector(Mesh& mesh) : mesh_(mesh) {}
+  Status vertices(std::span<const Vec3d> positions, std::span<const Vec3f> normals, std::span<const Rgba8> colors,
+                  uint8_t color_channels) override;
+  Status triangles(std::span<const Triangle> triangles) override;
+  Status vertexNormals(uint64_t first, std::span<const Vec3f> normals) override;
+  void finish();
+
+ private:
+  Mesh& mesh_;
+};
+
 // Format from the name (a trailing .zst is ignored), else from the content.
 MeshFormat formatFromName(const std::string& path);
 
