@@ -6,8 +6,9 @@
 namespace scanpress {
 namespace {
 
-constexpr std::array<CodecInfo, 1> kCodecs = {{
+constexpr std::array<CodecInfo, 2> kCodecs = {{
     {CodecId::kStore, "store", 1, &storeEncode, &storeDecode},
+    {CodecId::kKdtree, "kdtree", 1, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel},
 }};
 
 }  // namespace

@@ -18,12 +18,20 @@ namespace scanpress {
 
 enum class CodecId : uint16_t {
   kStore = 1,
+  kKdtree = 2,
 };
 
 // What every tile of a container shares: the grid's bits and the attribute layout (from the container header).
 struct TileContext {
   int bits = 16;
   AttributeLayout layout;
+};
+
+// A level of a progressive payload: decoding it needs the first `end_bytes` bytes of the payload. Level L has
+// cells of 2^(bits-L) grid cells per axis; level == bits is the lossless mesh.
+struct CodecLevel {
+  uint32_t level = 0;
+  uint64_t end_bytes = 0;
 };
 
 struct CodecInfo {
@@ -33,6 +41,12 @@ struct CodecInfo {
   // Appends the encoded tile to `out`.
   Status (*encode)(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out);
   Result<QuantizedMesh> (*decode)(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload);
+  // Progressive codecs only (nullptr otherwise): the levels a payload holds, and the mesh of one level from a
+  // payload that may be cut after that level's end_bytes.
+  Result<std::vector<CodecLevel>> (*levels)(const TileContext& ctx, uint16_t version,
+                                            std::span<const uint8_t> payload) = nullptr;
+  Result<QuantizedMesh> (*decode_level)(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                        uint32_t level) = nullptr;
 };
 
 std::span<const CodecInfo> allCodecs();
@@ -45,5 +59,27 @@ Status validateTile(const TileContext& ctx, const QuantizedMesh& mesh);
 // `store`: the reference codec (store.cpp).
 Status storeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out);
 Result<QuantizedMesh> storeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload);
+
+// `kdtree`: progressive lossless coding after Gandoin & Devillers (kdtree.cpp).
+Status kdtreeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out);
+Result<QuantizedMesh> kdtreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload);
+Result<std::vector<CodecLevel>> kdtreeLevels(const TileContext& ctx, uint16_t version,
+                                             std::span<const uint8_t> payload);
+Result<QuantizedMesh> kdtreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                        uint32_t level);
+
+// What a kdtree encoding spent, in bits (ideal arithmetic-coding costs; the bytes add flushes and headers).
+struct KdtreeStats {
+  uint64_t points = 0;         // distinct coded vertices
+  uint64_t triangles = 0;      // triangles coded (with multiplicity)
+  uint64_t splits = 0;         // cell splits with both halves non-empty (vertex splits)
+  uint64_t edge_expansions = 0;  // of those, coded as edge expansions
+  double geometry_bits = 0;
+  double connectivity_bits = 0;  // vertex splits, triangle orientation and multiplicity
+  double attribute_bits = 0;
+  uint64_t payload_bytes = 0;
+};
+Status kdtreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
+                             KdtreeStats* stats);
 
 }  // namespace scanpress

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cassert>
+#include <cmath>
 
 namespace scanpress {
 
@@ -87,6 +88,7 @@ void RangeEncoder::shiftLow() {
 
 void RangeEncoder::encodeBit(BitModel& model, int bit) {
   const uint32_t bound = (range_ >> 16) * model.p0();
+  if (meter_) *meter_ -= std::log2((bit ? 65536.0 - model.p0() : double(model.p0())) / 65536.0);
   if (bit) {
     low_ += bound;
     range_ -= bound;
@@ -101,6 +103,7 @@ void RangeEncoder::encodeSymbol(SymbolModel& model, uint32_t symbol) {
   assert(symbol < model.n_);
   const uint32_t r = range_ >> SymbolModel::kTotalBits;
   const uint32_t lo = model.cum_[symbol];
+  if (meter_) *meter_ -= std::log2(double(model.cum_[symbol + 1] - lo) / double(1u << SymbolModel::kTotalBits));
   low_ += uint64_t(r) * lo;
   if (symbol + 1 == model.n_) range_ -= r * lo;  // the last symbol takes the truncation remainder
   else range_ = r * (model.cum_[symbol + 1] - lo);
@@ -111,6 +114,7 @@ void RangeEncoder::encodeSymbol(SymbolModel& model, uint32_t symbol) {
 void RangeEncoder::encodeFrequency(uint32_t cum, uint32_t freq, uint32_t total) {
   assert(freq >= 1 && cum + freq <= total && total <= (1u << 16));
   const uint32_t r = range_ / total;
+  if (meter_) *meter_ -= std::log2(double(freq) / double(total));
   low_ += uint64_t(r) * cum;
   if (cum + freq == total) range_ -= r * cum;
   else range_ = r * freq;
@@ -119,6 +123,7 @@ void RangeEncoder::encodeFrequency(uint32_t cum, uint32_t freq, uint32_t total) 
 
 void RangeEncoder::encodeBits(uint32_t value, int bits) {
   assert(bits >= 0 && bits <= 32);
+  if (meter_) *meter_ += bits;
   while (bits > 0) {
     const int n = bits > 16 ? 16 : bits;
     bits -= n;

@@ -90,6 +90,9 @@ class RangeEncoder {
   void encodeUniform(uint32_t value, uint32_t count);
   // Flushes the coder; no more symbols may be coded afterwards.
   void finish();
+  // While set, every coded symbol adds its ideal cost (-log2 of its probability, in bits) to *meter: how codecs
+  // report what each part of a stream costs. Off (nullptr) by default; costs one log2 per symbol when on.
+  void setCostMeter(double* meter) { meter_ = meter; }
 
  private:
   void shiftLow();
@@ -105,6 +108,7 @@ class RangeEncoder {
   uint8_t cache_ = 0;
   uint64_t pending_ = 1;  // cached byte plus pending 0xFF bytes
   bool first_ = true;     // LZMA's first output byte is always 0 and is dropped
+  double* meter_ = nullptr;
 };
 
 class RangeDecoder {

@@ -26,6 +26,14 @@ class ByteWriter {
     std::memcpy(&bits, &v, 8);
     u64(bits);
   }
+  // LEB128: 7 bits per byte, low bits first, high bit set on every byte but the last.
+  void varint(uint64_t v) {
+    while (v >= 0x80) {
+      out_.push_back(static_cast<uint8_t>(v | 0x80));
+      v >>= 7;
+    }
+    out_.push_back(static_cast<uint8_t>(v));
+  }
   void bytes(std::span<const uint8_t> data) { out_.insert(out_.end(), data.begin(), data.end()); }
   size_t size() const { return out_.size(); }
 
@@ -50,6 +58,18 @@ class ByteReader {
     SP_RETURN_IF_ERROR(u64(bits));
     std::memcpy(&v, &bits, 8);
     return Status::ok();
+  }
+  // LEB128 of at most 10 bytes whose value fits 64 bits; anything else is kMalformed.
+  Status varint(uint64_t& v) {
+    v = 0;
+    for (int shift = 0; shift < 64; shift += 7) {
+      uint8_t b = 0;
+      SP_RETURN_IF_ERROR(u8(b));
+      if (shift == 63 && b > 1) return error(ErrorCode::kMalformed, "varint overflows 64 bits");
+      v |= uint64_t(b & 0x7F) << shift;
+      if (!(b & 0x80)) return Status::ok();
+    }
+    return error(ErrorCode::kMalformed, "varint longer than 10 bytes");
   }
   Status bytes(size_t n, std::span<const uint8_t>& out) {
     SP_RETURN_IF_ERROR(need(n));
