@@ -106,11 +106,39 @@ void BM_Tiling(benchmark::State& state, std::string scan) {
   state.counters["tiles"] = double(tiles);
 }
 
+// Where kdtree's bits go (connectivity and geometry per vertex, the paper's Table 2 split) on every scan.
+void BM_KdtreeBits(benchmark::State& state, std::string scan, int bits) {
+  const Prepared& p = prepared(scan, bits);
+  std::vector<uint8_t> out;
+  KdtreeStats stats;
+  for (auto _ : state) {
+    out.clear();
+    if (!kdtreeEncodeWithStats(p.ctx, p.mesh, out, &stats).isOk()) state.SkipWithError("encode failed");
+  }
+  const double n = double(stats.points);
+  state.counters["Mtri/s"] =
+      benchmark::Counter(double(p.mesh.triangles.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["bpv"] = 8.0 * out.size() / n;
+  state.counters["geo_bpv"] = stats.geometry_bits / n;
+  state.counters["conn_bpv"] = stats.connectivity_bits / n;
+  state.counters["attr_bpv"] = stats.attribute_bits / n;
+  state.counters["expansion_%"] = 100.0 * double(stats.edge_expansions) / std::max<double>(1, double(stats.splits));
+}
+
+const char* kAllScans[] = {"aneurysm_data.stl.zst", "armadillo.obj.zst", "bun_zipper.ply.zst", "bunny.stl.zst",
+                           "decimated-max.obj", "fandisk.obj", "gargo.ply.zst", "horse.ply.zst", "igea.ply.zst",
+                           "lato000.ply.zst", "lucy.ply.zst", "parasaurolophus_low_normals2.ply.zst",
+                           "rs1_normals.ply.zst", "screwdriver.ply", "turbineblade.ply.zst"};
+
 const char* kScans[] = {"igea.ply.zst", "bun_zipper.ply.zst", "rs1_normals.ply.zst", "gargo.ply.zst"};
 
 int registerAll() {
   benchmark::RegisterBenchmark("Tiling/igea.ply.zst", BM_Tiling, std::string("igea.ply.zst"))
       ->Arg(16384)->Arg(131072)->Unit(benchmark::kMillisecond);
+  for (const char* scan : kAllScans)
+    benchmark::RegisterBenchmark((std::string("KdtreeBits/") + scan + "/12").c_str(), BM_KdtreeBits,
+                                 std::string(scan), 12)
+        ->Iterations(1)->Unit(benchmark::kMillisecond);
   for (const char* scan : kScans) {
     benchmark::RegisterBenchmark((std::string("Read/") + scan).c_str(), BM_Read, std::string(scan))
         ->Unit(benchmark::kMillisecond);

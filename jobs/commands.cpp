@@ -10,9 +10,10 @@
 #include "spatial/weld.h"
 
 namespace scanpress {
-Result<QuantizedMesh> decodeContainer(const std::string& path, const std::optional<std::vector<uint32_t>>& tiles,
-                                      ContainerHeader* header) {
-  SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(path));
+namespace {
+
+Result<std::vector<const TileEntry*>> chooseTiles(const ContainerFile& file, const std::string& path,
+                                                 const std::optional<std::vector<uint32_t>>& tiles) {
   std::vector<const TileEntry*> chosen;
   if (tiles) {
     for (uint32_t id : *tiles) {
@@ -23,11 +24,42 @@ Result<QuantizedMesh> decodeContainer(const std::string& path, const std::option
   } else {
     for (const auto& e : file.tiles()) chosen.push_back(&e);
   }
+  return chosen;
+}
+
+// Payload bytes each level needs over the chosen tiles (index = level, 0..bits); a tile whose first level is
+// coarser than L needs its first level's bytes.
+Result<std::vector<uint64_t>> levelBytes(const ContainerFile& file, const std::vector<const TileEntry*>& chosen) {
+  const uint32_t bits = uint32_t(file.header().grid.bits);
+  std::vector<uint64_t> total(bits + 1, 0);
+  for (const TileEntry* e : chosen) {
+    SP_ASSIGN_OR_RETURN(auto levels, file.tileLevels(*e));
+    if (levels.empty())
+      return makeError(ErrorCode::kInvalidArgument, file.path() + ": tile " + std::to_string(e->tile_id) +
+                                                        " uses a single-rate codec; it has no coarser levels");
+    size_t i = 0;
+    for (uint32_t l = 0; l <= bits; ++l) {
+      while (i + 1 < levels.size() && levels[i].level < l) ++i;
+      total[l] += levels[i].end_bytes;
+    }
+  }
+  return total;
+}
+
+}  // namespace
+
+Result<QuantizedMesh> decodeContainer(const std::string& path, const std::optional<std::vector<uint32_t>>& tiles,
+                                      ContainerHeader* header, std::optional<uint32_t> level) {
+  SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(path));
+  SP_ASSIGN_OR_RETURN(auto chosen, chooseTiles(file, path, tiles));
+  if (level && *level > uint32_t(file.header().grid.bits))
+    return makeError(ErrorCode::kInvalidArgument, path + ": level " + std::to_string(*level) + " is past the last (" +
+                                                      std::to_string(file.header().grid.bits) + ")");
   // Tiles decode independently: in parallel, then welded in index order (deterministic).
   std::vector<QuantizedMesh> decoded(chosen.size());
   std::vector<Status> errors(chosen.size());
   tbb::parallel_for(size_t(0), chosen.size(), [&](size_t i) {
-    auto m = file.decodeTile(*chosen[i]);
+    auto m = file.decodeTile(*chosen[i], level);
     if (m.isOk()) decoded[i] = std::move(m).value();
     else errors[i] = m.status();
   });
@@ -52,8 +84,25 @@ bool floatPositionsSuffice(const QuantizedMesh& mesh, const Grid& grid) {
 
 Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   ContainerHeader header;
-  SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeContainer(settings.input, settings.tiles, &header));
   DecodeResult result;
+  std::optional<uint32_t> level = settings.level;
+  if (settings.level || settings.bytes) {
+    SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(settings.input));
+    SP_ASSIGN_OR_RETURN(auto chosen, chooseTiles(file, settings.input, settings.tiles));
+    SP_ASSIGN_OR_RETURN(auto bytes, levelBytes(file, chosen));
+    if (settings.bytes) {
+      if (bytes[0] > *settings.bytes)
+        return makeError(ErrorCode::kInvalidArgument,
+                         settings.input + ": --bytes " + std::to_string(*settings.bytes) +
+                             " is below the coarsest level, which needs " + std::to_string(bytes[0]) + " bytes");
+      uint32_t l = 0;
+      while (l + 1 < bytes.size() && bytes[l + 1] <= *settings.bytes) ++l;
+      if (!level || l < *level) level = l;
+    }
+    if (*level < bytes.size()) result.level_bytes = bytes[*level];
+    result.level = level;
+  }
+  SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeContainer(settings.input, settings.tiles, &header, level));
   result.vertices = q.positions.size();
   result.faces = q.triangles.size();
   result.tiles = settings.tiles ? static_cast<uint32_t>(settings.tiles->size()) : header.tile_count;

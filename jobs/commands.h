@@ -93,17 +93,22 @@ struct DecodeSettings {
   std::string input;
   std::string output;
   std::optional<std::vector<uint32_t>> tiles;  // all tiles when empty
+  std::optional<uint32_t> level;               // progressive codecs: decode this level (grid bits = lossless)
+  std::optional<uint64_t> bytes;               // progressive codecs: the finest level within this many payload bytes
 };
 
 struct DecodeResult {
   uint64_t vertices = 0, faces = 0;
   uint32_t tiles = 0;
   bool double_positions = false;
+  std::optional<uint32_t> level;  // the level decoded, when one was asked for (directly or by bytes)
+  uint64_t level_bytes = 0;       // payload bytes that level needs, over the decoded tiles
 };
 
 // Decodes the selected tiles and welds them (in memory).
+// With a level, every tile is decoded at that level (progressive codecs only).
 Result<QuantizedMesh> decodeContainer(const std::string& path, const std::optional<std::vector<uint32_t>>& tiles,
-                                      ContainerHeader* header = nullptr);
+                                      ContainerHeader* header = nullptr, std::optional<uint32_t> level = std::nullopt);
 Result<DecodeResult> decodeFile(const DecodeSettings& settings);
 
 // Whether float positions requantize to the same cells on this grid (otherwise writers use double).

@@ -27,11 +27,22 @@ const TileEntry* ContainerFile::findTile(uint32_t tile_id) const {
   return nullptr;
 }
 
-Result<QuantizedMesh> ContainerFile::decodeTile(const TileEntry& entry) const {
+Result<QuantizedMesh> ContainerFile::decodeTile(const TileEntry& entry, std::optional<uint32_t> level) const {
   std::vector<uint8_t> chunk;
   SP_RETURN_IF_ERROR(file_->read(entry.offset, entry.chunk_bytes, chunk));
   SP_ASSIGN_OR_RETURN(auto payload, parseTileChunk(chunk, entry, path()));
-  return decodeTilePayload(header_, entry, payload, path());
+  return decodeTilePayload(header_, entry, payload, path(), level);
+}
+
+Result<std::vector<CodecLevel>> ContainerFile::tileLevels(const TileEntry& entry) const {
+  const CodecInfo* codec = findCodec(entry.codec);
+  if (!codec || !codec->levels) return std::vector<CodecLevel>{};
+  std::vector<uint8_t> chunk;
+  SP_RETURN_IF_ERROR(file_->read(entry.offset, entry.chunk_bytes, chunk));
+  SP_ASSIGN_OR_RETURN(auto payload, parseTileChunk(chunk, entry, path()));
+  auto levels = codec->levels(TileContext{header_.grid.bits, header_.layout}, entry.codec_version, payload);
+  if (!levels.isOk()) return levels.status().withContext(path() + ": tile " + std::to_string(entry.tile_id));
+  return levels;
 }
 
 }  // namespace scanpress

@@ -20,7 +20,9 @@ class ContainerFile {
   const std::string& path() const { return file_->path(); }
   const TileEntry* findTile(uint32_t tile_id) const;
   // Reads, verifies (both checksums) and decodes one tile.
-  Result<QuantizedMesh> decodeTile(const TileEntry& entry) const;
+  Result<QuantizedMesh> decodeTile(const TileEntry& entry, std::optional<uint32_t> level = std::nullopt) const;
+  // The levels of a progressive tile (empty for single-rate codecs).
+  Result<std::vector<CodecLevel>> tileLevels(const TileEntry& entry) const;
 
  private:
   std::shared_ptr<RandomAccessFile> file_;

@@ -423,7 +423,7 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
       if (r.status.isOk()) r.status = codec->encode(ctx, tm.mesh, r.payload);
       if (r.status.isOk() && result.measured)  // decode in memory, measure, discard
         r.status = measureTile(s, *codec, ctx, result.grid, density, device, tm, originals, r);
-      r.vertices = static_cast<uint32_t>(tm.mesh.positions.size());
+      r.vertices = static_cast<uint32_t>(decodedVertexCount(*codec, tm.mesh, r.payload));
       r.faces = static_cast<uint32_t>(tm.mesh.triangles.size());
       r.border = static_cast<uint32_t>(std::count(tm.border.begin(), tm.border.end(), 1));
       meshBounds(tm.mesh, r.lo, r.hi);

@@ -150,6 +150,10 @@ std::string containerInfoJson(const ContainerFile& file) {
   j["bytes"] = file.size();
   j["bpv"] = h.vertices ? 8.0 * file.size() / h.vertices : 0.0;
   json tiles = json::array();
+  // Progressive tiles list their levels (payload bytes needed for each); the container-wide list sums them over
+  // tiles (a tile whose first level is coarser counts its first level's bytes) when every tile is progressive.
+  std::vector<uint64_t> level_total(h.grid.bits + 1, 0);
+  bool all_progressive = !file.tiles().empty();
   for (const auto& t : file.tiles()) {
     json e = {{"id", t.tile_id},
               {"codec", codecName(t.codec)},
@@ -159,7 +163,28 @@ std::string containerInfoJson(const ContainerFile& file) {
               {"vertices", t.vertices},
               {"faces", t.faces}};
     if (t.vertices > 0) e["bounds"] = {{t.lo[0], t.lo[1], t.lo[2]}, {t.hi[0], t.hi[1], t.hi[2]}};
+    auto levels = file.tileLevels(t);
+    if (!levels.isOk()) {
+      e["levels_error"] = levels.status().toString();
+      all_progressive = false;
+    } else if (levels->empty()) {
+      all_progressive = false;
+    } else {
+      json l = json::array();
+      for (const auto& lv : *levels) l.push_back({{"level", lv.level}, {"bytes", lv.end_bytes}});
+      e["levels"] = std::move(l);
+      size_t i = 0;
+      for (uint32_t lv = 0; lv < level_total.size(); ++lv) {
+        while (i + 1 < levels->size() && (*levels)[i].level < lv) ++i;
+        level_total[lv] += (*levels)[i].end_bytes;
+      }
+    }
     tiles.push_back(std::move(e));
+  }
+  if (all_progressive) {
+    json l = json::array();
+    for (uint32_t lv = 0; lv < level_total.size(); ++lv) l.push_back({{"level", lv}, {"bytes", level_total[lv]}});
+    j["levels"] = std::move(l);
   }
   j["tiles"] = std::move(tiles);
   return j.dump(2) + "\n";

@@ -8,7 +8,8 @@ namespace {
 
 constexpr std::array<CodecInfo, 2> kCodecs = {{
     {CodecId::kStore, "store", 1, &storeEncode, &storeDecode},
-    {CodecId::kKdtree, "kdtree", 1, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel},
+    {CodecId::kKdtree, "kdtree", 1, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel,
+     &kdtreePayloadVertices},
 }};
 
 }  // namespace
@@ -25,6 +26,10 @@ const CodecInfo* findCodec(std::string_view name) {
   for (const auto& c : kCodecs)
     if (c.name == name) return &c;
   return nullptr;
+}
+
+uint64_t decodedVertexCount(const CodecInfo& codec, const QuantizedMesh& mesh, std::span<const uint8_t> payload) {
+  return codec.payload_vertices ? codec.payload_vertices(payload) : mesh.positions.size();
 }
 
 Status validateTile(const TileContext& ctx, const QuantizedMesh& mesh) {

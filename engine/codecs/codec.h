@@ -47,7 +47,13 @@ struct CodecInfo {
                                             std::span<const uint8_t> payload) = nullptr;
   Result<QuantizedMesh> (*decode_level)(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         uint32_t level) = nullptr;
+  // Codecs whose decoder yields a different vertex count than the encoder was given (kdtree merges vertices
+  // that share position and attributes): that count, read from a payload this build wrote. nullptr: the same.
+  uint64_t (*payload_vertices)(std::span<const uint8_t> payload) = nullptr;
 };
+
+// The vertex count the codec's decoder will produce for `payload`, encoded from `mesh`.
+uint64_t decodedVertexCount(const CodecInfo& codec, const QuantizedMesh& mesh, std::span<const uint8_t> payload);
 
 std::span<const CodecInfo> allCodecs();
 const CodecInfo* findCodec(CodecId id);
@@ -65,6 +71,7 @@ Status kdtreeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vect
 Result<QuantizedMesh> kdtreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload);
 Result<std::vector<CodecLevel>> kdtreeLevels(const TileContext& ctx, uint16_t version,
                                              std::span<const uint8_t> payload);
+uint64_t kdtreePayloadVertices(std::span<const uint8_t> payload);
 Result<QuantizedMesh> kdtreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         uint32_t level);
 

@@ -344,9 +344,9 @@ class Engine {
     cx_.init(n);
     lo_.assign(n, Vec3u{0, 0, 0});
     depth_.assign(n, 0);
+    c2_.assign(n, Vec3u{0, 0, 0});
     if (n > 0) {
-      lo_[0] = root_lo;
-      depth_[0] = static_cast<u8>(3 * k0);
+      setCell(0, root_lo, static_cast<u8>(3 * k0));
       cells_.push_back({0, n});
     }
     level_ = k0;
@@ -431,9 +431,13 @@ class Engine {
     u32 s, e;
   };
 
-  double center(u32 v, int a) const {
-    return double(lo_[v][a]) + double(1u << (bits_ - splitsAlong(depth_[v], a))) * 0.5;
+  // Cell position and depth; c2_ holds twice the center (exact in integers), the only thing neighbours read.
+  void setCell(u32 v, const Vec3u& lo, u8 depth) {
+    lo_[v] = lo;
+    depth_[v] = depth;
+    for (int a = 0; a < 3; ++a) c2_[v][a] = 2 * lo[a] + (1u << (bits_ - splitsAlong(depth, a)));
   }
+  double center(u32 v, int a) const { return 0.5 * double(c2_[v][a]); }
   Vec3d center(u32 v) const { return {center(v, 0), center(v, 1), center(v, 2)}; }
   static double dist(const Vec3d& a, const Vec3d& b) {
     return std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]));
@@ -443,9 +447,9 @@ class Engine {
   int centroidBin(u32 v, int axis, double plane, double half) const {
     const auto& nb = cx_.nb[v];
     if (nb.empty()) return kCentroidBins - 1;
-    double sum = 0;
-    for (u32 n : nb) sum += center(n, axis);
-    const double t = (sum / double(nb.size()) - plane) / half;
+    u64 sum = 0;
+    for (u32 n : nb) sum += c2_[n][axis];
+    const double t = (0.5 * double(sum) / double(nb.size()) - plane) / half;
     static constexpr double kEdges[] = {-2, -1, -0.5, -0.15, 0, 0.15, 0.5, 1, 2};
     int bin = 0;
     while (bin < 9 && t >= kEdges[bin]) ++bin;
@@ -486,16 +490,13 @@ class Engine {
     right[axis] += half;
     const u8 nd = static_cast<u8>(d + 1);
     if (c == p || c == 0) {
-      lo_[cell.s] = c == p ? left : right;
-      depth_[cell.s] = nd;
+      setCell(cell.s, c == p ? left : right, nd);
       next_.push_back(cell);
       return Status::ok();
     }
     const u32 v2 = cell.s + c;
-    lo_[cell.s] = left;
-    lo_[v2] = right;
-    depth_[cell.s] = nd;
-    depth_[v2] = nd;
+    setCell(cell.s, left, nd);
+    setCell(v2, right, nd);
     next_.push_back({cell.s, v2});
     next_.push_back({v2, cell.e});
     return splitVertex(cell.s, v2, cell.e);
@@ -510,8 +511,7 @@ class Engine {
       std::vector<Cell> rest;
       for (const auto& c : work) {
         const u32 v2 = c.s + 1;
-        lo_[v2] = lo_[c.s];
-        depth_[v2] = depth_[c.s];
+        setCell(v2, lo_[c.s], depth_[c.s]);
         SP_RETURN_IF_ERROR(splitVertex(c.s, v2, c.e));
         if (c.e - v2 > 1) rest.push_back({v2, c.e});
       }
@@ -796,9 +796,9 @@ class Engine {
   // Sorted final triangles (a < b < c) of the complex.
   std::vector<std::array<u32, 3>> triangleKeys() const {
     std::vector<std::array<u32, 3>> keys;
-    for (const auto& c : cells_)
-      for (u64 pr : cx_.tr[c.s])
-        if (c.s < pairLo(pr)) keys.push_back({c.s, pairLo(pr), pairHi(pr)});
+    for (u32 v = 0; v < n_; ++v)  // cells that do not exist (yet) have empty lists
+      for (u64 pr : cx_.tr[v])
+        if (v < pairLo(pr)) keys.push_back({v, pairLo(pr), pairHi(pr)});
     std::sort(keys.begin(), keys.end());
     keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
     return keys;
@@ -940,6 +940,7 @@ class Engine {
   Complex cx_;
   std::vector<Vec3u> lo_;
   std::vector<u8> depth_;
+  std::vector<Vec3u> c2_;
   std::vector<Cell> cells_, next_;
   size_t split_index_ = 0;
   int level_ = 0;
@@ -1228,6 +1229,12 @@ Status kdtreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, 
 
 Result<QuantizedMesh> kdtreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload) {
   return decodeImpl(ctx, version, payload, u32(ctx.bits));
+}
+
+uint64_t kdtreePayloadVertices(std::span<const uint8_t> payload) {
+  ByteReader r(payload, "kdtree payload");
+  uint64_t n = 0;
+  return r.varint(n).isOk() ? n : 0;
 }
 
 Result<QuantizedMesh> kdtreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,

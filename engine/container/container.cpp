@@ -111,7 +111,7 @@ Status ContainerWriter::addTile(uint32_t tile_id, const CodecInfo& codec, const 
     return makeError(ErrorCode::kLimitExceeded, "tile has more than 2^32-1 vertices or faces");
   Vec3u lo, hi;
   meshBounds(mesh, lo, hi);
-  return addTile(tile_id, codec, static_cast<uint32_t>(mesh.positions.size()),
+  return addTile(tile_id, codec, static_cast<uint32_t>(decodedVertexCount(codec, mesh, payload)),
                  static_cast<uint32_t>(mesh.triangles.size()), lo, hi, payload);
 }
 
@@ -329,15 +329,22 @@ Result<std::span<const uint8_t>> parseTileChunk(std::span<const uint8_t> chunk, 
 }
 
 Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const TileEntry& e,
-                                        std::span<const uint8_t> payload, const std::string& what) {
+                                        std::span<const uint8_t> payload, const std::string& what,
+                                        std::optional<uint32_t> level) {
   const std::string where = what + ": tile " + std::to_string(e.tile_id);
   const CodecInfo* codec = findCodec(e.codec);
   if (!codec)
     return makeError(ErrorCode::kUnknownCodec, where + ": codec id " + std::to_string(static_cast<int>(e.codec)) +
                                                    " is not known to this build");
   TileContext ctx{header.grid.bits, header.layout};
-  auto mesh = codec->decode(ctx, e.codec_version, payload);
+  const bool partial = level && *level < uint32_t(header.grid.bits);
+  if (partial && !codec->decode_level)
+    return makeError(ErrorCode::kInvalidArgument, where + ": codec " + std::string(codec->name) +
+                                                      " is single-rate; it has no coarser levels");
+  auto mesh = partial ? codec->decode_level(ctx, e.codec_version, payload, *level)
+                      : codec->decode(ctx, e.codec_version, payload);
   if (!mesh.isOk()) return mesh.status().withContext(where);
+  if (partial) return mesh;
   if (mesh->positions.size() != e.vertices || mesh->triangles.size() != e.faces)
     return makeError(ErrorCode::kMalformed, where + ": decoded counts differ from the index");
   return mesh;

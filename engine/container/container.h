@@ -9,6 +9,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -97,9 +98,11 @@ Result<std::vector<TileEntry>> parseIndex(std::span<const uint8_t> bytes, const 
 Result<std::span<const uint8_t>> parseTileChunk(std::span<const uint8_t> chunk, const TileEntry& entry,
                                                 const std::string& what);
 
-// Decodes a verified payload with the entry's codec and checks the counts against the index.
+// Decodes a verified payload with the entry's codec and checks the counts against the index. With a `level`
+// (progressive codecs only; kInvalidArgument otherwise) the tile's mesh at that level: see CodecLevel.
 Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const TileEntry& entry,
-                                        std::span<const uint8_t> payload, const std::string& what);
+                                        std::span<const uint8_t> payload, const std::string& what,
+                                        std::optional<uint32_t> level = std::nullopt);
 
 // Whole-container helpers for in-memory buffers (tests, and small files).
 Result<std::vector<uint8_t>> encodeContainer(const Grid& grid, const AttributeLayout& layout,

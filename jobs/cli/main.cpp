@@ -129,6 +129,10 @@ centers of the container's grid; they are written as float, or as double when fl
 
 options:
   --tiles ID,ID,...   decode only these tiles (welded together)
+  --level L           progressive codecs (kdtree): the mesh of level L, cells of 2^(bits-L) grid cells as
+                      vertices at their centers with that level's triangles (L = grid bits: lossless)
+  --bytes N           progressive codecs: the finest level whose payloads fit in N bytes (info --json lists
+                      the bytes of every level)
   --quiet             print nothing on success
 )";
 
@@ -309,10 +313,21 @@ bool parseTileList(const std::string& text, std::vector<uint32_t>& out, std::str
   return true;
 }
 
+// A decimal non-negative integer that fits 64 bits, nothing else.
+bool parseUnsignedArg(const std::string& v, uint64_t& out) {
+  char* end = nullptr;
+  errno = 0;
+  const unsigned long long x = std::strtoull(v.c_str(), &end, 10);
+  if (v.empty() || v[0] == '-' || *end != '\0' || errno != 0) return false;
+  out = x;
+  return true;
+}
+
 int runDecode(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {"--tiles"}, {"--quiet", "--help"}, args, error)) return usage(error, "decode");
+  if (!parseArgs(argc, argv, 2, {"--tiles", "--level", "--bytes"}, {"--quiet", "--help"}, args, error))
+    return usage(error, "decode");
   if (args.has("--help")) return std::fputs(kDecodeHelp, stdout), 0;
   if (args.positional.size() != 2) return usage("decode needs IN.spz and OUT", "decode");
   DecodeSettings s;
@@ -323,12 +338,22 @@ int runDecode(int argc, char** argv) {
     if (!parseTileList(*t, ids, error)) return usage(error, "decode");
     s.tiles = std::move(ids);
   }
+  for (const char* name : {"--level", "--bytes"})
+    if (const auto* v = args.get(name)) {
+      uint64_t x = 0;
+      if (!parseUnsignedArg(*v, x) || (std::string(name) == "--level" && x > 64))
+        return usage(std::string(name) + " expects a non-negative integer, got '" + *v + "'", "decode");
+      if (std::string(name) == "--level") s.level = static_cast<uint32_t>(x);
+      else s.bytes = x;
+    }
   auto result = decodeFile(s);
   if (!result.isOk()) return fail(result.status());
   if (!args.has("--quiet"))
     std::printf("%s -> %s: %llu vertices, %llu faces from %u tile(s)%s\n", s.input.c_str(), s.output.c_str(),
                 static_cast<unsigned long long>(result->vertices), static_cast<unsigned long long>(result->faces),
                 result->tiles, result->double_positions ? " (double positions)" : "");
+  if (!args.has("--quiet") && result->level)
+    std::printf("level %u: %llu payload bytes\n", *result->level, static_cast<unsigned long long>(result->level_bytes));
   return 0;
 }
 
@@ -471,13 +496,8 @@ int runSynth(int argc, char** argv) {
   s.output = args.positional[0];
   auto parseU64 = [&](const char* name, uint64_t& out) {
     const std::string* v = args.get(name);
-    if (!v) return true;
-    char* end = nullptr;
-    errno = 0;
-    const unsigned long long x = std::strtoull(v->c_str(), &end, 10);
-    if (v->empty() || (*v)[0] == '-' || *end != '\0' || errno != 0) return error = std::string(name) + " must be a non-negative integer", false;
-    out = x;
-    return true;
+    if (!v || parseUnsignedArg(*v, out)) return true;
+    return error = std::string(name) + " must be a non-negative integer", false;
   };
   if (!parseU64("--triangles", s.triangles) || !parseU64("--seed", s.seed)) return usage(error, "synth");
   if (const auto* f = args.get("--from")) s.from = *f;
