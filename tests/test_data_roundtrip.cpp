@@ -38,6 +38,17 @@ const Scan kScans[] = {
 
 void PrintTo(const Scan& scan, std::ostream* os) { *os << scan.file; }
 
+// One tile through a whole in-memory container with `codec`, and back.
+Result<QuantizedMesh> throughContainer(const Grid& grid, const AttributeLayout& layout, CodecId codec,
+                                       const QuantizedMesh& q, const std::string& name) {
+  const QuantizedMesh tiles[] = {q};
+  SP_ASSIGN_OR_RETURN(auto bytes, encodeContainer(grid, layout, *findCodec(codec), tiles));
+  SP_ASSIGN_OR_RETURN(auto pc, parseContainer(bytes, name));
+  const auto& e = pc.tiles.at(0);
+  SP_ASSIGN_OR_RETURN(auto payload, parseTileChunk(std::span(bytes).subspan(e.offset, e.chunk_bytes), e, name));
+  return decodeTilePayload(pc.header, e, payload, name);
+}
+
 class DataRoundTrip : public ::testing::TestWithParam<Scan> {};
 
 TEST_P(DataRoundTrip, StoreIsLosslessAfterQuantization) {
@@ -62,15 +73,7 @@ TEST_P(DataRoundTrip, StoreIsLosslessAfterQuantization) {
     ASSERT_TRUE(q.isOk());
     EXPECT_EQ(q->triangles.size() + qs.degenerate_triangles, scan.triangles);
     EXPECT_EQ(q->positions.size() + qs.unreferenced_vertices, scan.vertices);
-    const QuantizedMesh tiles[] = {*q};
-    auto bytes = encodeContainer(*grid, layout, *findCodec(CodecId::kStore), tiles);
-    ASSERT_TRUE(bytes.isOk());
-    auto pc = parseContainer(*bytes, scan.file);
-    ASSERT_TRUE(pc.isOk()) << pc.status().toString();
-    const auto& e = pc->tiles[0];
-    auto payload = parseTileChunk(std::span(*bytes).subspan(e.offset, e.chunk_bytes), e, scan.file);
-    ASSERT_TRUE(payload.isOk());
-    auto decoded = decodeTilePayload(pc->header, e, *payload, scan.file);
+    auto decoded = throughContainer(*grid, layout, CodecId::kStore, *q, scan.file);
     ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
     EXPECT_TRUE(testing::triangleMultiset(*decoded) == testing::triangleMultiset(*q));
     EXPECT_EQ(decoded->normals, q->normals);
@@ -101,15 +104,7 @@ TEST_P(DataRoundTrip, KdtreeIsLosslessAfterQuantization) {
     auto q = quantizeMesh(*mesh, *grid, layout, &qs);
     ASSERT_TRUE(q.isOk());
     EXPECT_EQ(q->triangles.size() + qs.degenerate_triangles, scan.triangles);
-    const QuantizedMesh tiles[] = {*q};
-    auto bytes = encodeContainer(*grid, layout, *findCodec(CodecId::kKdtree), tiles);
-    ASSERT_TRUE(bytes.isOk()) << bytes.status().toString();
-    auto pc = parseContainer(*bytes, scan.file);
-    ASSERT_TRUE(pc.isOk()) << pc.status().toString();
-    const auto& e = pc->tiles[0];
-    auto payload = parseTileChunk(std::span(*bytes).subspan(e.offset, e.chunk_bytes), e, scan.file);
-    ASSERT_TRUE(payload.isOk());
-    auto decoded = decodeTilePayload(pc->header, e, *payload, scan.file);
+    auto decoded = throughContainer(*grid, layout, CodecId::kKdtree, *q, scan.file);
     ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
     EXPECT_TRUE(testing::cornerMultiset(*decoded, layout.normal_bits) ==
                 testing::cornerMultiset(*q, layout.normal_bits));

@@ -108,6 +108,18 @@ struct Complex {
 // 4: edge V1V2), then one code per neighbour (sorted by name), then one per star triangle (sorted pairs).
 // Edge codes: 1 V1N, 2 V2N, 3 both, 4 both and triangle V1V2N. Triangle codes: 1 V1NM, 2 V2NM, 3 both.
 
+// Sorts (key, flags) entries and merges those of one key by or-ing their flags.
+template <class K>
+void sortAndMergeFlags(std::vector<std::pair<K, u8>>& v) {
+  std::sort(v.begin(), v.end());
+  size_t n = 0;
+  for (size_t i = 0; i < v.size(); ++i) {
+    if (n > 0 && v[n - 1].first == v[i].first) v[n - 1].second |= v[i].second;
+    else v[n++] = v[i];
+  }
+  v.resize(n);
+}
+
 // Encoder, fine to coarse: merges cell v2 into v1 (the reverse of the split) and appends the split's codes.
 void mergeCells(Complex& cx, u32 v1, u32 v2, std::vector<u8>& codes) {
   auto& n1 = cx.nb[v1];
@@ -128,24 +140,12 @@ void mergeCells(Complex& cx, u32 v1, u32 v2, std::vector<u8>& codes) {
     if (pairLo(pr) == v2) e.push_back({pairHi(pr), 4});
     else if (pairHi(pr) == v2) e.push_back({pairLo(pr), 4});
   }
-  std::sort(e.begin(), e.end());
-  size_t ne = 0;
-  for (size_t i = 0; i < e.size(); ++i) {
-    if (ne > 0 && e[ne - 1].first == e[i].first) e[ne - 1].second |= e[i].second;
-    else e[ne++] = e[i];
-  }
-  e.resize(ne);
+  sortAndMergeFlags(e);
   for (u64 pr : t1)
     if (pairLo(pr) != v2 && pairHi(pr) != v2) t.push_back({pr, 1});
   for (u64 pr : t2)
     if (pairLo(pr) != v1 && pairHi(pr) != v1) t.push_back({pr, 2});
-  std::sort(t.begin(), t.end());
-  size_t nt = 0;
-  for (size_t i = 0; i < t.size(); ++i) {
-    if (nt > 0 && t[nt - 1].first == t[i].first) t[nt - 1].second |= t[i].second;
-    else t[nt++] = t[i];
-  }
-  t.resize(nt);
+  sortAndMergeFlags(t);
 
   codes.push_back(e12 ? 4 : 3);
   for (const auto& [n, f] : e) codes.push_back((f & 3) == 3 ? ((f & 4) ? 4 : 3) : ((f & 1) ? 1 : 2));
