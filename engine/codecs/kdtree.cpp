@@ -320,7 +320,7 @@ struct Models {
   std::vector<SymbolModel> orient;
   Models() {
     for (int p = 2; p <= kSmallCounts; ++p)
-      for (int c = 0; c < 4; ++c) small.emplace_back(p + 1);
+      for (int c = 0; c < kCentroidBins; ++c) small.emplace_back(p + 1);
     for (int i = 0; i < 24; ++i) large.emplace_back(16);
     for (int i = 0; i < 3; ++i) rank_first.emplace_back(kRankEscape + 1), rank_second.emplace_back(kRankEscape + 1);
     for (int i = 0; i < 4; ++i) edge.emplace_back(3);
@@ -478,8 +478,7 @@ class Engine {
     if (p == 1) {
       c = io_.bit(models_.single[axis][bin], truth_c == 0 ? 1 : 0) ? 0 : 1;
     } else if (p <= kSmallCounts) {
-      const int cls = bin == kCentroidBins - 1 ? 3 : (bin < 3 ? 0 : (bin > 6 ? 2 : 1));
-      c = io_.sym(models_.small[(p - 2) * 4 + cls], truth_c);
+      c = io_.sym(models_.small[(p - 2) * kCentroidBins + bin], truth_c);
     } else {
       int lg = 0;
       while ((p >> (lg + 1)) != 0) ++lg;
