@@ -38,6 +38,14 @@ const Scan kScans[] = {
 
 void PrintTo(const Scan& scan, std::ostream* os) { *os << scan.file; }
 
+// The scan's attributes at 12-bit normals.
+AttributeLayout layoutOf(const Mesh& mesh) {
+  AttributeLayout layout;
+  if (!mesh.normals.empty()) layout.normal_bits = 12;
+  if (!mesh.colors.empty()) layout.color_channels = mesh.color_channels;
+  return layout;
+}
+
 // One tile through a whole in-memory container with `codec`, and back.
 Result<QuantizedMesh> throughContainer(const Grid& grid, const AttributeLayout& layout, CodecId codec,
                                        const QuantizedMesh& q, const std::string& name) {
@@ -60,9 +68,7 @@ TEST_P(DataRoundTrip, StoreIsLosslessAfterQuantization) {
   ASSERT_TRUE(mesh.isOk()) << mesh.status().toString();
   EXPECT_EQ(stats.vertices, scan.vertices);
   EXPECT_EQ(stats.triangles, scan.triangles);
-  AttributeLayout layout;
-  if (!mesh->normals.empty()) layout.normal_bits = 12;
-  if (!mesh->colors.empty()) layout.color_channels = mesh->color_channels;
+  const AttributeLayout layout = layoutOf(*mesh);
 
   for (int bits : {12, 16, 24}) {
     SCOPED_TRACE(bits);
@@ -93,9 +99,7 @@ TEST_P(DataRoundTrip, KdtreeIsLosslessAfterQuantization) {
 #endif
   auto mesh = readMeshFile(path);
   ASSERT_TRUE(mesh.isOk()) << mesh.status().toString();
-  AttributeLayout layout;
-  if (!mesh->normals.empty()) layout.normal_bits = 12;
-  if (!mesh->colors.empty()) layout.color_channels = mesh->color_channels;
+  const AttributeLayout layout = layoutOf(*mesh);
   for (int bits : {12, 16, 20}) {
     SCOPED_TRACE(bits);
     auto grid = makeGrid(boundingBox(*mesh), bits);
