@@ -37,23 +37,17 @@ Result<std::vector<uint64_t>> levelBytes(const ContainerFile& file, const std::v
     if (levels.empty())
       return makeError(ErrorCode::kInvalidArgument, file.path() + ": tile " + std::to_string(e->tile_id) +
                                                         " uses a single-rate codec; it has no coarser levels");
-    size_t i = 0;
-    for (uint32_t l = 0; l <= bits; ++l) {
-      while (i + 1 < levels.size() && levels[i].level < l) ++i;
-      total[l] += levels[i].end_bytes;
-    }
+    addLevelBytes(levels, total);
   }
   return total;
 }
 
-}  // namespace
-
-Result<QuantizedMesh> decodeContainer(const std::string& path, const std::optional<std::vector<uint32_t>>& tiles,
-                                      ContainerHeader* header, std::optional<uint32_t> level) {
-  SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(path));
-  SP_ASSIGN_OR_RETURN(auto chosen, chooseTiles(file, path, tiles));
+// Decodes the chosen tiles (at `level` when given) and welds them.
+Result<QuantizedMesh> decodeChosen(const ContainerFile& file, const std::vector<const TileEntry*>& chosen,
+                                   std::optional<uint32_t> level) {
   if (level && *level > uint32_t(file.header().grid.bits))
-    return makeError(ErrorCode::kInvalidArgument, path + ": level " + std::to_string(*level) + " is past the last (" +
+    return makeError(ErrorCode::kInvalidArgument, file.path() + ": level " + std::to_string(*level) +
+                                                      " is past the last (" +
                                                       std::to_string(file.header().grid.bits) + ")");
   // Tiles decode independently: in parallel, then welded in index order (deterministic).
   std::vector<QuantizedMesh> decoded(chosen.size());
@@ -64,9 +58,18 @@ Result<QuantizedMesh> decodeContainer(const std::string& path, const std::option
     else errors[i] = m.status();
   });
   for (const Status& e : errors) SP_RETURN_IF_ERROR(e);
-  if (header) *header = file.header();
   if (decoded.empty()) return QuantizedMesh();
   return weldTiles(decoded);
+}
+
+}  // namespace
+
+Result<QuantizedMesh> decodeContainer(const std::string& path, const std::optional<std::vector<uint32_t>>& tiles,
+                                      ContainerHeader* header, std::optional<uint32_t> level) {
+  SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(path));
+  SP_ASSIGN_OR_RETURN(auto chosen, chooseTiles(file, path, tiles));
+  if (header) *header = file.header();
+  return decodeChosen(file, chosen, level);
 }
 
 bool floatPositionsSuffice(const QuantizedMesh& mesh, const Grid& grid) {
@@ -83,12 +86,12 @@ bool floatPositionsSuffice(const QuantizedMesh& mesh, const Grid& grid) {
 }
 
 Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
-  ContainerHeader header;
+  SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(settings.input));
+  SP_ASSIGN_OR_RETURN(auto chosen, chooseTiles(file, settings.input, settings.tiles));
+  const ContainerHeader& header = file.header();
   DecodeResult result;
   std::optional<uint32_t> level = settings.level;
   if (settings.level || settings.bytes) {
-    SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(settings.input));
-    SP_ASSIGN_OR_RETURN(auto chosen, chooseTiles(file, settings.input, settings.tiles));
     SP_ASSIGN_OR_RETURN(auto bytes, levelBytes(file, chosen));
     if (settings.bytes) {
       if (bytes[0] > *settings.bytes)
@@ -102,7 +105,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     if (*level < bytes.size()) result.level_bytes = bytes[*level];
     result.level = level;
   }
-  SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeContainer(settings.input, settings.tiles, &header, level));
+  SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeChosen(file, chosen, level));
   result.vertices = q.positions.size();
   result.faces = q.triangles.size();
   result.tiles = settings.tiles ? static_cast<uint32_t>(settings.tiles->size()) : header.tile_count;

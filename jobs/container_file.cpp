@@ -27,10 +27,14 @@ const TileEntry* ContainerFile::findTile(uint32_t tile_id) const {
   return nullptr;
 }
 
+Result<std::span<const uint8_t>> ContainerFile::readPayload(const TileEntry& entry, std::vector<uint8_t>& chunk) const {
+  SP_RETURN_IF_ERROR(file_->read(entry.offset, entry.chunk_bytes, chunk));
+  return parseTileChunk(chunk, entry, path());
+}
+
 Result<QuantizedMesh> ContainerFile::decodeTile(const TileEntry& entry, std::optional<uint32_t> level) const {
   std::vector<uint8_t> chunk;
-  SP_RETURN_IF_ERROR(file_->read(entry.offset, entry.chunk_bytes, chunk));
-  SP_ASSIGN_OR_RETURN(auto payload, parseTileChunk(chunk, entry, path()));
+  SP_ASSIGN_OR_RETURN(auto payload, readPayload(entry, chunk));
   return decodeTilePayload(header_, entry, payload, path(), level);
 }
 
@@ -38,8 +42,7 @@ Result<std::vector<CodecLevel>> ContainerFile::tileLevels(const TileEntry& entry
   const CodecInfo* codec = findCodec(entry.codec);
   if (!codec || !codec->levels) return std::vector<CodecLevel>{};
   std::vector<uint8_t> chunk;
-  SP_RETURN_IF_ERROR(file_->read(entry.offset, entry.chunk_bytes, chunk));
-  SP_ASSIGN_OR_RETURN(auto payload, parseTileChunk(chunk, entry, path()));
+  SP_ASSIGN_OR_RETURN(auto payload, readPayload(entry, chunk));
   auto levels = codec->levels(TileContext{header_.grid.bits, header_.layout}, entry.codec_version, payload);
   if (!levels.isOk()) return levels.status().withContext(path() + ": tile " + std::to_string(entry.tile_id));
   return levels;

@@ -173,11 +173,7 @@ std::string containerInfoJson(const ContainerFile& file) {
       json l = json::array();
       for (const auto& lv : *levels) l.push_back({{"level", lv.level}, {"bytes", lv.end_bytes}});
       e["levels"] = std::move(l);
-      size_t i = 0;
-      for (uint32_t lv = 0; lv < level_total.size(); ++lv) {
-        while (i + 1 < levels->size() && (*levels)[i].level < lv) ++i;
-        level_total[lv] += (*levels)[i].end_bytes;
-      }
+      addLevelBytes(*levels, level_total);
     }
     tiles.push_back(std::move(e));
   }

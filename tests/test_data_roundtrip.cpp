@@ -46,15 +46,20 @@ AttributeLayout layoutOf(const Mesh& mesh) {
   return layout;
 }
 
-// One tile through a whole in-memory container with `codec`, and back.
-Result<QuantizedMesh> throughContainer(const Grid& grid, const AttributeLayout& layout, CodecId codec,
-                                       const QuantizedMesh& q, const std::string& name) {
+// `mesh` quantized at `bits` (its drop counts into *qs), and the same mesh after one tile of an in-memory
+// container with `codec` and back.
+Result<std::pair<QuantizedMesh, QuantizedMesh>> quantizedAndDecoded(const Mesh& mesh, int bits,
+                                                                    const AttributeLayout& layout, CodecId codec,
+                                                                    const std::string& name, QuantizeStats* qs) {
+  SP_ASSIGN_OR_RETURN(Grid grid, makeGrid(boundingBox(mesh), bits));
+  SP_ASSIGN_OR_RETURN(QuantizedMesh q, quantizeMesh(mesh, grid, layout, qs));
   const QuantizedMesh tiles[] = {q};
   SP_ASSIGN_OR_RETURN(auto bytes, encodeContainer(grid, layout, *findCodec(codec), tiles));
   SP_ASSIGN_OR_RETURN(auto pc, parseContainer(bytes, name));
   const auto& e = pc.tiles.at(0);
   SP_ASSIGN_OR_RETURN(auto payload, parseTileChunk(std::span(bytes).subspan(e.offset, e.chunk_bytes), e, name));
-  return decodeTilePayload(pc.header, e, payload, name);
+  SP_ASSIGN_OR_RETURN(QuantizedMesh decoded, decodeTilePayload(pc.header, e, payload, name));
+  return std::pair{std::move(q), std::move(decoded)};
 }
 
 class DataRoundTrip : public ::testing::TestWithParam<Scan> {};
@@ -72,18 +77,15 @@ TEST_P(DataRoundTrip, StoreIsLosslessAfterQuantization) {
 
   for (int bits : {12, 16, 24}) {
     SCOPED_TRACE(bits);
-    auto grid = makeGrid(boundingBox(*mesh), bits);
-    ASSERT_TRUE(grid.isOk());
     QuantizeStats qs;
-    auto q = quantizeMesh(*mesh, *grid, layout, &qs);
-    ASSERT_TRUE(q.isOk());
-    EXPECT_EQ(q->triangles.size() + qs.degenerate_triangles, scan.triangles);
-    EXPECT_EQ(q->positions.size() + qs.unreferenced_vertices, scan.vertices);
-    auto decoded = throughContainer(*grid, layout, CodecId::kStore, *q, scan.file);
-    ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
-    EXPECT_TRUE(testing::triangleMultiset(*decoded) == testing::triangleMultiset(*q));
-    EXPECT_EQ(decoded->normals, q->normals);
-    EXPECT_EQ(decoded->colors, q->colors);
+    auto r = quantizedAndDecoded(*mesh, bits, layout, CodecId::kStore, scan.file, &qs);
+    ASSERT_TRUE(r.isOk()) << r.status().toString();
+    const auto& [q, decoded] = *r;
+    EXPECT_EQ(q.triangles.size() + qs.degenerate_triangles, scan.triangles);
+    EXPECT_EQ(q.positions.size() + qs.unreferenced_vertices, scan.vertices);
+    EXPECT_TRUE(testing::triangleMultiset(decoded) == testing::triangleMultiset(q));
+    EXPECT_EQ(decoded.normals, q.normals);
+    EXPECT_EQ(decoded.colors, q.colors);
   }
 }
 
@@ -102,16 +104,13 @@ TEST_P(DataRoundTrip, KdtreeIsLosslessAfterQuantization) {
   const AttributeLayout layout = layoutOf(*mesh);
   for (int bits : {12, 16, 20}) {
     SCOPED_TRACE(bits);
-    auto grid = makeGrid(boundingBox(*mesh), bits);
-    ASSERT_TRUE(grid.isOk());
     QuantizeStats qs;
-    auto q = quantizeMesh(*mesh, *grid, layout, &qs);
-    ASSERT_TRUE(q.isOk());
-    EXPECT_EQ(q->triangles.size() + qs.degenerate_triangles, scan.triangles);
-    auto decoded = throughContainer(*grid, layout, CodecId::kKdtree, *q, scan.file);
-    ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
-    EXPECT_TRUE(testing::cornerMultiset(*decoded, layout.normal_bits) ==
-                testing::cornerMultiset(*q, layout.normal_bits));
+    auto r = quantizedAndDecoded(*mesh, bits, layout, CodecId::kKdtree, scan.file, &qs);
+    ASSERT_TRUE(r.isOk()) << r.status().toString();
+    const auto& [q, decoded] = *r;
+    EXPECT_EQ(q.triangles.size() + qs.degenerate_triangles, scan.triangles);
+    EXPECT_TRUE(testing::cornerMultiset(decoded, layout.normal_bits) ==
+                testing::cornerMultiset(q, layout.normal_bits));
   }
 }
 

@@ -28,6 +28,14 @@ const CodecInfo* findCodec(std::string_view name) {
   return nullptr;
 }
 
+void addLevelBytes(std::span<const CodecLevel> levels, std::vector<uint64_t>& total) {
+  size_t i = 0;
+  for (uint32_t l = 0; l < total.size(); ++l) {
+    while (i + 1 < levels.size() && levels[i].level < l) ++i;
+    total[l] += levels[i].end_bytes;
+  }
+}
+
 uint64_t decodedVertexCount(const CodecInfo& codec, const QuantizedMesh& mesh, std::span<const uint8_t> payload) {
   return codec.payload_vertices ? codec.payload_vertices(payload) : mesh.positions.size();
 }

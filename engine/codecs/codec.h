@@ -34,6 +34,10 @@ struct CodecLevel {
   uint64_t end_bytes = 0;
 };
 
+// Adds to total[L], for every level L < total.size(), the payload bytes a tile with these levels (as `levels`
+// lists them, coarse to fine, non-empty) needs for L; a level coarser than the tile's first needs the first one's.
+void addLevelBytes(std::span<const CodecLevel> levels, std::vector<uint64_t>& total);
+
 struct CodecInfo {
   CodecId id;
   std::string_view name;

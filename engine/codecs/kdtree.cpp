@@ -237,6 +237,14 @@ void applySplit(Complex& cx, u32 v, u32 v2, const std::vector<u32>& nbrs, const 
   }
 }
 
+// How many of the kd-ordered points [s, e) have bit `bit` of `axis` clear: the lower half of a split.
+u32 lowerHalf(const std::vector<Vec3u>& pos, u32 s, u32 e, int axis, int bit) {
+  const auto first = pos.begin() + s;
+  return static_cast<u32>(
+      std::partition_point(first, pos.begin() + e, [&](const Vec3u& q) { return ((q[axis] >> bit) & 1) == 0; }) -
+      first);
+}
+
 // What only the encoder knows: the points in kd order, the split codes, triangle copies, attributes.
 struct Truth {
   std::vector<Vec3u> pos;
@@ -341,8 +349,8 @@ struct Link {
 template <class Io>
 class Engine {
  public:
-  Engine(Io& io, int bits, u32 n, int k0, Vec3u root_lo, const Truth* truth, KdtreeStats* stats)
-      : io_(io), bits_(bits), n_(n), k0_(k0), truth_(truth), stats_(stats) {
+  Engine(Io& io, int bits, u32 n, int k0, Vec3u root_lo, const Truth* truth)
+      : io_(io), bits_(bits), n_(n), k0_(k0), truth_(truth) {
     cx_.init(n);
     lo_.assign(n, Vec3u{0, 0, 0});
     depth_.assign(n, 0);
@@ -465,13 +473,7 @@ class Engine {
     const int axis = d % 3;
     const u32 size = 1u << (bits_ - splitsAlong(d, axis));
     const u32 half = size >> 1;
-    u32 truth_c = 0;
-    if (truth_) {
-      const int bit = bits_ - 1 - splitsAlong(d, axis);
-      const auto first = truth_->pos.begin() + cell.s, last = truth_->pos.begin() + cell.e;
-      truth_c = static_cast<u32>(
-          std::partition_point(first, last, [&](const Vec3u& q) { return ((q[axis] >> bit) & 1) == 0; }) - first);
-    }
+    const u32 truth_c = truth_ ? lowerHalf(truth_->pos, cell.s, cell.e, axis, bits_ - 1 - splitsAlong(d, axis)) : 0;
     io_.meter(&KdtreeStats::geometry_bits);
     const int bin = centroidBin(cell.s, axis, double(lo_[cell.s][axis]) + half, double(half));
     u32 c;
@@ -962,7 +964,6 @@ class Engine {
   u32 n_;
   int k0_;
   const Truth* truth_;
-  KdtreeStats* stats_;
   Models models_;
   Complex cx_;
   std::vector<Vec3u> lo_;
@@ -1147,9 +1148,7 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
       const int axis = d % 3, bit = ctx.bits - 1 - splitsAlong(d, axis);
       next.clear();
       for (const auto& [s, e] : cells) {
-        const u32 c = u32(std::partition_point(truth.pos.begin() + s, truth.pos.begin() + e,
-                                               [&](const Vec3u& q) { return ((q[axis] >> bit) & 1) == 0; }) -
-                          (truth.pos.begin() + s));
+        const u32 c = lowerHalf(truth.pos, s, e, axis, bit);
         if (c == 0 || c == e - s) {
           next.push_back({s, e});
         } else {
@@ -1203,7 +1202,7 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
 
   EncodeIo io;
   io.stats = stats;
-  Engine<EncodeIo> engine(io, ctx.bits, n, k0, root, &truth, stats);
+  Engine<EncodeIo> engine(io, ctx.bits, n, k0, root, &truth);
   engine.layout = ctx.layout;
   SP_RETURN_IF_ERROR(engine.run(ctx.bits));
   w.u8(static_cast<u8>(k0));
@@ -1240,7 +1239,7 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   if (target >= ctx.bits && pos != payload.size())
     return makeError(ErrorCode::kMalformed, "kdtree payload: " + std::to_string(payload.size() - pos) +
                                                 " bytes after the last segment");
-  Engine<DecodeIo> engine(io, ctx.bits, h.n, h.k0, h.root, nullptr, nullptr);
+  Engine<DecodeIo> engine(io, ctx.bits, h.n, h.k0, h.root, nullptr);
   engine.layout = ctx.layout;
   engine.max_triangles_ = h.t;
   SP_RETURN_IF_ERROR(engine.run(target));

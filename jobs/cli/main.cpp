@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "engine/codecs/codec.h"
+#include "engine/quantize.h"
 #include "jobs/batch.h"
 #include "jobs/commands.h"
 #include "jobs/config.h"
@@ -297,22 +298,6 @@ int runEncode(int argc, char** argv) {
   return 0;
 }
 
-bool parseTileList(const std::string& text, std::vector<uint32_t>& out, std::string& error) {
-  size_t i = 0;
-  while (i <= text.size()) {
-    const size_t comma = std::min(text.find(',', i), text.size());
-    const std::string part = text.substr(i, comma - i);
-    char* end = nullptr;
-    errno = 0;
-    const unsigned long long v = std::strtoull(part.c_str(), &end, 10);
-    if (part.empty() || *end != '\0' || errno != 0 || v > UINT32_MAX || part[0] == '-')
-      return error = "--tiles expects tile ids separated by commas, got '" + text + "'", false;
-    out.push_back(static_cast<uint32_t>(v));
-    i = comma + 1;
-  }
-  return true;
-}
-
 // A decimal non-negative integer that fits 64 bits, nothing else.
 bool parseUnsignedArg(const std::string& v, uint64_t& out) {
   char* end = nullptr;
@@ -320,6 +305,35 @@ bool parseUnsignedArg(const std::string& v, uint64_t& out) {
   const unsigned long long x = std::strtoull(v.c_str(), &end, 10);
   if (v.empty() || v[0] == '-' || *end != '\0' || errno != 0) return false;
   out = x;
+  return true;
+}
+
+// Option `name`, when given, as an unsigned integer no larger than `max`; false with `error` set otherwise.
+bool unsignedOption(const Args& args, const char* name, uint64_t max, std::optional<uint64_t>& out,
+                    std::string& error) {
+  const std::string* v = args.get(name);
+  if (!v) return true;
+  uint64_t x = 0;
+  if (!parseUnsignedArg(*v, x) || x > max) {
+    error = std::string(name) + " must be a non-negative integer";
+    if (max < UINT64_MAX) error += " no larger than " + std::to_string(max);
+    error += ", got '" + *v + "'";
+    return false;
+  }
+  out = x;
+  return true;
+}
+
+bool parseTileList(const std::string& text, std::vector<uint32_t>& out, std::string& error) {
+  size_t i = 0;
+  while (i <= text.size()) {
+    const size_t comma = std::min(text.find(',', i), text.size());
+    uint64_t v = 0;
+    if (!parseUnsignedArg(text.substr(i, comma - i), v) || v > UINT32_MAX)
+      return error = "--tiles expects tile ids separated by commas, got '" + text + "'", false;
+    out.push_back(static_cast<uint32_t>(v));
+    i = comma + 1;
+  }
   return true;
 }
 
@@ -338,14 +352,11 @@ int runDecode(int argc, char** argv) {
     if (!parseTileList(*t, ids, error)) return usage(error, "decode");
     s.tiles = std::move(ids);
   }
-  for (const char* name : {"--level", "--bytes"})
-    if (const auto* v = args.get(name)) {
-      uint64_t x = 0;
-      if (!parseUnsignedArg(*v, x) || (std::string(name) == "--level" && x > 64))
-        return usage(std::string(name) + " expects a non-negative integer, got '" + *v + "'", "decode");
-      if (std::string(name) == "--level") s.level = static_cast<uint32_t>(x);
-      else s.bytes = x;
-    }
+  std::optional<uint64_t> level;
+  if (!unsignedOption(args, "--level", kMaxGridBits, level, error) ||
+      !unsignedOption(args, "--bytes", UINT64_MAX, s.bytes, error))
+    return usage(error, "decode");
+  if (level) s.level = static_cast<uint32_t>(*level);
   auto result = decodeFile(s);
   if (!result.isOk()) return fail(result.status());
   if (!args.has("--quiet"))
@@ -494,12 +505,12 @@ int runSynth(int argc, char** argv) {
   if (args.positional.size() != 1 || !args.has("--triangles")) return usage("synth needs OUT.ply and --triangles N", "synth");
   SynthSettings s;
   s.output = args.positional[0];
-  auto parseU64 = [&](const char* name, uint64_t& out) {
-    const std::string* v = args.get(name);
-    if (!v || parseUnsignedArg(*v, out)) return true;
-    return error = std::string(name) + " must be a non-negative integer", false;
-  };
-  if (!parseU64("--triangles", s.triangles) || !parseU64("--seed", s.seed)) return usage(error, "synth");
+  std::optional<uint64_t> triangles, seed;
+  if (!unsignedOption(args, "--triangles", UINT64_MAX, triangles, error) ||
+      !unsignedOption(args, "--seed", UINT64_MAX, seed, error))
+    return usage(error, "synth");
+  s.triangles = triangles.value_or(s.triangles);
+  s.seed = seed.value_or(s.seed);
   if (const auto* f = args.get("--from")) s.from = *f;
   auto r = synthesize(s);
   if (!r.isOk()) return fail(r.status());
