@@ -110,7 +110,7 @@ void BM_Tiling(benchmark::State& state, std::string scan) {
 void BM_KdtreeBits(benchmark::State& state, std::string scan, int bits) {
   const Prepared& p = prepared(scan, bits);
   std::vector<uint8_t> out;
-  KdtreeStats stats;
+  CodecStats stats;
   for (auto _ : state) {
     out.clear();
     if (!kdtreeEncodeWithStats(p.ctx, p.mesh, out, &stats).isOk()) state.SkipWithError("encode failed");

@@ -79,8 +79,8 @@ uint64_t kdtreePayloadVertices(std::span<const uint8_t> payload);
 Result<QuantizedMesh> kdtreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         uint32_t level);
 
-// What a kdtree encoding spent, in bits (ideal arithmetic-coding costs; the bytes add flushes and headers).
-struct KdtreeStats {
+// What a progressive encoding (kdtree, octree) spent, in bits (ideal arithmetic-coding costs; the bytes add flushes and headers).
+struct CodecStats {
   uint64_t points = 0;         // distinct coded vertices
   uint64_t triangles = 0;      // triangles coded (with multiplicity)
   uint64_t splits = 0;         // cell splits with both halves non-empty (vertex splits)
@@ -91,6 +91,6 @@ struct KdtreeStats {
   uint64_t payload_bytes = 0;
 };
 Status kdtreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
-                             KdtreeStats* stats);
+                             CodecStats* stats);
 
 }  // namespace scanpress

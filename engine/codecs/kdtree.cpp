@@ -48,6 +48,7 @@
 #include <string>
 
 #include "engine/codecs/codec.h"
+#include "engine/codecs/hierarchy.h"
 #include "engine/entropy/range_coder.h"
 #include "engine/io/bytes.h"
 #include "engine/octahedral.h"
@@ -55,13 +56,8 @@
 namespace scanpress {
 namespace {
 
-using u8 = uint8_t;
-using u32 = uint32_t;
-using u64 = uint64_t;
-using Key = unsigned __int128;
+using namespace hierarchy;
 
-constexpr u32 kMaxPoints = 1u << 26;
-constexpr u64 kMaxTriangles = 1ull << 28;
 constexpr u32 kRankEscape = 15;
 constexpr int kSmallCounts = 15;  // p in [2, kSmallCounts] has a model per p
 constexpr int kCentroidBins = 11;
@@ -246,72 +242,10 @@ u32 lowerHalf(const std::vector<Vec3u>& pos, u32 s, u32 e, int axis, int bit) {
 }
 
 // What only the encoder knows: the points in kd order, the split codes, triangle copies, attributes.
-struct Truth {
-  std::vector<Vec3u> pos;
-  std::vector<OctNormal> normals;
-  std::vector<Rgba8> colors;
+struct Truth : Points {
   std::vector<std::array<u32, 3>> splits;  // (s, s+c, e) of every vertex split, in decoder order
   std::vector<u8> codes;
   std::vector<u32> code_start;  // per split, into codes; one extra entry at the end
-  std::vector<std::array<u32, 3>> tri_keys;   // sorted triples, sorted
-  std::vector<std::array<u32, 2>> tri_copies;  // (copies as sorted, copies reversed)
-};
-
-struct EncodeIo {
-  std::vector<std::vector<u8>> segments;
-  std::unique_ptr<RangeEncoder> enc;
-  KdtreeStats* stats = nullptr;
-  Status begin() {
-    segments.emplace_back();
-    enc = std::make_unique<RangeEncoder>(segments.back());
-    return Status::ok();
-  }
-  Status end() {
-    enc->finish();
-    enc.reset();
-    return Status::ok();
-  }
-  void meter(double KdtreeStats::*part) { enc->setCostMeter(stats ? &(stats->*part) : nullptr); }
-  int bit(BitModel& m, int v) {
-    enc->encodeBit(m, v);
-    return v;
-  }
-  u32 sym(SymbolModel& m, u32 v) {
-    enc->encodeSymbol(m, v);
-    return v;
-  }
-  u32 uniform(u32 v, u32 n) {
-    enc->encodeUniform(v, n);
-    return v;
-  }
-  u32 bits(u32 v, int n) {
-    enc->encodeBits(v, n);
-    return v;
-  }
-};
-
-struct DecodeIo {
-  std::vector<std::span<const u8>> segments;
-  size_t next = 0;
-  std::unique_ptr<RangeDecoder> dec;
-  Status begin() {
-    if (next >= segments.size()) return makeError(ErrorCode::kTruncated, "kdtree payload: segment missing");
-    dec = std::make_unique<RangeDecoder>(segments[next++]);
-    return Status::ok();
-  }
-  Status end() {
-    const bool bad = dec->overrun();
-    dec.reset();
-    if (bad)
-      return makeError(ErrorCode::kMalformed,
-                       "kdtree payload: segment " + std::to_string(next - 1) + " ends before its symbols do");
-    return Status::ok();
-  }
-  void meter(double KdtreeStats::*) {}
-  int bit(BitModel& m, int) { return dec->decodeBit(m); }
-  u32 sym(SymbolModel& m, u32) { return dec->decodeSymbol(m); }
-  u32 uniform(u32, u32 n) { return dec->decodeUniform(n); }
-  u32 bits(u32, int n) { return dec->decodeBits(n); }
 };
 
 struct Models {
@@ -406,30 +340,14 @@ class Engine {
       for (int a = 0; a < 3; ++a) p[a] += (1u << (bits_ - splitsAlong(depth_[c.s], a))) >> 1;
       m.positions.push_back(p);
     }
-    std::vector<std::array<u32, 3>> keys;
-    std::vector<u8> orient;
-    orientWithoutCodes(keys, orient);
+    const auto keys = triangleKeys();
+    const auto orient = orientWithoutCodes(keys);
     for (size_t t = 0; t < keys.size(); ++t) {
       auto k = keys[t];
       if (orient[t]) std::swap(k[1], k[2]);
       m.triangles.push_back({index[k[0]], index[k[1]], index[k[2]]});
     }
-    if (layout.hasNormals()) {
-      std::vector<Vec3d> acc(m.positions.size(), Vec3d{0, 0, 0});
-      for (const auto& t : m.triangles) {
-        Vec3d e1, e2;
-        for (int a = 0; a < 3; ++a) {
-          e1[a] = double(m.positions[t[1]][a]) - m.positions[t[0]][a];
-          e2[a] = double(m.positions[t[2]][a]) - m.positions[t[0]][a];
-        }
-        const Vec3d nrm{e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
-        for (u32 v : t)
-          for (int a = 0; a < 3; ++a) acc[v][a] += nrm[a];
-      }
-      for (const auto& a : acc)
-        m.normals.push_back(encodeOctahedral(Vec3f{float(a[0]), float(a[1]), float(a[2])}, layout.normal_bits));
-    }
-    if (layout.hasColors()) m.colors.assign(m.positions.size(), Rgba8{128, 128, 128, 255});
+    addCoarseAttributes(m, layout);
     return m;
   }
 
@@ -474,7 +392,7 @@ class Engine {
     const u32 size = 1u << (bits_ - splitsAlong(d, axis));
     const u32 half = size >> 1;
     const u32 truth_c = truth_ ? lowerHalf(truth_->pos, cell.s, cell.e, axis, bits_ - 1 - splitsAlong(d, axis)) : 0;
-    io_.meter(&KdtreeStats::geometry_bits);
+    io_.meter(&CodecStats::geometry_bits);
     const int bin = centroidBin(cell.s, axis, double(lo_[cell.s][axis]) + half, double(half));
     u32 c;
     if (p == 1) {
@@ -662,7 +580,7 @@ class Engine {
         return makeError(ErrorCode::kInternal, "kdtree encoder: star mismatch");
     }
     ++split_index_;
-    io_.meter(&KdtreeStats::connectivity_bits);
+    io_.meter(&CodecStats::connectivity_bits);
     auto& nbrs = nbrs_;
     auto& tris = tris_;
     nbrs.assign(cx_.nb[v].begin(), cx_.nb[v].end());
@@ -833,125 +751,15 @@ class Engine {
     return keys;
   }
 
-  // Breadth-first over triangles sharing edges; calls visit(t, parent, shared a, shared b) in a fixed order
-  // (parent < 0 for the first triangle of a component). visit returns the orientation decided for t.
-  template <class Visit>
-  void breadthFirst(const std::vector<std::array<u32, 3>>& keys, std::vector<u8>& orient, Visit visit) const {
-    const size_t nt = keys.size();
-    orient.assign(nt, 0);
-    std::vector<u8> seen(nt, 0);
-    std::vector<u32> queue;
-    for (size_t root = 0; root < nt; ++root) {
-      if (seen[root]) continue;
-      seen[root] = 1;
-      orient[root] = visit(root, -1, 0, 0);
-      queue.assign(1, u32(root));
-      for (size_t head = 0; head < queue.size(); ++head) {
-        const u32 t = queue[head];
-        const auto& k = keys[t];
-        for (int side = 0; side < 3; ++side) {
-          const u32 x = k[side], y = k[(side + 1) % 3];
-          const u32 lo = std::min(x, y), hi = std::max(x, y);
-          std::vector<u32> thirds;
-          for (u64 pr : cx_.tr[lo]) {
-            if (pairLo(pr) == hi) thirds.push_back(pairHi(pr));
-            else if (pairHi(pr) == hi) thirds.push_back(pairLo(pr));
-          }
-          std::sort(thirds.begin(), thirds.end());
-          for (u32 z : thirds) {
-            std::array<u32, 3> key{lo, hi, z};
-            std::sort(key.begin(), key.end());
-            auto it = std::lower_bound(keys.begin(), keys.end(), key);
-            if (it == keys.end() || *it != key) continue;
-            const size_t u = size_t(it - keys.begin());
-            if (seen[u]) continue;
-            seen[u] = 1;
-            orient[u] = visit(u, int(t), x, y);
-            queue.push_back(u32(u));
-          }
-        }
-      }
-    }
-  }
-
-  // Orientation bit (0: as sorted a,b,c; 1: a,c,b) that makes triangle u traverse x->y opposite to parent t.
-  static u8 consistentOrientation(const std::array<u32, 3>& t, u8 ot, const std::array<u32, 3>& u, u32 x, u32 y) {
-    auto forward = [](const std::array<u32, 3>& k, u32 a, u32 b) {
-      return (k[0] == a && k[1] == b) || (k[1] == a && k[2] == b) || (k[2] == a && k[0] == b);
-    };
-    const bool dir_t = forward(t, x, y) != bool(ot);
-    return static_cast<u8>(forward(u, x, y) == dir_t);  // u must not run x->y where t does
-  }
-
-  void orientWithoutCodes(std::vector<std::array<u32, 3>>& keys, std::vector<u8>& orient) const {
-    keys = triangleKeys();
-    breadthFirst(keys, orient, [&](size_t u, int t, u32 x, u32 y) -> u8 {
-      return t < 0 ? 0 : consistentOrientation(keys[t], orient[t], keys[u], x, y);
-    });
-  }
-
-  u32 codeCount(u32 v) {
-    int len = 0;
-    while (len < 32 && (v >> len) != 0) ++len;
-    len = int(io_.uniform(u32(len), 33));
-    return len == 0 ? 0 : io_.bits(v, len);
-  }
-
   // Orientation and multiplicity of the final triangles.
   Status codeTriangles() {
-    io_.meter(&KdtreeStats::connectivity_bits);
-    const auto keys = triangleKeys();
-    std::vector<u8> orient;
-    Status status = Status::ok();
-    u64 total = 0;
-    triangles_.clear();
-    breadthFirst(keys, orient, [&](size_t u, int t, u32 x, u32 y) -> u8 {
-      const u8 pred = t < 0 ? 0 : consistentOrientation(keys[t], orient[t], keys[u], x, y);
-      u32 fwd = 0, bwd = 0, sym = 2;
-      if (truth_) {
-        auto it = std::lower_bound(truth_->tri_keys.begin(), truth_->tri_keys.end(), keys[u]);
-        if (it == truth_->tri_keys.end() || *it != keys[u]) {
-          status = makeError(ErrorCode::kInternal, "kdtree encoder: triangle set mismatch");
-          return 0;
-        }
-        fwd = truth_->tri_copies[it - truth_->tri_keys.begin()][0];
-        bwd = truth_->tri_copies[it - truth_->tri_keys.begin()][1];
-        if (fwd + bwd == 1) sym = ((fwd == 1) == (pred == 0)) ? 0 : 1;
-      }
-      sym = io_.sym(models_.orient[t < 0 ? 0 : 1], sym);
-      if (sym == 0) fwd = pred == 0, bwd = pred == 1;
-      else if (sym == 1) fwd = pred == 1, bwd = pred == 0;
-      else {
-        fwd = codeCount(fwd);
-        bwd = codeCount(bwd);
-      }
-      total += u64(fwd) + bwd;
-      if (fwd + u64(bwd) == 0 || total > max_triangles_) {
-        if (status.isOk()) status = makeError(ErrorCode::kMalformed, "kdtree payload: triangle copies out of range");
-        return 0;
-      }
-      const auto& k = keys[u];
-      for (u32 i = 0; i < fwd; ++i) triangles_.push_back({k[0], k[1], k[2]});
-      for (u32 i = 0; i < bwd; ++i) triangles_.push_back({k[0], k[2], k[1]});
-      return fwd > 0 ? 0 : 1;
-    });
-    return status;
+    io_.meter(&CodecStats::connectivity_bits);
+    return codeFaceCopies(io_, "kdtree", models_.orient.data(), triangleKeys(), truth_, max_triangles_, triangles_);
   }
 
   void codeAttributes() {
-    io_.meter(&KdtreeStats::attribute_bits);
-    if (layout.hasNormals()) {
-      normals_.resize(n_);
-      for (u32 i = 0; i < n_; ++i)
-        for (int c = 0; c < 2; ++c)
-          normals_[i][c] = static_cast<uint16_t>(io_.bits(truth_ ? truth_->normals[i][c] : 0, layout.normal_bits));
-    }
-    if (layout.hasColors()) {
-      colors_.assign(n_, Rgba8{0, 0, 0, 255});
-      for (u32 i = 0; i < n_; ++i)
-        for (int c = 0; c < layout.color_channels; ++c)
-          colors_[i][c] = static_cast<u8>(io_.bits(truth_ ? truth_->colors[i][c] : 0, 8));
-    }
+    io_.meter(&CodecStats::attribute_bits);
+    codeRawAttributes(io_, layout, n_, truth_, normals_, colors_);
   }
 
  public:
@@ -986,160 +794,31 @@ class Engine {
   std::vector<Rgba8> colors_;
 };
 
-Key mortonKey(const Vec3u& p, int bits) {
-  Key k = 0;
-  for (int b = bits - 1; b >= 0; --b)
-    for (int a = 0; a < 3; ++a) k = (k << 1) | ((p[a] >> b) & 1);
-  return k;
-}
+constexpr HeaderFormat kFormat{"kdtree", false};
 
-struct Header {
-  u32 n = 0;
-  u64 t = 0;
-  int k0 = 0;
-  Vec3u root{0, 0, 0};
-  std::vector<u64> seg_len;
-  size_t header_bytes = 0;
-};
-
-Status checkVersion(uint16_t version) {
-  if (version != 1)
-    return makeError(ErrorCode::kUnknownVersion,
-                     "kdtree codec version " + std::to_string(version) + " is not known to this build (knows 1)");
-  return Status::ok();
-}
-
-Result<Header> readHeader(const TileContext& ctx, std::span<const u8> payload) {
-  ByteReader r(payload, "kdtree payload");
-  Header h;
-  u64 n = 0;
-  SP_RETURN_IF_ERROR(r.varint(n));
-  SP_RETURN_IF_ERROR(r.varint(h.t));
-  if (n > kMaxPoints || h.t > kMaxTriangles)
-    return r.error(ErrorCode::kLimitExceeded, "tile claims " + std::to_string(n) + " vertices and " +
-                                                  std::to_string(h.t) + " triangles (limits 2^26, 2^28)");
-  if (n > 1024 * u64(payload.size()) + 1024 || h.t > 64 * n + 64)
-    return r.error(ErrorCode::kMalformed, "counts too large for the payload");
-  h.n = static_cast<u32>(n);
-  if (h.n == 0) {
-    if (h.t != 0) return r.error(ErrorCode::kMalformed, "triangles without vertices");
-    h.header_bytes = r.position();
-    return h;
-  }
-  u8 k0 = 0;
-  SP_RETURN_IF_ERROR(r.u8(k0));
-  if (k0 > ctx.bits) return r.error(ErrorCode::kMalformed, "root level beyond the grid");
-  h.k0 = k0;
-  for (int a = 0; a < 3; ++a) {
-    u64 idx = 0;
-    SP_RETURN_IF_ERROR(r.varint(idx));
-    if (idx >= (u64(1) << k0)) return r.error(ErrorCode::kMalformed, "root cell outside the grid");
-    h.root[a] = static_cast<u32>(idx << (ctx.bits - k0));
-  }
-  u64 segs = 0;
-  SP_RETURN_IF_ERROR(r.varint(segs));
-  if (segs != u64(ctx.bits - k0 + 1)) return r.error(ErrorCode::kMalformed, "wrong number of level segments");
-  h.seg_len.resize(segs);
-  for (auto& len : h.seg_len) {
-    SP_RETURN_IF_ERROR(r.varint(len));
-    if (len > (u64(1) << 40)) return r.error(ErrorCode::kMalformed, "segment length out of range");
-  }
-  h.header_bytes = r.position();
-  return h;
-}
-
-Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<u8>& out, KdtreeStats* stats) {
-  const size_t nv = mesh.positions.size();
-  if (nv >= kMaxPoints || mesh.triangles.size() >= kMaxTriangles)
-    return makeError(ErrorCode::kLimitExceeded, "kdtree: tile has more than 2^26 vertices or 2^28 triangles");
-  if (ctx.layout.hasNormals() != !mesh.normals.empty() || (ctx.layout.hasNormals() && mesh.normals.size() != nv) ||
-      ctx.layout.hasColors() != !mesh.colors.empty() || (ctx.layout.hasColors() && mesh.colors.size() != nv))
-    return makeError(ErrorCode::kInvalidArgument, "kdtree: attributes do not match the layout");
-  const u32 max_coord = (1u << ctx.bits) - 1;
-  for (const auto& p : mesh.positions)
-    if (p[0] > max_coord || p[1] > max_coord || p[2] > max_coord)
-      return makeError(ErrorCode::kInvalidArgument, "kdtree: vertex outside the grid");
-
-  // Points: distinct (position, normal, color), in kd order.
-  std::vector<Key> keys(nv);
-  for (size_t i = 0; i < nv; ++i) keys[i] = mortonKey(mesh.positions[i], ctx.bits);
-  auto attrLess = [&](u32 a, u32 b) {
-    if (!mesh.normals.empty() && mesh.normals[a] != mesh.normals[b]) return mesh.normals[a] < mesh.normals[b];
-    if (!mesh.colors.empty() && mesh.colors[a] != mesh.colors[b]) return mesh.colors[a] < mesh.colors[b];
-    return false;
-  };
-  std::vector<u32> order(nv);
-  for (size_t i = 0; i < nv; ++i) order[i] = u32(i);
-  std::sort(order.begin(), order.end(), [&](u32 a, u32 b) {
-    if (keys[a] != keys[b]) return keys[a] < keys[b];
-    return attrLess(a, b);
-  });
+Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<u8>& out, CodecStats* stats) {
   Truth truth;
-  std::vector<u32> point_of(nv);
-  for (size_t i = 0; i < nv; ++i) {
-    const u32 v = order[i];
-    if (i == 0 || keys[v] != keys[order[i - 1]] || attrLess(order[i - 1], v)) {
-      truth.pos.push_back(mesh.positions[v]);
-      if (!mesh.normals.empty()) truth.normals.push_back(mesh.normals[v]);
-      if (!mesh.colors.empty()) truth.colors.push_back(mesh.colors[v]);
-    }
-    point_of[v] = u32(truth.pos.size() - 1);
-  }
+  SP_RETURN_IF_ERROR(collectPoints("kdtree", ctx, mesh, {0, 1, 2}, truth));
   const u32 n = u32(truth.pos.size());
-
-  // Triangles over points: unordered keys with the copies of each orientation.
-  std::vector<std::pair<std::array<u32, 3>, u8>> tris;
-  tris.reserve(mesh.triangles.size());
-  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
-    std::array<u32, 3> q;
-    for (int c = 0; c < 3; ++c) {
-      if (mesh.triangles[t][c] >= nv)
-        return makeError(ErrorCode::kInvalidArgument, "kdtree: triangle " + std::to_string(t) + " indexes past the vertices");
-      q[c] = point_of[mesh.triangles[t][c]];
-    }
-    if (truth.pos[q[0]] == truth.pos[q[1]] || truth.pos[q[1]] == truth.pos[q[2]] || truth.pos[q[0]] == truth.pos[q[2]])
-      return makeError(ErrorCode::kInvalidArgument,
-                       "kdtree: triangle " + std::to_string(t) + " has two corners in one grid cell");
-    const int r = int(std::min_element(q.begin(), q.end()) - q.begin());
-    std::rotate(q.begin(), q.begin() + r, q.end());
-    u8 o = 0;
-    if (q[1] > q[2]) std::swap(q[1], q[2]), o = 1;
-    tris.push_back({q, o});
-  }
-  std::sort(tris.begin(), tris.end());
-  for (const auto& [q, o] : tris) {
-    if (truth.tri_keys.empty() || truth.tri_keys.back() != q) {
-      truth.tri_keys.push_back(q);
-      truth.tri_copies.push_back({0, 0});
-    }
-    truth.tri_copies.back()[o]++;
-  }
-
-  ByteWriter w(out);
-  w.varint(n);
-  w.varint(mesh.triangles.size());
+  const size_t start = out.size();
+  Header h;
+  h.n = n;
+  h.t = mesh.triangles.size();
   if (stats) {
-    *stats = KdtreeStats{};
+    *stats = CodecStats{};
     stats->points = n;
     stats->triangles = mesh.triangles.size();
   }
   if (n == 0) {
-    if (stats) stats->payload_bytes = w.size();
+    writeHeader(kFormat, h, ctx.bits, {}, out);
+    if (stats) stats->payload_bytes = out.size() - start;
     return Status::ok();
   }
 
   // Root: the smallest grid-aligned cube holding every point.
   int k0 = ctx.bits;
-  {
-    const Key diff = mortonKey(truth.pos.front(), ctx.bits) ^ mortonKey(truth.pos.back(), ctx.bits);
-    for (int b = 3 * ctx.bits - 1; b >= 0; --b)
-      if ((diff >> b) & 1) {
-        k0 = (3 * ctx.bits - 1 - b) / 3;
-        break;
-      }
-  }
   Vec3u root;
-  for (int a = 0; a < 3; ++a) root[a] = k0 == 0 ? 0 : (truth.pos[0][a] >> (ctx.bits - k0)) << (ctx.bits - k0);
+  rootCube(truth, ctx.bits, {0, 1, 2}, k0, root);
 
   // The decoder's split order, then the codes of every split, fine to coarse.
   {
@@ -1205,40 +884,25 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
   Engine<EncodeIo> engine(io, ctx.bits, n, k0, root, &truth);
   engine.layout = ctx.layout;
   SP_RETURN_IF_ERROR(engine.run(ctx.bits));
-  w.u8(static_cast<u8>(k0));
-  for (int a = 0; a < 3; ++a) w.varint(k0 == 0 ? 0 : root[a] >> (ctx.bits - k0));
-  w.varint(io.segments.size());
-  for (const auto& s : io.segments) w.varint(s.size());
-  for (const auto& s : io.segments) w.bytes(s);
+  h.k0 = k0;
+  h.root = root;
+  writeHeader(kFormat, h, ctx.bits, io.segments, out);
   if (stats) {
     stats->splits = engine.splits_;
     stats->edge_expansions = engine.expansions_;
-    stats->payload_bytes = w.size();
+    stats->payload_bytes = out.size() - start;
   }
   return Status::ok();
 }
 
 Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::span<const u8> payload, u32 level) {
-  SP_RETURN_IF_ERROR(checkVersion(version));
-  SP_ASSIGN_OR_RETURN(Header h, readHeader(ctx, payload));
+  SP_RETURN_IF_ERROR(checkVersion("kdtree", version));
+  SP_ASSIGN_OR_RETURN(Header h, readHeader(kFormat, ctx, payload));
   if (h.n == 0) return QuantizedMesh{};
   const int target = int(std::min<u32>(level, u32(ctx.bits)));
-  // Segments this level needs: every level after the root up to `target`, and the final one for the last level.
-  const size_t needed = target >= ctx.bits ? h.seg_len.size() : size_t(std::max(0, target - h.k0));
   DecodeIo io;
-  size_t pos = h.header_bytes;
-  for (size_t i = 0; i < needed; ++i) {
-    if (h.seg_len[i] > payload.size() - pos)
-      return makeError(ErrorCode::kTruncated, "kdtree payload: level segment " + std::to_string(i) + " needs " +
-                                                  std::to_string(h.seg_len[i]) + " bytes at offset " +
-                                                  std::to_string(pos) + ", " + std::to_string(payload.size() - pos) +
-                                                  " left");
-    io.segments.push_back(payload.subspan(pos, h.seg_len[i]));
-    pos += h.seg_len[i];
-  }
-  if (target >= ctx.bits && pos != payload.size())
-    return makeError(ErrorCode::kMalformed, "kdtree payload: " + std::to_string(payload.size() - pos) +
-                                                " bytes after the last segment");
+  io.codec = "kdtree";
+  SP_ASSIGN_OR_RETURN(io.segments, levelSegments("kdtree", h, ctx.bits, payload, target));
   Engine<DecodeIo> engine(io, ctx.bits, h.n, h.k0, h.root, nullptr);
   engine.layout = ctx.layout;
   engine.max_triangles_ = h.t;
@@ -1258,7 +922,7 @@ Status kdtreeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vect
 }
 
 Status kdtreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
-                             KdtreeStats* stats) {
+                             CodecStats* stats) {
   return encodeImpl(ctx, mesh, out, stats);
 }
 
@@ -1279,23 +943,9 @@ Result<QuantizedMesh> kdtreeDecodeLevel(const TileContext& ctx, uint16_t version
 
 Result<std::vector<CodecLevel>> kdtreeLevels(const TileContext& ctx, uint16_t version,
                                              std::span<const uint8_t> payload) {
-  SP_RETURN_IF_ERROR(checkVersion(version));
-  SP_ASSIGN_OR_RETURN(Header h, readHeader(ctx, payload));
-  std::vector<CodecLevel> levels;
-  u64 end = h.header_bytes;
-  if (h.n == 0) {
-    levels.push_back({u32(ctx.bits), end});
-    return levels;
-  }
-  levels.push_back({u32(h.k0), end});
-  for (size_t i = 0; i + 1 < h.seg_len.size(); ++i) {
-    end += h.seg_len[i];
-    levels.push_back({u32(h.k0 + i + 1), end});
-  }
-  end += h.seg_len.back();
-  if (levels.back().level == u32(ctx.bits)) levels.back().end_bytes = end;
-  else levels.push_back({u32(ctx.bits), end});
-  return levels;
+  SP_RETURN_IF_ERROR(checkVersion("kdtree", version));
+  SP_ASSIGN_OR_RETURN(Header h, readHeader(kFormat, ctx, payload));
+  return headerLevels(h, ctx.bits);
 }
 
 }  // namespace scanpress
