@@ -4,6 +4,7 @@
 // triangle orientation and multiplicity and of raw attributes. Internal to engine/codecs.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -144,6 +145,52 @@ void codeRawAttributes(Io& io, const AttributeLayout& layout, u32 n, const Point
 
 // Coarse levels: normals from the incident triangles' areas, gray colors (as the layout asks).
 void addCoarseAttributes(QuantizedMesh& m, const AttributeLayout& layout);
+
+template <class T>
+bool eraseOne(std::vector<T>& v, T x) {
+  for (size_t i = 0; i < v.size(); ++i)
+    if (v[i] == x) {
+      v[i] = v.back();
+      v.pop_back();
+      return true;
+    }
+  return false;
+}
+template <class T>
+void replaceOne(std::vector<T>& v, T from, T to) {
+  for (auto& e : v)
+    if (e == from) {
+      e = to;
+      return;
+    }
+}
+
+// Sorts (key, flags) entries and merges those of one key by or-ing their flags.
+template <class K>
+void sortAndMergeFlags(std::vector<std::pair<K, u8>>& v) {
+  std::sort(v.begin(), v.end());
+  size_t n = 0;
+  for (size_t i = 0; i < v.size(); ++i) {
+    if (n > 0 && v[n - 1].first == v[i].first) v[n - 1].second |= v[i].second;
+    else v[n++] = v[i];
+  }
+  v.resize(n);
+}
+
+// Where the centroid of the neighbours `nb` (doubled centers in c2) lies relative to a split plane, in units of
+// `half` (bins 0..9; kCentroidBins - 1: no neighbours): geometry predicted from connectivity.
+constexpr int kCentroidBins = 11;
+inline int centroidBin(const std::vector<u32>& nb, const std::vector<Vec3u>& c2, int axis, double plane,
+                       double half) {
+  if (nb.empty()) return kCentroidBins - 1;
+  u64 sum = 0;
+  for (u32 n : nb) sum += c2[n][axis];
+  const double t = (0.5 * double(sum) / double(nb.size()) - plane) / half;
+  static constexpr double kEdges[] = {-2, -1, -0.5, -0.15, 0, 0.15, 0.5, 1, 2};
+  int bin = 0;
+  while (bin < 9 && t >= kEdges[bin]) ++bin;
+  return bin;
+}
 
 // --- templates -------------------------------------------------------------------------------------------------
 

@@ -60,30 +60,9 @@ using namespace hierarchy;
 
 constexpr u32 kRankEscape = 15;
 constexpr int kSmallCounts = 15;  // p in [2, kSmallCounts] has a model per p
-constexpr int kCentroidBins = 11;
-
 inline u64 packPair(u32 a, u32 b) { return a < b ? (u64(a) << 32) | b : (u64(b) << 32) | a; }
 inline u32 pairLo(u64 p) { return u32(p >> 32); }
 inline u32 pairHi(u64 p) { return u32(p); }
-
-template <class T>
-bool eraseOne(std::vector<T>& v, T x) {
-  for (size_t i = 0; i < v.size(); ++i)
-    if (v[i] == x) {
-      v[i] = v.back();
-      v.pop_back();
-      return true;
-    }
-  return false;
-}
-template <class T>
-void replaceOne(std::vector<T>& v, T from, T to) {
-  for (auto& e : v)
-    if (e == from) {
-      e = to;
-      return;
-    }
-}
 
 // Number of splits along `axis` after `depth` kd splits from the grid's root (x, y, z in turn).
 inline int splitsAlong(int depth, int axis) { return (depth + 2 - axis) / 3; }
@@ -103,18 +82,6 @@ struct Complex {
 // The split codes of one vertex split, in the order the decoder enumerates the star: V's code (3: no edge V1V2,
 // 4: edge V1V2), then one code per neighbour (sorted by name), then one per star triangle (sorted pairs).
 // Edge codes: 1 V1N, 2 V2N, 3 both, 4 both and triangle V1V2N. Triangle codes: 1 V1NM, 2 V2NM, 3 both.
-
-// Sorts (key, flags) entries and merges those of one key by or-ing their flags.
-template <class K>
-void sortAndMergeFlags(std::vector<std::pair<K, u8>>& v) {
-  std::sort(v.begin(), v.end());
-  size_t n = 0;
-  for (size_t i = 0; i < v.size(); ++i) {
-    if (n > 0 && v[n - 1].first == v[i].first) v[n - 1].second |= v[i].second;
-    else v[n++] = v[i];
-  }
-  v.resize(n);
-}
 
 // Encoder, fine to coarse: merges cell v2 into v1 (the reverse of the split) and appends the split's codes.
 void mergeCells(Complex& cx, u32 v1, u32 v2, std::vector<u8>& codes) {
@@ -371,19 +338,10 @@ class Engine {
     return std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]));
   }
 
-  // Where the centroid of v's neighbours lies relative to the split plane, in half-cells (bins 0..9; 10: none).
   // Neighbours are read afresh at every split: caching the centroid per level (reused for the level's three
   // axes) cost 5% of the geometry bits on bunny and igea for no measurable time.
   int centroidBin(u32 v, int axis, double plane, double half) const {
-    const auto& nb = cx_.nb[v];
-    if (nb.empty()) return kCentroidBins - 1;
-    u64 sum = 0;
-    for (u32 n : nb) sum += c2_[n][axis];
-    const double t = (0.5 * double(sum) / double(nb.size()) - plane) / half;
-    static constexpr double kEdges[] = {-2, -1, -0.5, -0.15, 0, 0.15, 0.5, 1, 2};
-    int bin = 0;
-    while (bin < 9 && t >= kEdges[bin]) ++bin;
-    return bin;
+    return hierarchy::centroidBin(cx_.nb[v], c2_, axis, plane, half);
   }
 
   Status splitCell(const Cell& cell, int d) {
