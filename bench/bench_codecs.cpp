@@ -2,6 +2,8 @@
 // (Mtri/s, bits per vertex). Scans come from ../shared/data (the bundled bunny when it is missing).
 #include <benchmark/benchmark.h>
 
+#include <functional>
+
 #include <filesystem>
 #include <map>
 #include <stdexcept>
@@ -106,14 +108,16 @@ void BM_Tiling(benchmark::State& state, std::string scan) {
   state.counters["tiles"] = double(tiles);
 }
 
-// Where kdtree's bits go (connectivity and geometry per vertex, the paper's Table 2 split) on every scan.
-void BM_KdtreeBits(benchmark::State& state, std::string scan, int bits) {
+// Where a progressive codec's bits go on every scan: connectivity and geometry per vertex (kdtree's paper, Table 2)
+// and connectivity per triangle (EMC's paper, Table 1).
+using StatsEncoder = std::function<Status(const TileContext&, const QuantizedMesh&, std::vector<uint8_t>&, CodecStats*)>;
+void BM_Bits(benchmark::State& state, StatsEncoder encode, std::string scan, int bits) {
   const Prepared& p = prepared(scan, bits);
   std::vector<uint8_t> out;
   CodecStats stats;
   for (auto _ : state) {
     out.clear();
-    if (!kdtreeEncodeWithStats(p.ctx, p.mesh, out, &stats).isOk()) state.SkipWithError("encode failed");
+    if (!encode(p.ctx, p.mesh, out, &stats).isOk()) state.SkipWithError("encode failed");
   }
   const double n = double(stats.points);
   state.counters["Mtri/s"] =
@@ -121,8 +125,10 @@ void BM_KdtreeBits(benchmark::State& state, std::string scan, int bits) {
   state.counters["bpv"] = 8.0 * out.size() / n;
   state.counters["geo_bpv"] = stats.geometry_bits / n;
   state.counters["conn_bpv"] = stats.connectivity_bits / n;
+  state.counters["conn_bpt"] = stats.connectivity_bits / std::max<double>(1, double(stats.triangles));
   state.counters["attr_bpv"] = stats.attribute_bits / n;
-  state.counters["expansion_%"] = 100.0 * double(stats.edge_expansions) / std::max<double>(1, double(stats.splits));
+  if (stats.edge_expansions > 0)
+    state.counters["expansion_%"] = 100.0 * double(stats.edge_expansions) / std::max<double>(1, double(stats.splits));
 }
 
 const char* kAllScans[] = {"aneurysm_data.stl.zst", "armadillo.obj.zst", "bun_zipper.ply.zst", "bunny.stl.zst",
@@ -135,10 +141,25 @@ const char* kScans[] = {"igea.ply.zst", "bun_zipper.ply.zst", "rs1_normals.ply.z
 int registerAll() {
   benchmark::RegisterBenchmark("Tiling/igea.ply.zst", BM_Tiling, std::string("igea.ply.zst"))
       ->Arg(16384)->Arg(131072)->Unit(benchmark::kMillisecond);
-  for (const char* scan : kAllScans)
-    benchmark::RegisterBenchmark((std::string("KdtreeBits/") + scan + "/12").c_str(), BM_KdtreeBits,
+  const StatsEncoder kdtree = &kdtreeEncodeWithStats;
+  const StatsEncoder octree = [](const TileContext& c, const QuantizedMesh& m, std::vector<uint8_t>& o,
+                                 CodecStats* s) { return octreeEncodeWithStats(c, m, o, s, true); };
+  // Without contexts (one adaptive model per symbol kind): what the contexts gain. Not decodable.
+  const StatsEncoder octree_flat = [](const TileContext& c, const QuantizedMesh& m, std::vector<uint8_t>& o,
+                                      CodecStats* s) { return octreeEncodeWithStats(c, m, o, s, false); };
+  for (const char* scan : kAllScans) {
+    benchmark::RegisterBenchmark((std::string("KdtreeBits/") + scan + "/12").c_str(), BM_Bits, kdtree,
                                  std::string(scan), 12)
         ->Iterations(1)->Unit(benchmark::kMillisecond);
+    for (int bits : {12, 24}) {
+      const std::string suffix = std::string(scan) + "/" + std::to_string(bits);
+      benchmark::RegisterBenchmark(("OctreeBits/" + suffix).c_str(), BM_Bits, octree, std::string(scan), bits)
+          ->Iterations(1)->Unit(benchmark::kMillisecond);
+      benchmark::RegisterBenchmark(("OctreeBitsNoContexts/" + suffix).c_str(), BM_Bits, octree_flat,
+                                   std::string(scan), bits)
+          ->Iterations(1)->Unit(benchmark::kMillisecond);
+    }
+  }
   for (const char* scan : kScans) {
     benchmark::RegisterBenchmark((std::string("Read/") + scan).c_str(), BM_Read, std::string(scan))
         ->Unit(benchmark::kMillisecond);

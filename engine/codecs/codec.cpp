@@ -6,10 +6,12 @@
 namespace scanpress {
 namespace {
 
-constexpr std::array<CodecInfo, 2> kCodecs = {{
+constexpr std::array<CodecInfo, 3> kCodecs = {{
     {CodecId::kStore, "store", 1, &storeEncode, &storeDecode},
     {CodecId::kKdtree, "kdtree", 1, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel,
-     &kdtreePayloadVertices},
+     &hierarchyPayloadVertices},
+    {CodecId::kOctree, "octree", 1, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel,
+     &hierarchyPayloadVertices},
 }};
 
 }  // namespace

@@ -19,6 +19,7 @@ namespace scanpress {
 enum class CodecId : uint16_t {
   kStore = 1,
   kKdtree = 2,
+  kOctree = 3,
 };
 
 // What every tile of a container shares: the grid's bits and the attribute layout (from the container header).
@@ -70,13 +71,24 @@ Status validateTile(const TileContext& ctx, const QuantizedMesh& mesh);
 Status storeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out);
 Result<QuantizedMesh> storeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload);
 
+// The progressive hierarchy codecs (kdtree, octree) merge vertices that share position and attributes: the
+// vertex count their decoders yield, read from the payload's header.
+uint64_t hierarchyPayloadVertices(std::span<const uint8_t> payload);
+
 // `kdtree`: progressive lossless coding after Gandoin & Devillers (kdtree.cpp).
 Status kdtreeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out);
 Result<QuantizedMesh> kdtreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload);
 Result<std::vector<CodecLevel>> kdtreeLevels(const TileContext& ctx, uint16_t version,
                                              std::span<const uint8_t> payload);
-uint64_t kdtreePayloadVertices(std::span<const uint8_t> payload);
 Result<QuantizedMesh> kdtreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                        uint32_t level);
+
+// `octree`: embedded mesh coding after Magnor & Girod (octree.cpp).
+Status octreeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out);
+Result<QuantizedMesh> octreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload);
+Result<std::vector<CodecLevel>> octreeLevels(const TileContext& ctx, uint16_t version,
+                                             std::span<const uint8_t> payload);
+Result<QuantizedMesh> octreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         uint32_t level);
 
 // What a progressive encoding (kdtree, octree) spent, in bits (ideal arithmetic-coding costs; the bytes add flushes and headers).
@@ -92,5 +104,9 @@ struct CodecStats {
 };
 Status kdtreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
                              CodecStats* stats);
+// `contexts` false codes every symbol kind with one adaptive model (no contexts): for measuring what the contexts
+// gain; such a payload is not decodable.
+Status octreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
+                             CodecStats* stats, bool contexts = true);
 
 }  // namespace scanpress

@@ -171,6 +171,18 @@ Result<Header> readHeader(const HeaderFormat& f, const TileContext& ctx, std::sp
   return h;
 }
 
+}  // namespace scanpress::hierarchy
+
+namespace scanpress {
+uint64_t hierarchyPayloadVertices(std::span<const uint8_t> payload) {
+  ByteReader r(payload, "payload");
+  uint64_t n = 0;
+  return r.varint(n).isOk() ? n : 0;
+}
+}  // namespace scanpress
+
+namespace scanpress::hierarchy {
+
 std::vector<CodecLevel> headerLevels(const Header& h, int bits) {
   std::vector<CodecLevel> levels;
   u64 end = h.header_bytes;

@@ -177,6 +177,14 @@ void sortAndMergeFlags(std::vector<std::pair<K, u8>>& v) {
   v.resize(n);
 }
 
+// How many of the Morton-ordered points [s, e) have bit `bit` of `axis` clear: the lower half of a split.
+inline u32 lowerHalf(const std::vector<Vec3u>& pos, u32 s, u32 e, int axis, int bit) {
+  const auto first = pos.begin() + s;
+  return static_cast<u32>(
+      std::partition_point(first, pos.begin() + e, [&](const Vec3u& q) { return ((q[axis] >> bit) & 1) == 0; }) -
+      first);
+}
+
 // Where the centroid of the neighbours `nb` (doubled centers in c2) lies relative to a split plane, in units of
 // `half` (bins 0..9; kCentroidBins - 1: no neighbours): geometry predicted from connectivity.
 constexpr int kCentroidBins = 11;

@@ -200,14 +200,6 @@ void applySplit(Complex& cx, u32 v, u32 v2, const std::vector<u32>& nbrs, const 
   }
 }
 
-// How many of the kd-ordered points [s, e) have bit `bit` of `axis` clear: the lower half of a split.
-u32 lowerHalf(const std::vector<Vec3u>& pos, u32 s, u32 e, int axis, int bit) {
-  const auto first = pos.begin() + s;
-  return static_cast<u32>(
-      std::partition_point(first, pos.begin() + e, [&](const Vec3u& q) { return ((q[axis] >> bit) & 1) == 0; }) -
-      first);
-}
-
 // What only the encoder knows: the points in kd order, the split codes, triangle copies, attributes.
 struct Truth : Points {
   std::vector<std::array<u32, 3>> splits;  // (s, s+c, e) of every vertex split, in decoder order
@@ -886,12 +878,6 @@ Status kdtreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, 
 
 Result<QuantizedMesh> kdtreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload) {
   return decodeImpl(ctx, version, payload, u32(ctx.bits));
-}
-
-uint64_t kdtreePayloadVertices(std::span<const uint8_t> payload) {
-  ByteReader r(payload, "kdtree payload");
-  uint64_t n = 0;
-  return r.varint(n).isOk() ? n : 0;
 }
 
 Result<QuantizedMesh> kdtreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,

@@ -1,6 +1,6 @@
-// Codec `kdtree`: lossless round trips on meshes of every kind (manifold, boundaries, non-manifold, soups,
-// duplicates, isolated and coincident vertices), every progressive level decodes to a valid mesh, truncated and
-// corrupted payloads fail cleanly (decoded here without the container's checksums).
+// The progressive codecs `kdtree` and `octree`: lossless round trips on meshes of every kind (manifold,
+// boundaries, non-manifold, soups, duplicates, isolated and coincident vertices), every progressive level decodes
+// to a valid mesh, truncated and corrupted payloads fail cleanly (decoded here without the container's checksums).
 #include <gtest/gtest.h>
 
 #include <random>
@@ -14,7 +14,10 @@
 namespace scanpress {
 namespace {
 
-const CodecInfo& kdtree() { return *findCodec(CodecId::kKdtree); }
+class Progressive : public ::testing::TestWithParam<CodecId> {
+ protected:
+  const CodecInfo& codec() const { return *findCodec(GetParam()); }
+};
 
 QuantizedMesh quantized(const Mesh& m, int bits, const AttributeLayout& layout = {}) {
   auto grid = makeGrid(boundingBox(m), bits);
@@ -24,21 +27,21 @@ QuantizedMesh quantized(const Mesh& m, int bits, const AttributeLayout& layout =
   return *q;
 }
 
-std::vector<uint8_t> encode(const TileContext& ctx, const QuantizedMesh& q) {
+std::vector<uint8_t> encode(const CodecInfo& codec, const TileContext& ctx, const QuantizedMesh& q) {
   std::vector<uint8_t> out;
-  const Status s = kdtree().encode(ctx, q, out);
+  const Status s = codec.encode(ctx, q, out);
   EXPECT_TRUE(s.isOk()) << s.toString();
   return out;
 }
 
 // Decodes and checks the result is the input (triangles with orientation and multiplicity, attributes).
-void expectRoundTrip(const TileContext& ctx, const QuantizedMesh& q) {
-  const auto bytes = encode(ctx, q);
-  auto d = kdtree().decode(ctx, 1, bytes);
+void expectRoundTrip(const CodecInfo& codec, const TileContext& ctx, const QuantizedMesh& q) {
+  const auto bytes = encode(codec, ctx, q);
+  auto d = codec.decode(ctx, 1, bytes);
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   EXPECT_EQ(d->triangles.size(), q.triangles.size());
   EXPECT_TRUE(testing::cornerMultiset(*d, ctx.layout.normal_bits) == testing::cornerMultiset(q, ctx.layout.normal_bits));
-  EXPECT_EQ(d->positions.size(), decodedVertexCount(kdtree(), q, bytes));
+  EXPECT_EQ(d->positions.size(), decodedVertexCount(codec, q, bytes));
   // Every input position comes back (isolated vertices included).
   auto positions = [](const QuantizedMesh& m) {
     std::vector<Vec3u> p = m.positions;
@@ -56,34 +59,34 @@ QuantizedMesh rawMesh(std::vector<Vec3u> p, std::vector<Triangle> t) {
   return m;
 }
 
-TEST(Kdtree, ClosedManifolds) {
+TEST_P(Progressive, ClosedManifolds) {
   const TileContext ctx{12, {}};
-  expectRoundTrip(ctx, quantized(testing::octahedron(), 12));
-  for (int levels : {0, 1, 3, 5}) expectRoundTrip(ctx, quantized(icosphere(levels), 12));
-  expectRoundTrip(TileContext{16, {}}, quantized(icosphere(4), 16));
+  expectRoundTrip(codec(), ctx, quantized(testing::octahedron(), 12));
+  for (int levels : {0, 1, 3, 5}) expectRoundTrip(codec(), ctx, quantized(icosphere(levels), 12));
+  expectRoundTrip(codec(), TileContext{16, {}}, quantized(icosphere(4), 16));
 }
 
-TEST(Kdtree, EmptySingleAndIsolated) {
+TEST_P(Progressive, EmptySingleAndIsolated) {
   const TileContext ctx{10, {}};
-  expectRoundTrip(ctx, QuantizedMesh{});
-  expectRoundTrip(ctx, rawMesh({{5, 6, 7}}, {}));
-  expectRoundTrip(ctx, rawMesh({{0, 0, 0}, {1023, 1023, 1023}, {1, 0, 0}}, {}));
+  expectRoundTrip(codec(), ctx, QuantizedMesh{});
+  expectRoundTrip(codec(), ctx, rawMesh({{5, 6, 7}}, {}));
+  expectRoundTrip(codec(), ctx, rawMesh({{0, 0, 0}, {1023, 1023, 1023}, {1, 0, 0}}, {}));
   // A triangle plus isolated vertices, one of them far away.
-  expectRoundTrip(ctx, rawMesh({{0, 0, 0}, {9, 0, 0}, {0, 9, 0}, {500, 3, 3}, {4, 4, 4}}, {{0, 1, 2}}));
+  expectRoundTrip(codec(), ctx, rawMesh({{0, 0, 0}, {9, 0, 0}, {0, 9, 0}, {500, 3, 3}, {4, 4, 4}}, {{0, 1, 2}}));
 }
 
-TEST(Kdtree, NonManifoldBoundariesAndSoups) {
+TEST_P(Progressive, NonManifoldBoundariesAndSoups) {
   const TileContext ctx{10, {}};
   // Three triangles on one edge; a bow-tie vertex; an open strip with boundary.
-  expectRoundTrip(ctx, rawMesh({{0, 0, 0}, {10, 0, 0}, {5, 9, 0}, {5, 0, 9}, {5, 3, 3}},
+  expectRoundTrip(codec(), ctx, rawMesh({{0, 0, 0}, {10, 0, 0}, {5, 9, 0}, {5, 0, 9}, {5, 3, 3}},
                                {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}}));
-  expectRoundTrip(ctx, rawMesh({{10, 10, 10}, {0, 0, 0}, {0, 20, 0}, {20, 0, 20}, {20, 20, 20}},
+  expectRoundTrip(codec(), ctx, rawMesh({{10, 10, 10}, {0, 0, 0}, {0, 20, 0}, {20, 0, 20}, {20, 20, 20}},
                                {{0, 1, 2}, {0, 3, 4}}));
   std::vector<Vec3u> strip;
   std::vector<Triangle> st;
   for (uint32_t i = 0; i < 40; ++i) strip.push_back({i * 7, (i % 2) * 11, 3 + (i * 13) % 5});
   for (uint32_t i = 0; i + 2 < 40; ++i) st.push_back(i % 2 ? Triangle{i, i + 2, i + 1} : Triangle{i, i + 1, i + 2});
-  expectRoundTrip(ctx, rawMesh(strip, st));
+  expectRoundTrip(codec(), ctx, rawMesh(strip, st));
   // A random soup: unshared vertices, random positions, overlapping triangles.
   std::mt19937 rng(7);
   std::uniform_int_distribution<uint32_t> coord(0, 1023);
@@ -92,7 +95,7 @@ TEST(Kdtree, NonManifoldBoundariesAndSoups) {
     for (int c = 0; c < 3; ++c) soup.positions.push_back({coord(rng), coord(rng), coord(rng)});
     soup.triangles.push_back({3 * t, 3 * t + 1, 3 * t + 2});
   }
-  expectRoundTrip(ctx, soup);
+  expectRoundTrip(codec(), ctx, soup);
   // Random triangles over few shared vertices: heavily non-manifold.
   QuantizedMesh dense;
   for (int v = 0; v < 40; ++v) dense.positions.push_back({coord(rng), coord(rng), coord(rng)});
@@ -101,20 +104,20 @@ TEST(Kdtree, NonManifoldBoundariesAndSoups) {
     Triangle t{pick(rng), pick(rng), pick(rng)};
     if (t[0] != t[1] && t[1] != t[2] && t[0] != t[2]) dense.triangles.push_back(t);
   }
-  expectRoundTrip(ctx, dense);
+  expectRoundTrip(codec(), ctx, dense);
 }
 
-TEST(Kdtree, DuplicatesOrientationAndCoincidentVertices) {
+TEST_P(Progressive, DuplicatesOrientationAndCoincidentVertices) {
   const TileContext ctx{10, {}};
   // The same triangle twice, and once more reversed; an inconsistently oriented neighbour.
-  expectRoundTrip(ctx, rawMesh({{0, 0, 0}, {10, 0, 0}, {0, 10, 0}, {10, 10, 0}},
+  expectRoundTrip(codec(), ctx, rawMesh({{0, 0, 0}, {10, 0, 0}, {0, 10, 0}, {10, 10, 0}},
                                {{0, 1, 2}, {0, 1, 2}, {0, 2, 1}, {1, 3, 2}, {1, 2, 3}, {1, 2, 3}}));
   // Flipped halves of an icosphere.
   QuantizedMesh q = quantized(icosphere(2), 10);
   for (size_t t = 0; t < q.triangles.size(); t += 3) std::swap(q.triangles[t][1], q.triangles[t][2]);
-  expectRoundTrip(ctx, q);
+  expectRoundTrip(codec(), ctx, q);
   // Vertices sharing a cell: without attributes they merge (same triangles over positions).
-  expectRoundTrip(ctx, rawMesh({{0, 0, 0}, {10, 0, 0}, {0, 10, 0}, {0, 0, 0}, {0, 0, 10}},
+  expectRoundTrip(codec(), ctx, rawMesh({{0, 0, 0}, {10, 0, 0}, {0, 10, 0}, {0, 0, 0}, {0, 0, 10}},
                                {{0, 1, 2}, {3, 2, 4}}));
   // With attributes they stay apart: coincident vertices with different normals and colors.
   TileContext actx{10, {8, 3}};
@@ -124,10 +127,10 @@ TEST(Kdtree, DuplicatesOrientationAndCoincidentVertices) {
     a.normals.push_back({uint16_t(10 + v), uint16_t(200 - v)});
     a.colors.push_back({uint8_t(v), uint8_t(2 * v), uint8_t(3 * v), 255});
   }
-  expectRoundTrip(actx, a);
+  expectRoundTrip(codec(), actx, a);
 }
 
-TEST(Kdtree, LargeFanAndAttributes) {
+TEST_P(Progressive, LargeFanAndAttributes) {
   const TileContext ctx{16, {}};
   QuantizedMesh fan;
   fan.positions.push_back({32768, 32768, 100});
@@ -137,7 +140,7 @@ TEST(Kdtree, LargeFanAndAttributes) {
     fan.positions.push_back({uint32_t(32768 + 30000 * std::cos(a)), uint32_t(32768 + 30000 * std::sin(a)), 0});
   }
   for (uint32_t i = 0; i < n; ++i) fan.triangles.push_back({0, 1 + i, 1 + (i + 1) % n});
-  expectRoundTrip(ctx, fan);
+  expectRoundTrip(codec(), ctx, fan);
 
   Mesh sphere = icosphere(3);
   for (const auto& p : sphere.positions) {
@@ -146,18 +149,18 @@ TEST(Kdtree, LargeFanAndAttributes) {
   }
   sphere.color_channels = 3;
   const AttributeLayout layout{12, 3};
-  expectRoundTrip(TileContext{14, layout}, quantized(sphere, 14, layout));
+  expectRoundTrip(codec(), TileContext{14, layout}, quantized(sphere, 14, layout));
 }
 
 // Every level of a small mesh decodes, from a payload cut at that level's end, to a valid mesh: vertices on the
 // grid, triangles with three distinct corners; vertex counts grow with the level; the last level is lossless.
-TEST(Kdtree, EveryLevelDecodesToAValidMesh) {
+TEST_P(Progressive, EveryLevelDecodesToAValidMesh) {
   const TileContext ctx{12, {12, 0}};
   Mesh sphere = icosphere(4);
   for (const auto& p : sphere.positions) sphere.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
   const QuantizedMesh q = quantized(sphere, 12, ctx.layout);
-  const auto bytes = encode(ctx, q);
-  auto levels = kdtree().levels(ctx, 1, bytes);
+  const auto bytes = encode(codec(), ctx, q);
+  auto levels = codec().levels(ctx, 1, bytes);
   ASSERT_TRUE(levels.isOk()) << levels.status().toString();
   ASSERT_EQ(levels->back().level, 12u);
   EXPECT_EQ(levels->back().end_bytes, bytes.size());
@@ -165,7 +168,7 @@ TEST(Kdtree, EveryLevelDecodesToAValidMesh) {
   for (const auto& lv : *levels) {
     SCOPED_TRACE(lv.level);
     const std::span<const uint8_t> prefix(bytes.data(), lv.end_bytes);
-    auto m = kdtree().decode_level(ctx, 1, prefix, lv.level);
+    auto m = codec().decode_level(ctx, 1, prefix, lv.level);
     ASSERT_TRUE(m.isOk()) << m.status().toString();
     EXPECT_TRUE(validateTile(ctx, *m).isOk());
     for (const auto& t : m->triangles) {
@@ -176,37 +179,37 @@ TEST(Kdtree, EveryLevelDecodesToAValidMesh) {
     EXPECT_GE(m->positions.size(), last_vertices);
     last_vertices = m->positions.size();
     // The same level from the whole payload.
-    auto full = kdtree().decode_level(ctx, 1, bytes, lv.level);
+    auto full = codec().decode_level(ctx, 1, bytes, lv.level);
     ASSERT_TRUE(full.isOk());
     EXPECT_EQ(full->positions, m->positions);
     EXPECT_EQ(full->triangles, m->triangles);
     if (lv.level < 12 && lv.end_bytes > 0) {  // one byte short of the level is an error, not a crash
-      auto cut = kdtree().decode_level(ctx, 1, std::span<const uint8_t>(bytes.data(), lv.end_bytes - 1), lv.level);
+      auto cut = codec().decode_level(ctx, 1, std::span<const uint8_t>(bytes.data(), lv.end_bytes - 1), lv.level);
       if (lv.level > levels->front().level) {
         EXPECT_FALSE(cut.isOk());
       }
     }
   }
-  EXPECT_TRUE(testing::cornerMultiset(*kdtree().decode_level(ctx, 1, bytes, 12), 12) == testing::cornerMultiset(q, 12));
+  EXPECT_TRUE(testing::cornerMultiset(*codec().decode_level(ctx, 1, bytes, 12), 12) == testing::cornerMultiset(q, 12));
   // Coarse levels look like the mesh: by level 6 it has most of its sphere.
-  auto l6 = kdtree().decode_level(ctx, 1, bytes, 6);
+  auto l6 = codec().decode_level(ctx, 1, bytes, 6);
   ASSERT_TRUE(l6.isOk());
   EXPECT_GT(l6->triangles.size(), 100u);
 }
 
-TEST(Kdtree, EveryTruncationFailsCleanly) {
+TEST_P(Progressive, EveryTruncationFailsCleanly) {
   const TileContext ctx{12, {}};
-  const auto bytes = encode(ctx, quantized(icosphere(2), 12));
+  const auto bytes = encode(codec(), ctx, quantized(icosphere(2), 12));
   for (size_t n = 0; n < bytes.size(); ++n) {
-    auto d = kdtree().decode(ctx, 1, std::span<const uint8_t>(bytes.data(), n));
+    auto d = codec().decode(ctx, 1, std::span<const uint8_t>(bytes.data(), n));
     EXPECT_FALSE(d.isOk()) << "a payload cut to " << n << " of " << bytes.size() << " bytes decoded";
   }
-  EXPECT_EQ(kdtree().decode(ctx, 2, bytes).status().code(), ErrorCode::kUnknownVersion);
+  EXPECT_EQ(codec().decode(ctx, 2, bytes).status().code(), ErrorCode::kUnknownVersion);
 }
 
 // Corrupted payloads (no checksum in the way): errors or some valid mesh, never a crash, hang or bad index
 // (the sanitizer build checks memory).
-TEST(Kdtree, RandomCorruptionsNeverCrash) {
+TEST_P(Progressive, RandomCorruptionsNeverCrash) {
   const TileContext ctx{12, {12, 3}};
   Mesh sphere = icosphere(2);
   for (const auto& p : sphere.positions) {
@@ -214,7 +217,7 @@ TEST(Kdtree, RandomCorruptionsNeverCrash) {
     sphere.colors.push_back({1, 2, 3, 255});
   }
   sphere.color_channels = 3;
-  const auto bytes = encode(ctx, quantized(sphere, 12, ctx.layout));
+  const auto bytes = encode(codec(), ctx, quantized(sphere, 12, ctx.layout));
   std::mt19937 rng(11);
   int failures = 0;
   for (int trial = 0; trial < 2000; ++trial) {
@@ -222,7 +225,7 @@ TEST(Kdtree, RandomCorruptionsNeverCrash) {
     const int flips = 1 + trial % 4;
     for (int f = 0; f < flips; ++f) b[rng() % b.size()] ^= uint8_t(1 + rng() % 255);
     const uint32_t level = trial % 3 == 0 ? uint32_t(rng() % 13) : 12u;
-    auto d = kdtree().decode_level(ctx, 1, b, level);
+    auto d = codec().decode_level(ctx, 1, b, level);
     if (!d.isOk()) {
       ++failures;
     } else {
@@ -232,17 +235,22 @@ TEST(Kdtree, RandomCorruptionsNeverCrash) {
   EXPECT_GT(failures, 0);
 }
 
-TEST(Kdtree, RejectsWhatItCannotCode) {
+TEST_P(Progressive, RejectsWhatItCannotCode) {
   const TileContext ctx{10, {}};
   std::vector<uint8_t> out;
   // Two corners in one cell (quantizeMesh drops these triangles before any codec sees them).
-  EXPECT_EQ(kdtree().encode(ctx, rawMesh({{0, 0, 0}, {0, 0, 0}, {1, 1, 1}}, {{0, 1, 2}}), out).code(),
+  EXPECT_EQ(codec().encode(ctx, rawMesh({{0, 0, 0}, {0, 0, 0}, {1, 1, 1}}, {{0, 1, 2}}), out).code(),
             ErrorCode::kInvalidArgument);
-  EXPECT_EQ(kdtree().encode(ctx, rawMesh({{0, 0, 0}, {1, 0, 0}, {1, 1, 1}}, {{0, 1, 3}}), out).code(),
+  EXPECT_EQ(codec().encode(ctx, rawMesh({{0, 0, 0}, {1, 0, 0}, {1, 1, 1}}, {{0, 1, 3}}), out).code(),
             ErrorCode::kInvalidArgument);
-  EXPECT_EQ(kdtree().encode(ctx, rawMesh({{0, 0, 0}, {1, 0, 0}, {1024, 1, 1}}, {{0, 1, 2}}), out).code(),
+  EXPECT_EQ(codec().encode(ctx, rawMesh({{0, 0, 0}, {1, 0, 0}, {1024, 1, 1}}, {{0, 1, 2}}), out).code(),
             ErrorCode::kInvalidArgument);
 }
+
+INSTANTIATE_TEST_SUITE_P(Codecs, Progressive, ::testing::Values(CodecId::kKdtree, CodecId::kOctree),
+                         [](const ::testing::TestParamInfo<CodecId>& info) {
+                           return std::string(findCodec(info.param)->name);
+                         });
 
 }  // namespace
 }  // namespace scanpress

@@ -1,0 +1,613 @@
+// Codec `octree` (id 3): embedded mesh coding (EMC) of arbitrary triangle meshes, octree levels with vertex
+// merges and splits.
+//
+// Paper: "Embedded Mesh Coding" (M. Magnor, B. Girod, 1999), ../shared/papers/emc-embedded-octree-mesh-coding.md.
+//
+// The method (§3, §4): the bounding volume is refined level by level, each level as three binary splits, one per
+// axis. The decoder keeps a vertex list (one vertex per occupied cell, at the cell's center) with an edge list per
+// vertex. At every split step it passes once over the vertices that exist at the start of the step:
+//  - a vertex not due to split gets a refinement bit (RF): which half of its cell it moves to;
+//  - a vertex due to split (its cell holds points on both sides) is split (VS): it keeps the lower half, a new
+//    vertex is appended for the upper half, each of its edges is classified STAY (stays with the old vertex), MOVE
+//    (goes to the new one) or DUPLICATE (both), a flag says whether the two are connected, and for both vertices
+//    the step of their next split is coded as a difference from the current step (or "never").
+// The encoder finds those codes by merging vertices fine to coarse in the exact reverse order (§3's operation list
+// read backwards). Triangles are the three-cliques of the edge graph ("reconstructed from local connectivity").
+//
+// Where this departs from the paper, and why:
+//  - Adaptive range coding with contexts instead of fixed Huffman tables (the issue asks for it; gains measured in
+//    bench/RESULTS.md): RF bits by where the centroid of the vertex's neighbours lies relative to the split plane
+//    (geometry predicted from connectivity), by the split's axis and by whether the vertex still has a split
+//    ahead; edge classes by where the neighbour lies relative to the split plane (in half-cells: the neighbour has
+//    or has not been refined in this step yet) and by the DUPLICATEs so far; the connecting-edge flag by the
+//    number of DUPLICATEs; next-split differences by old/new vertex, remaining levels and degree class.
+//  - The volume is the smallest cube aligned to the scan's global grid holding the tile (not the tile's bounding
+//    box), so level L means cells of 2^(bits-L) grid cells in every tile and tiles decoded at one level weld. The
+//    axis order is the paper's: the encoder merges along the tile's shortest extent first in every level, so the
+//    decoder splits the longest first (the order is one header byte).
+//  - Exact triangle sets for any input (§4 inserts extra vertices where edges close triangles that are not in the
+//    surface, which changes the mesh): after the last level every three-clique of the graph codes whether it is a
+//    face (nearly free where cliques and faces agree), then orientation and multiplicity are coded breadth-first
+//    as in `kdtree` (EMC's graph is unoriented). Coarse levels output all cliques of their graph, oriented
+//    consistently where possible without bits.
+//  - Vertices at one grid position with different attributes split apart after the last level, one per round,
+//    by the same VS codes with no geometry.
+//  - Attributes (normals, colors) are stored raw per vertex in the final segment; coarse levels get normals from
+//    their triangles and gray colors. Attribute coding through the hierarchy is a separate codec.
+//
+// Payload v1 (hierarchy.h's header with the axis order byte):
+//   varint N (points), varint T (triangles, with multiplicity); if N == 0 nothing follows.
+//   u8 k0 (root level), u8 axis order (0..5: xyz xzy yxz yzx zxy zyx, decoder order), 3 x varint root cell index,
+//   varint S (= bits - k0 + 1), S x varint segment length, then the segments, each one range-coder stream.
+//   Segment i < S-1: the root's next split (i = 0 only), then the three split steps from level k0+i to k0+i+1.
+//   Segment S-1: (the root's next split if k0 = bits) the rounds of coincident-vertex splits, face flags of the
+//   cliques, orientation and multiplicity, attributes.
+#include <algorithm>
+#include <string>
+
+#include "engine/codecs/codec.h"
+#include "engine/codecs/hierarchy.h"
+
+namespace scanpress {
+namespace {
+
+using namespace hierarchy;
+using i64 = int64_t;
+
+constexpr u32 kNone = UINT32_MAX;  // no further split
+constexpr int kLevelClasses = 12;  // levels remaining after the step (0..10), coincident rounds (11)
+constexpr int kDegreeClasses = 3;
+constexpr int kPlaneBins = 10;     // a neighbour's offset from the split plane (9 bins), coincident splits (1)
+enum : u8 { kStay = 0, kMove = 1, kDuplicate = 2 };
+constexpr std::string_view kCodec = "octree";
+constexpr HeaderFormat kFormat{kCodec, true};
+
+// The encoder's plan: every vertex split in decoder order (old vertex, new vertex) and its codes: the old vertex's
+// neighbours just before the split, sorted, each with its class, and the connecting-edge flag.
+struct Plan {
+  std::vector<std::array<u32, 2>> events;
+  std::vector<std::pair<u32, u8>> codes;
+  std::vector<u32> code_start;  // per event, one extra entry at the end
+  std::vector<u8> connect;
+};
+
+// What only the encoder knows.
+struct Truth {
+  const Points* pts = nullptr;  // Morton order (decoder axis order)
+  std::vector<Key> keys;        // Morton key per point
+  const Plan* plan = nullptr;   // null while planning
+  Points by_id;                 // triangles and attributes over the decoder's vertex ids
+};
+
+// The planning pass codes nothing: it only follows the truth.
+struct NullIo {
+  Status begin() { return Status::ok(); }
+  Status end() { return Status::ok(); }
+  void meter(double CodecStats::*) {}
+  int bit(BitModel&, int v) { return v; }
+  u32 sym(SymbolModel&, u32 v) { return v; }
+  u32 uniform(u32 v, u32) { return v; }
+  u32 bits(u32 v, int) { return v; }
+};
+
+struct Models {
+  BitModel rf[2][3][kCentroidBins];  // [split ahead][axis in level][centroid bin]
+  std::vector<SymbolModel> next;     // [role 3][level class][degree class], symbols 0 (never), 1..3*bits+1
+  std::vector<SymbolModel> cls;      // [plane bin][DUPLICATEs so far, 0..2]
+  BitModel connect[4];
+  BitModel face[3];                  // by faces already on the clique's first edge
+  std::vector<SymbolModel> orient;
+  explicit Models(int bits) {
+    for (int i = 0; i < 3 * kLevelClasses * kDegreeClasses; ++i) next.emplace_back(u32(3 * bits + 2));
+    for (int i = 0; i < kPlaneBins * 3; ++i) cls.emplace_back(3);
+    for (int i = 0; i < 2; ++i) orient.emplace_back(3);
+  }
+};
+
+int highestBit(Key k) {
+  const u64 hi = u64(k >> 64), lo = u64(k);
+  return hi ? 127 - __builtin_clzll(hi) : 63 - __builtin_clzll(lo);
+}
+
+template <class Io>
+class Engine {
+ public:
+  Engine(Io& io, int bits, const Header& h, const Truth* truth)
+      : io_(io), bits_(bits), n_(h.n), k0_(h.k0), axes_(h.axes), truth_(truth), models_(bits) {
+    steps_ = 3 * (bits - h.k0);
+    max_triangles_ = h.t;
+    max_edges_ = 3 * h.t;
+    level_ = h.k0;
+    if (n_ == 0) return;
+    const u32 size = 1u << (bits - h.k0);
+    addVertex(h.root, {2 * h.root[0] + size, 2 * h.root[1] + size, 2 * h.root[2] + size});
+    if (truth_) range_.push_back({0, n_});
+  }
+
+  // Decodes (or encodes) up to level `target` (bits: everything, lossless).
+  Status run(int target) {
+    if (n_ == 0) return Status::ok();
+    for (int k = k0_; k < bits_ && k < target; ++k) {
+      SP_RETURN_IF_ERROR(io_.begin());
+      if (k == k0_) SP_RETURN_IF_ERROR(codeNext(0, -1, 2));
+      for (int j = 0; j < 3; ++j) SP_RETURN_IF_ERROR(step(3 * (k - k0_) + j));
+      SP_RETURN_IF_ERROR(io_.end());
+      level_ = k + 1;
+    }
+    if (target < bits_) return Status::ok();
+    SP_RETURN_IF_ERROR(io_.begin());
+    if (k0_ == bits_) SP_RETURN_IF_ERROR(codeNext(0, -1, 2));
+    SP_RETURN_IF_ERROR(splitCoincident());
+    if (lo_.size() != n_)
+      return makeError(ErrorCode::kMalformed, "octree payload: " + std::to_string(lo_.size()) +
+                                                  " vertices after the last split, header says " + std::to_string(n_));
+    if (planning()) return Status::ok();
+    if (truth_ && split_index_ != truth_->plan->events.size())
+      return makeError(ErrorCode::kInternal, "octree encoder: split sequence mismatch");
+    SP_RETURN_IF_ERROR(codeFaces());
+    io_.meter(&CodecStats::attribute_bits);
+    codeRawAttributes(io_, layout, n_, truth_ ? &truth_->by_id : nullptr, normals_, colors_);
+    SP_RETURN_IF_ERROR(io_.end());
+    level_ = bits_;
+    complete_ = true;
+    return Status::ok();
+  }
+
+  // The mesh of the level reached: vertices at their cells' centers, the cliques as triangles (lossless once
+  // complete).
+  Result<QuantizedMesh> mesh(const AttributeLayout& layout) const {
+    QuantizedMesh m;
+    if (n_ == 0) return m;
+    if (complete_) {
+      m.positions = lo_;
+      m.triangles = triangles_;
+      m.normals = normals_;
+      m.colors = colors_;
+      return m;
+    }
+    const u32 half = (1u << (bits_ - level_)) >> 1;
+    m.positions = lo_;
+    for (auto& p : m.positions)
+      for (auto& c : p) c += half;
+    auto lists = nb_;
+    for (auto& l : lists) std::sort(l.begin(), l.end());
+    std::vector<TriKey> keys;
+    Status status = Status::ok();
+    forEachClique(lists, [&](u32 a, u32 b, u32 c, int) {
+      if (keys.size() >= kMaxTriangles) {
+        status = makeError(ErrorCode::kLimitExceeded, "octree payload: more than 2^28 triangles at level " +
+                                                          std::to_string(level_));
+        return -1;
+      }
+      keys.push_back({a, b, c});
+      return 1;
+    });
+    SP_RETURN_IF_ERROR(status);
+    const auto orient = orientWithoutCodes(keys);
+    for (size_t t = 0; t < keys.size(); ++t) {
+      auto k = keys[t];
+      if (orient[t]) std::swap(k[1], k[2]);
+      m.triangles.push_back({k[0], k[1], k[2]});
+    }
+    addCoarseAttributes(m, layout);
+    return m;
+  }
+
+  AttributeLayout layout;  // set by the caller before run()
+  bool flat_ = false;      // one model per symbol kind (measuring the contexts' gain)
+  u64 splits_ = 0;
+  std::vector<std::array<u32, 2>> range_;   // encoder: the points [s, e) of each vertex
+  std::vector<std::array<u32, 2>> events_;  // planning: the splits in order
+
+ private:
+  bool planning() const { return truth_ && !truth_->plan; }
+
+  void addVertex(Vec3u lo, Vec3u c2) {
+    lo_.push_back(lo);
+    c2_.push_back(c2);
+    next_.push_back(kNone);
+    nb_.emplace_back();
+  }
+
+  // One split step: every vertex that exists at its start is refined (RF) or split (VS).
+  Status step(int t) {
+    const int j = t % 3, axis = axes_[j];
+    const int bit = bits_ - 1 - (k0_ + t / 3);
+    const u32 half = 1u << bit;
+    const u32 count = u32(lo_.size());
+    for (u32 v = 0; v < count; ++v) {
+      if (next_[v] == u32(t)) {
+        SP_RETURN_IF_ERROR(splitVertex(v, t, axis, bit));
+        continue;
+      }
+      io_.meter(&CodecStats::geometry_bits);
+      const int truth_bit = truth_ ? int((truth_->pts->pos[range_[v][0]][axis] >> bit) & 1) : 0;
+      const int bin = flat_ ? 0 : centroidBin(nb_[v], c2_, axis, double(lo_[v][axis]) + half, double(half));
+      const int ahead = flat_ ? 0 : (next_[v] != kNone);
+      if (io_.bit(models_.rf[ahead][flat_ ? 0 : j][bin], truth_bit)) lo_[v][axis] += half;
+      c2_[v][axis] = 2 * lo_[v][axis] + half;
+    }
+    return Status::ok();
+  }
+
+  // After the last level: vertices holding points at one grid position split one point off per round.
+  Status splitCoincident() {
+    for (int t = steps_;; ++t) {
+      bool any = false;
+      const u32 count = u32(lo_.size());
+      for (u32 v = 0; v < count; ++v)
+        if (next_[v] == u32(t)) {
+          any = true;
+          SP_RETURN_IF_ERROR(splitVertex(v, t, -1, 0));
+        }
+      if (!any) return Status::ok();
+    }
+  }
+
+  // The step of v's next split after step t (encoder), kNone if it holds one point.
+  u32 nextSplit(u32 v, int t) const {
+    const auto [s, e] = range_[v];
+    if (e - s == 1) return kNone;
+    const Key diff = truth_->keys[s] ^ truth_->keys[e - 1];
+    if (diff == 0) return u32(std::max(steps_, t + 1));  // coincident points: the rounds after the last level
+    return u32(3 * bits_ - 1 - highestBit(diff) - 3 * k0_);
+  }
+
+  // Codes when v splits next, as the difference from step t (t = -1 for the root); role 0 old, 1 new, 2 root.
+  Status codeNext(u32 v, int t, int role) {
+    io_.meter(&CodecStats::geometry_bits);
+    u32 truth_sym = 0;
+    if (truth_) {
+      const u32 nx = nextSplit(v, t);
+      if (nx != kNone && i64(nx) <= t) return makeError(ErrorCode::kInternal, "octree encoder: split order");
+      truth_sym = nx == kNone ? 0 : u32(i64(nx) - t);
+    }
+    int ctx = 0;
+    if (!flat_) {
+      const int lc = t < 0 ? 0 : t >= steps_ ? kLevelClasses - 1 : std::min(bits_ - 1 - (k0_ + t / 3), kLevelClasses - 2);
+      const size_t deg = nb_[v].size();
+      const int dc = deg == 0 ? 0 : deg <= 5 ? 1 : 2;
+      ctx = (role * kLevelClasses + lc) * kDegreeClasses + dc;
+    }
+    const u32 s = io_.sym(models_.next[ctx], truth_sym);
+    if (s == 0) {
+      next_[v] = kNone;
+      return Status::ok();
+    }
+    const i64 nx = i64(t) + s;
+    if (t < steps_ ? nx > steps_ : s != 1)
+      return makeError(ErrorCode::kMalformed, "octree payload: vertex split scheduled past the last level");
+    next_[v] = u32(nx);
+    return Status::ok();
+  }
+
+  // VS at step t along `axis` (axis < 0: a coincident split, no geometry).
+  Status splitVertex(u32 v, int t, int axis, int bit) {
+    if (lo_.size() >= n_)
+      return makeError(ErrorCode::kMalformed, "octree payload: more vertex splits than the header's " +
+                                                  std::to_string(n_) + " vertices");
+    ++splits_;
+    const u32 w = u32(lo_.size());
+    addVertex(lo_[v], c2_[v]);
+    i64 plane2 = 0;
+    const u32 half = axis >= 0 ? 1u << bit : 1;
+    if (axis >= 0) {
+      plane2 = 2 * (i64(lo_[v][axis]) + half);
+      lo_[w][axis] += half;
+      c2_[v][axis] = 2 * lo_[v][axis] + half;
+      c2_[w][axis] = 2 * lo_[w][axis] + half;
+    }
+    if (truth_) {
+      const auto [s, e] = range_[v];
+      const u32 m = axis >= 0 ? s + lowerHalf(truth_->pts->pos, s, e, axis, bit) : s + 1;
+      if (m <= s || m >= e) return makeError(ErrorCode::kInternal, "octree encoder: split of a one-sided cell");
+      range_[v] = {s, m};
+      range_.push_back({m, e});
+    }
+    if (planning()) events_.push_back({v, w});
+    else SP_RETURN_IF_ERROR(splitEdges(v, w, axis, plane2, half));
+    SP_RETURN_IF_ERROR(codeNext(v, t, 0));
+    return codeNext(w, t, 1);
+  }
+
+  // The edge classes and the connecting edge of the split of v into v and w.
+  Status splitEdges(u32 v, u32 w, int axis, i64 plane2, u32 half) {
+    io_.meter(&CodecStats::connectivity_bits);
+    nbrs_ = nb_[v];
+    std::sort(nbrs_.begin(), nbrs_.end());
+    const std::pair<u32, u8>* codes = nullptr;
+    size_t ev = 0;
+    if (truth_) {
+      const Plan& plan = *truth_->plan;
+      ev = split_index_++;
+      if (ev >= plan.events.size() || plan.events[ev] != std::array<u32, 2>{v, w} ||
+          plan.code_start[ev + 1] - plan.code_start[ev] != nbrs_.size())
+        return makeError(ErrorCode::kInternal, "octree encoder: split sequence mismatch");
+      codes = plan.codes.data() + plan.code_start[ev];
+    }
+    nb_[v].clear();
+    int dups = 0;
+    for (size_t i = 0; i < nbrs_.size(); ++i) {
+      const u32 x = nbrs_[i];
+      if (codes && codes[i].first != x) return makeError(ErrorCode::kInternal, "octree encoder: star mismatch");
+      int bin = kPlaneBins - 1;
+      if (axis >= 0) bin = int(std::clamp<i64>((i64(c2_[x][axis]) - plane2) / half, -4, 4)) + 4;
+      const int ctx = flat_ ? 0 : bin * 3 + std::min(dups, 2);
+      switch (io_.sym(models_.cls[ctx], codes ? codes[i].second : 0)) {
+        case kStay:
+          nb_[v].push_back(x);
+          break;
+        case kMove:
+          replaceOne(nb_[x], v, w);
+          nb_[w].push_back(x);
+          break;
+        default:
+          nb_[v].push_back(x);
+          nb_[x].push_back(w);
+          nb_[w].push_back(x);
+          ++edges_;
+          ++dups;
+      }
+    }
+    if (io_.bit(models_.connect[flat_ ? 0 : std::min(dups, 3)], codes ? truth_->plan->connect[ev] : 0)) {
+      nb_[v].push_back(w);
+      nb_[w].push_back(v);
+      ++edges_;
+    }
+    if (edges_ > max_edges_)
+      return makeError(ErrorCode::kMalformed, "octree payload: more edges than three per triangle");
+    return Status::ok();
+  }
+
+  // Calls f(a, b, c, faces so far on edge ab) for every three-clique a < b < c of the sorted lists, in order;
+  // f returns -1 to stop, 1 when (a, b, c) counts as a face, 0 otherwise.
+  template <class F>
+  static void forEachClique(const std::vector<std::vector<u32>>& lists, F f) {
+    for (u32 a = 0; a < lists.size(); ++a) {
+      const auto& la = lists[a];
+      for (u32 b : la) {
+        if (b <= a) continue;
+        const auto& lb = lists[b];
+        auto ia = std::upper_bound(la.begin(), la.end(), b);
+        auto ib = std::upper_bound(lb.begin(), lb.end(), b);
+        int faces = 0;
+        while (ia != la.end() && ib != lb.end()) {
+          if (*ia < *ib) ++ia;
+          else if (*ib < *ia) ++ib;
+          else {
+            const int r = f(a, b, *ia, faces);
+            if (r < 0) return;
+            faces += r;
+            ++ia, ++ib;
+          }
+        }
+      }
+    }
+  }
+
+  // After the last split: which cliques are faces, then their orientation and multiplicity.
+  Status codeFaces() {
+    io_.meter(&CodecStats::connectivity_bits);
+    for (auto& l : nb_) std::sort(l.begin(), l.end());
+    std::vector<TriKey> faces;
+    u64 cliques = 0;
+    Status status = Status::ok();
+    forEachClique(nb_, [&](u32 a, u32 b, u32 c, int on_edge) -> int {
+      if (++cliques > kMaxTriangles) {
+        status = makeError(ErrorCode::kLimitExceeded, "octree payload: more than 2^28 cliques");
+        return -1;
+      }
+      const TriKey key{a, b, c};
+      int truth_face = 0;
+      if (truth_) truth_face = std::binary_search(truth_->by_id.tri_keys.begin(), truth_->by_id.tri_keys.end(), key);
+      if (!io_.bit(models_.face[flat_ ? 0 : std::min(on_edge, 2)], truth_face)) return 0;
+      if (faces.size() >= max_triangles_) {
+        status = makeError(ErrorCode::kMalformed, "octree payload: more faces than the header's triangles");
+        return -1;
+      }
+      faces.push_back(key);
+      return 1;
+    });
+    SP_RETURN_IF_ERROR(status);
+    return codeFaceCopies(io_, kCodec, models_.orient.data(), faces, truth_ ? &truth_->by_id : nullptr,
+                          max_triangles_, triangles_);
+  }
+
+  Io& io_;
+  int bits_;
+  u32 n_;
+  int k0_;
+  Axes axes_;
+  const Truth* truth_;
+  Models models_;
+  int steps_ = 0;
+  u64 max_triangles_ = 0, max_edges_ = 0, edges_ = 0;
+  int level_ = 0;
+  bool complete_ = false;
+  size_t split_index_ = 0;
+  std::vector<Vec3u> lo_;  // cell corner
+  std::vector<Vec3u> c2_;  // twice the cell center (exact in integers)
+  std::vector<u32> next_;  // step of the next split, kNone
+  std::vector<std::vector<u32>> nb_;
+  std::vector<u32> nbrs_;
+  std::vector<Triangle> triangles_;
+  std::vector<OctNormal> normals_;
+  std::vector<Rgba8> colors_;
+};
+
+// Decoder axis order: the tile's longest extent first (the encoder merges along the shortest first).
+Axes axisOrder(const QuantizedMesh& mesh) {
+  Axes axes{0, 1, 2};
+  if (mesh.positions.empty()) return axes;
+  Vec3u lo = mesh.positions[0], hi = lo;
+  for (const auto& p : mesh.positions)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+  std::stable_sort(axes.begin(), axes.end(), [&](int a, int b) { return hi[a] - lo[a] > hi[b] - lo[b]; });
+  return axes;
+}
+
+// Triangles and attributes renamed from points to the decoder's vertex ids (point of vertex v: range[v][0]).
+void renameToIds(const Points& pts, const std::vector<std::array<u32, 2>>& range, Points& out) {
+  const u32 n = u32(range.size());
+  std::vector<u32> id(n);
+  for (u32 v = 0; v < n; ++v) id[range[v][0]] = v;
+  for (u32 v = 0; v < n; ++v) {
+    out.pos.push_back(pts.pos[range[v][0]]);
+    if (!pts.normals.empty()) out.normals.push_back(pts.normals[range[v][0]]);
+    if (!pts.colors.empty()) out.colors.push_back(pts.colors[range[v][0]]);
+  }
+  std::vector<std::pair<TriKey, std::array<u32, 2>>> tris;
+  for (size_t i = 0; i < pts.tri_keys.size(); ++i) {
+    TriKey q{id[pts.tri_keys[i][0]], id[pts.tri_keys[i][1]], id[pts.tri_keys[i][2]]};  // copy 0's orientation
+    auto copies = pts.tri_copies[i];
+    const int r = int(std::min_element(q.begin(), q.end()) - q.begin());
+    std::rotate(q.begin(), q.begin() + r, q.end());
+    if (q[1] > q[2]) std::swap(q[1], q[2]), std::swap(copies[0], copies[1]);
+    tris.push_back({q, copies});
+  }
+  std::sort(tris.begin(), tris.end());
+  for (const auto& [q, c] : tris) {
+    out.tri_keys.push_back(q);
+    out.tri_copies.push_back(c);
+  }
+}
+
+// The codes of every split, fine to coarse: merges the new vertex back into the old one in reverse order.
+Plan planCodes(const Points& by_id, const std::vector<std::array<u32, 2>>& events) {
+  const size_t n = by_id.pos.size();
+  std::vector<std::vector<u32>> nb(n);
+  std::vector<std::array<u32, 2>> edges;
+  for (const auto& q : by_id.tri_keys) edges.push_back({q[0], q[1]}), edges.push_back({q[1], q[2]}), edges.push_back({q[0], q[2]});
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  for (const auto& [a, b] : edges) nb[a].push_back(b), nb[b].push_back(a);
+  std::vector<std::vector<std::pair<u32, u8>>> per_event(events.size());
+  Plan plan;
+  plan.events = events;
+  plan.connect.resize(events.size());
+  for (size_t i = events.size(); i-- > 0;) {
+    const auto [v, w] = events[i];
+    auto& e = per_event[i];
+    for (u32 x : nb[v])
+      if (x == w) plan.connect[i] = 1;
+      else e.push_back({x, 1});
+    for (u32 x : nb[w])
+      if (x != v) e.push_back({x, 2});
+    sortAndMergeFlags(e);
+    nb[v].clear();
+    for (auto& [x, flags] : e) {
+      nb[v].push_back(x);
+      if (flags == 2) replaceOne(nb[x], w, v);
+      else if (flags == 3) eraseOne(nb[x], w);
+      flags = flags == 1 ? kStay : flags == 2 ? kMove : kDuplicate;
+    }
+    std::vector<u32>().swap(nb[w]);
+  }
+  plan.code_start.reserve(events.size() + 1);
+  for (auto& e : per_event) {
+    plan.code_start.push_back(u32(plan.codes.size()));
+    plan.codes.insert(plan.codes.end(), e.begin(), e.end());
+    std::vector<std::pair<u32, u8>>().swap(e);
+  }
+  plan.code_start.push_back(u32(plan.codes.size()));
+  return plan;
+}
+
+Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<u8>& out, CodecStats* stats,
+                  bool contexts) {
+  const Axes axes = axisOrder(mesh);
+  Points pts;
+  SP_RETURN_IF_ERROR(collectPoints(kCodec, ctx, mesh, axes, pts));
+  const size_t start = out.size();
+  Header h;
+  h.n = u32(pts.pos.size());
+  h.t = mesh.triangles.size();
+  h.axes = axes;
+  if (stats) {
+    *stats = CodecStats{};
+    stats->points = h.n;
+    stats->triangles = h.t;
+  }
+  if (h.n == 0) {
+    writeHeader(kFormat, h, ctx.bits, {}, out);
+    if (stats) stats->payload_bytes = out.size() - start;
+    return Status::ok();
+  }
+  rootCube(pts, ctx.bits, axes, h.k0, h.root);
+  Truth truth;
+  truth.pts = &pts;
+  truth.keys.reserve(h.n);
+  for (const auto& p : pts.pos) truth.keys.push_back(mortonKey(p, ctx.bits, axes));
+
+  std::vector<std::array<u32, 2>> events;
+  {
+    NullIo nio;
+    Engine<NullIo> planner(nio, ctx.bits, h, &truth);
+    SP_RETURN_IF_ERROR(planner.run(ctx.bits));
+    renameToIds(pts, planner.range_, truth.by_id);
+    events = std::move(planner.events_);
+  }
+  const Plan plan = planCodes(truth.by_id, events);
+  truth.plan = &plan;
+
+  EncodeIo io;
+  io.stats = stats;
+  Engine<EncodeIo> engine(io, ctx.bits, h, &truth);
+  engine.layout = ctx.layout;
+  engine.flat_ = !contexts;
+  SP_RETURN_IF_ERROR(engine.run(ctx.bits));
+  writeHeader(kFormat, h, ctx.bits, io.segments, out);
+  if (stats) {
+    stats->splits = engine.splits_;
+    stats->payload_bytes = out.size() - start;
+  }
+  return Status::ok();
+}
+
+Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::span<const u8> payload, u32 level) {
+  SP_RETURN_IF_ERROR(checkVersion(kCodec, version));
+  SP_ASSIGN_OR_RETURN(Header h, readHeader(kFormat, ctx, payload));
+  if (h.n == 0) return QuantizedMesh{};
+  const int target = int(std::min<u32>(level, u32(ctx.bits)));
+  DecodeIo io;
+  io.codec = kCodec;
+  SP_ASSIGN_OR_RETURN(io.segments, levelSegments(kCodec, h, ctx.bits, payload, target));
+  Engine<DecodeIo> engine(io, ctx.bits, h, nullptr);
+  engine.layout = ctx.layout;
+  SP_RETURN_IF_ERROR(engine.run(target));
+  SP_ASSIGN_OR_RETURN(QuantizedMesh mesh, engine.mesh(ctx.layout));
+  if (target >= ctx.bits && mesh.triangles.size() != h.t)
+    return makeError(ErrorCode::kMalformed, "octree payload: decoded " + std::to_string(mesh.triangles.size()) +
+                                                " triangles, header says " + std::to_string(h.t));
+  SP_RETURN_IF_ERROR(validateTile(ctx, mesh));
+  return mesh;
+}
+
+}  // namespace
+
+Status octreeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out) {
+  return encodeImpl(ctx, mesh, out, nullptr, true);
+}
+
+Status octreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
+                             CodecStats* stats, bool contexts) {
+  return encodeImpl(ctx, mesh, out, stats, contexts);
+}
+
+Result<QuantizedMesh> octreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload) {
+  return decodeImpl(ctx, version, payload, u32(ctx.bits));
+}
+
+Result<QuantizedMesh> octreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                        uint32_t level) {
+  return decodeImpl(ctx, version, payload, level);
+}
+
+Result<std::vector<CodecLevel>> octreeLevels(const TileContext& ctx, uint16_t version,
+                                             std::span<const uint8_t> payload) {
+  SP_RETURN_IF_ERROR(checkVersion(kCodec, version));
+  SP_ASSIGN_OR_RETURN(Header h, readHeader(kFormat, ctx, payload));
+  return headerLevels(h, ctx.bits);
+}
+
+}  // namespace scanpress
