@@ -89,10 +89,9 @@ TEST_P(DataRoundTrip, StoreIsLosslessAfterQuantization) {
   }
 }
 
-// The same for `kdtree` at 12, 16 and 20 bits, through a container; vertices that share position and attributes
-// come back merged, so the comparison is over attributed corners.
-TEST_P(DataRoundTrip, KdtreeIsLosslessAfterQuantization) {
-  const Scan& scan = GetParam();
+// The same for the progressive codecs through a container; vertices that share position and attributes come
+// back merged, so the comparison is over attributed corners.
+void expectLosslessAfterQuantization(const Scan& scan, CodecId codec, std::initializer_list<int> bit_depths) {
   const std::string path = testing::sharedDataDir() + "/" + scan.file;
   if (!std::filesystem::exists(path)) GTEST_SKIP() << "shared data not found: " << path << " (set SCANPRESS_DATA)";
 #if defined(__SANITIZE_ADDRESS__)
@@ -102,16 +101,24 @@ TEST_P(DataRoundTrip, KdtreeIsLosslessAfterQuantization) {
   auto mesh = readMeshFile(path);
   ASSERT_TRUE(mesh.isOk()) << mesh.status().toString();
   const AttributeLayout layout = layoutOf(*mesh);
-  for (int bits : {12, 16, 20}) {
+  for (int bits : bit_depths) {
     SCOPED_TRACE(bits);
     QuantizeStats qs;
-    auto r = quantizedAndDecoded(*mesh, bits, layout, CodecId::kKdtree, scan.file, &qs);
+    auto r = quantizedAndDecoded(*mesh, bits, layout, codec, scan.file, &qs);
     ASSERT_TRUE(r.isOk()) << r.status().toString();
     const auto& [q, decoded] = *r;
     EXPECT_EQ(q.triangles.size() + qs.degenerate_triangles, scan.triangles);
     EXPECT_TRUE(testing::cornerMultiset(decoded, layout.normal_bits) ==
                 testing::cornerMultiset(q, layout.normal_bits));
   }
+}
+
+TEST_P(DataRoundTrip, KdtreeIsLosslessAfterQuantization) {
+  expectLosslessAfterQuantization(GetParam(), CodecId::kKdtree, {12, 16, 20});
+}
+
+TEST_P(DataRoundTrip, OctreeIsLosslessAfterQuantization) {
+  expectLosslessAfterQuantization(GetParam(), CodecId::kOctree, {12, 16, 24});
 }
 
 // Through files and the commands: encode, decode to PLY, read back, requantize on the container's grid.
