@@ -83,35 +83,39 @@ TEST(Cli, EncodeInfoDecodeWithReport) {
 TEST(Cli, ProgressiveDecodeByLevelAndBytes) {
   testing::TempDir dir;
   const std::string in = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
-  const std::string spz = dir.file("k.spz");
   std::string out;
-  ASSERT_EQ(run("encode '" + in + "' '" + spz + "' --codec kdtree --bits 12 --tile-triangles 20000 --quiet", &out), 0)
-      << out;
-  ASSERT_EQ(run("info '" + spz + "' --json --verify", &out), 0) << out;
-  const auto info = nlohmann::json::parse(out);
-  ASSERT_TRUE(info.contains("levels"));
-  const auto& levels = info["levels"];
-  ASSERT_EQ(levels.size(), 13u);
-  for (size_t l = 1; l < levels.size(); ++l) EXPECT_GE(levels[l]["bytes"], levels[l - 1]["bytes"]);
-  EXPECT_GT(info["tiles"].size(), 1u);
-  EXPECT_TRUE(info["tiles"][0].contains("levels"));
+  for (const char* codec : {"kdtree", "octree"}) {
+    SCOPED_TRACE(codec);
+    const std::string spz = dir.file(std::string(codec) + ".spz");
+    ASSERT_EQ(run("encode '" + in + "' '" + spz + "' --codec " + codec + " --bits 12 --tile-triangles 20000 --quiet",
+                  &out), 0)
+        << out;
+    ASSERT_EQ(run("info '" + spz + "' --json --verify", &out), 0) << out;
+    const auto info = nlohmann::json::parse(out);
+    ASSERT_TRUE(info.contains("levels"));
+    const auto& levels = info["levels"];
+    ASSERT_EQ(levels.size(), 13u);
+    for (size_t l = 1; l < levels.size(); ++l) EXPECT_GE(levels[l]["bytes"], levels[l - 1]["bytes"]);
+    EXPECT_GT(info["tiles"].size(), 1u);
+    EXPECT_TRUE(info["tiles"][0].contains("levels"));
 
-  ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("full.ply") + "'", &out), 0) << out;
-  ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("l6.ply") + "' --level 6", &out), 0) << out;
-  EXPECT_NE(out.find("level 6: " + std::to_string(levels[6]["bytes"].get<uint64_t>()) + " payload bytes"),
-            std::string::npos) << out;
-  EXPECT_LT(fs::file_size(dir.file("l6.ply")), fs::file_size(dir.file("full.ply")));
-  // The finest level within a budget: exactly level 8's bytes gives level 8.
-  const uint64_t b8 = levels[8]["bytes"].get<uint64_t>();
-  ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("b.ply") + "' --bytes " + std::to_string(b8), &out), 0) << out;
-  EXPECT_NE(out.find("level 8:"), std::string::npos) << out;
-  ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("b.ply") + "' --bytes " + std::to_string(b8 - 1), &out), 0);
-  EXPECT_NE(out.find("level 7:"), std::string::npos) << out;
+    ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("full.ply") + "'", &out), 0) << out;
+    ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("l6.ply") + "' --level 6", &out), 0) << out;
+    EXPECT_NE(out.find("level 6: " + std::to_string(levels[6]["bytes"].get<uint64_t>()) + " payload bytes"),
+              std::string::npos) << out;
+    EXPECT_LT(fs::file_size(dir.file("l6.ply")), fs::file_size(dir.file("full.ply")));
+    // The finest level within a budget: exactly level 8's bytes gives level 8.
+    const uint64_t b8 = levels[8]["bytes"].get<uint64_t>();
+    ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("b.ply") + "' --bytes " + std::to_string(b8), &out), 0) << out;
+    EXPECT_NE(out.find("level 8:"), std::string::npos) << out;
+    ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("b.ply") + "' --bytes " + std::to_string(b8 - 1), &out), 0);
+    EXPECT_NE(out.find("level 7:"), std::string::npos) << out;
 
-  EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --level 13", &out), 1);
-  EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --bytes 3", &out), 1);
-  EXPECT_NE(out.find("below the coarsest level"), std::string::npos) << out;
-  EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --level -1", &out), 1);
+    EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --level 13", &out), 1);
+    EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --bytes 3", &out), 1);
+    EXPECT_NE(out.find("below the coarsest level"), std::string::npos) << out;
+    EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --level -1", &out), 1);
+  }
   ASSERT_EQ(run("encode '" + in + "' '" + dir.file("s.spz") + "' --codec store --quiet", &out), 0);
   EXPECT_EQ(run("decode '" + dir.file("s.spz") + "' '" + dir.file("x.ply") + "' --level 3", &out), 1);
   EXPECT_NE(out.find("single-rate"), std::string::npos) << out;
