@@ -58,7 +58,7 @@ constexpr u32 kNone = UINT32_MAX;  // no further split
 constexpr int kLevelClasses = 12;  // levels remaining after the step (0..10), coincident rounds (11)
 constexpr int kDegreeClasses = 3;
 constexpr int kPlaneBins = 10;     // a neighbour's offset from the split plane (9 bins), coincident splits (1)
-enum : u8 { kStay = 0, kMove = 1, kDuplicate = 2 };
+enum : u8 { kStay = 0, kMove = 1, kDuplicate = 2, kUncoded = 3 };
 constexpr std::string_view kCodec = "octree";
 constexpr HeaderFormat kFormat{kCodec, true};
 
@@ -93,13 +93,13 @@ struct NullIo {
 struct Models {
   BitModel rf[2][3][kCentroidBins];  // [split ahead][axis in level][centroid bin]
   std::vector<SymbolModel> next;     // [role 3][level class][degree class], symbols 0 (never), 1..3*bits+1
-  std::vector<SymbolModel> cls;      // [plane bin][DUPLICATEs so far, 0..2]
+  std::vector<SymbolModel> cls;      // [link neighbours' classes seen][plane bin][DUPLICATEs so far, 0..2]
   BitModel connect[4];
   BitModel face[3];                  // by faces already on the clique's first edge
   std::vector<SymbolModel> orient;
   explicit Models(int bits) {
     for (int i = 0; i < 3 * kLevelClasses * kDegreeClasses; ++i) next.emplace_back(u32(3 * bits + 2));
-    for (int i = 0; i < kPlaneBins * 3; ++i) cls.emplace_back(3);
+    for (int i = 0; i < 8 * kPlaneBins * 3; ++i) cls.emplace_back(3);
     for (int i = 0; i < 2; ++i) orient.emplace_back(3);
   }
 };
@@ -325,15 +325,21 @@ class Engine {
         return makeError(ErrorCode::kInternal, "octree encoder: split sequence mismatch");
       codes = plan.codes.data() + plan.code_start[ev];
     }
+    linkOrder();
     nb_[v].clear();
     int dups = 0;
-    for (size_t i = 0; i < nbrs_.size(); ++i) {
+    for (u32 i : order_) {
       const u32 x = nbrs_[i];
       if (codes && codes[i].first != x) return makeError(ErrorCode::kInternal, "octree encoder: star mismatch");
       int bin = kPlaneBins - 1;
       if (axis >= 0) bin = int(std::clamp<i64>((i64(c2_[x][axis]) - plane2) / half, -4, 4)) + 4;
-      const int ctx = flat_ ? 0 : bin * 3 + std::min(dups, 2);
-      switch (io_.sym(models_.cls[ctx], codes ? codes[i].second : 0)) {
+      int seen = 0;  // the classes of x's link neighbours coded so far
+      for (u32 a = link_start_[i]; a < link_start_[i + 1]; ++a)
+        if (cls_[link_[a]] != kUncoded) seen |= 1 << cls_[link_[a]];
+      const int ctx = flat_ ? 0 : (seen * kPlaneBins + bin) * 3 + std::min(dups, 2);
+      const u8 c = u8(io_.sym(models_.cls[ctx], codes ? codes[i].second : 0));
+      cls_[i] = c;
+      switch (c) {
         case kStay:
           nb_[v].push_back(x);
           break;
@@ -357,6 +363,47 @@ class Engine {
     if (edges_ > max_edges_)
       return makeError(ErrorCode::kMalformed, "octree payload: more edges than three per triangle");
     return Status::ok();
+  }
+
+  // The order in which the split vertex's neighbours (nbrs_, sorted) are coded: depth-first along its link (the
+  // neighbours adjacent to each other), so that a neighbour's class is coded after those of its link neighbours;
+  // link_ / link_start_ hold the link's adjacency by index. Unsplit manifold stars are walked around their cycle.
+  void linkOrder() {
+    const u32 k = u32(nbrs_.size());
+    pairs_.clear();
+    for (u32 i = 0; i < k; ++i)
+      for (u32 y : nb_[nbrs_[i]]) {
+        auto it = std::lower_bound(nbrs_.begin(), nbrs_.end(), y);
+        if (it != nbrs_.end() && *it == y) pairs_.push_back({i, u32(it - nbrs_.begin())});
+      }
+    std::sort(pairs_.begin(), pairs_.end());
+    link_start_.assign(k + 1, 0);
+    link_.clear();
+    for (const auto& [i, j] : pairs_) {
+      ++link_start_[i + 1];
+      link_.push_back(j);
+    }
+    for (u32 i = 0; i < k; ++i) link_start_[i + 1] += link_start_[i];
+    cls_.assign(k, kUncoded);
+    order_.clear();
+    stack_.clear();
+    std::vector<u8>& pushed = pushed_;
+    pushed.assign(k, 0);
+    for (u32 root = 0; root < k; ++root) {
+      if (pushed[root]) continue;
+      pushed[root] = 1;
+      stack_.push_back(root);
+      while (!stack_.empty()) {
+        const u32 i = stack_.back();
+        stack_.pop_back();
+        order_.push_back(i);
+        for (u32 a = link_start_[i + 1]; a-- > link_start_[i];)  // smallest index on top
+          if (!pushed[link_[a]]) {
+            pushed[link_[a]] = 1;
+            stack_.push_back(link_[a]);
+          }
+      }
+    }
   }
 
   // Calls f(a, b, c, faces so far on edge ab) for every three-clique a < b < c of the sorted lists, in order;
@@ -429,7 +476,9 @@ class Engine {
   std::vector<Vec3u> c2_;  // twice the cell center (exact in integers)
   std::vector<u32> next_;  // step of the next split, kNone
   std::vector<std::vector<u32>> nb_;
-  std::vector<u32> nbrs_;
+  std::vector<u32> nbrs_, link_, link_start_, order_, stack_;
+  std::vector<std::pair<u32, u32>> pairs_;
+  std::vector<u8> cls_, pushed_;
   std::vector<Triangle> triangles_;
   std::vector<OctNormal> normals_;
   std::vector<Rgba8> colors_;
