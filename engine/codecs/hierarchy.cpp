@@ -201,6 +201,22 @@ std::vector<CodecLevel> headerLevels(const Header& h, int bits) {
   return levels;
 }
 
+Result<std::vector<CodecLevel>> payloadLevels(const HeaderFormat& f, const TileContext& ctx, uint16_t version,
+                                              std::span<const u8> payload) {
+  SP_RETURN_IF_ERROR(checkVersion(f.codec, version));
+  SP_ASSIGN_OR_RETURN(Header h, readHeader(f, ctx, payload));
+  return headerLevels(h, ctx.bits);
+}
+
+Status checkDecoded(std::string_view codec, const TileContext& ctx, const Header& h, int target,
+                    const QuantizedMesh& mesh) {
+  if (target >= ctx.bits && mesh.triangles.size() != h.t)
+    return makeError(ErrorCode::kMalformed, std::string(codec) + " payload: decoded " +
+                                                std::to_string(mesh.triangles.size()) + " triangles, header says " +
+                                                std::to_string(h.t));
+  return validateTile(ctx, mesh);
+}
+
 Result<std::vector<std::span<const u8>>> levelSegments(std::string_view codec, const Header& h, int bits,
                                                        std::span<const u8> payload, int target) {
   const std::string name(codec);

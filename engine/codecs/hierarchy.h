@@ -66,6 +66,12 @@ void writeHeader(const HeaderFormat& f, const Header& h, int bits, const std::ve
 Result<Header> readHeader(const HeaderFormat& f, const TileContext& ctx, std::span<const u8> payload);
 Status checkVersion(std::string_view codec, uint16_t version);
 std::vector<CodecLevel> headerLevels(const Header& h, int bits);
+// A payload's levels, from its header (CodecInfo::levels).
+Result<std::vector<CodecLevel>> payloadLevels(const HeaderFormat& f, const TileContext& ctx, uint16_t version,
+                                              std::span<const u8> payload);
+// The checks on a decoded mesh: the header's triangle count at the lossless level, then validateTile.
+Status checkDecoded(std::string_view codec, const TileContext& ctx, const Header& h, int target,
+                    const QuantizedMesh& mesh);
 // The segments that decoding up to `target` needs (all of them for the lossless level), checked against the payload.
 Result<std::vector<std::span<const u8>>> levelSegments(std::string_view codec, const Header& h, int bits,
                                                        std::span<const u8> payload, int target);

@@ -858,10 +858,7 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   engine.max_triangles_ = h.t;
   SP_RETURN_IF_ERROR(engine.run(target));
   QuantizedMesh mesh = engine.mesh(ctx.layout);
-  if (target >= ctx.bits && mesh.triangles.size() != h.t)
-    return makeError(ErrorCode::kMalformed, "kdtree payload: decoded " + std::to_string(mesh.triangles.size()) +
-                                                " triangles, header says " + std::to_string(h.t));
-  SP_RETURN_IF_ERROR(validateTile(ctx, mesh));
+  SP_RETURN_IF_ERROR(checkDecoded("kdtree", ctx, h, target, mesh));
   return mesh;
 }
 
@@ -887,9 +884,7 @@ Result<QuantizedMesh> kdtreeDecodeLevel(const TileContext& ctx, uint16_t version
 
 Result<std::vector<CodecLevel>> kdtreeLevels(const TileContext& ctx, uint16_t version,
                                              std::span<const uint8_t> payload) {
-  SP_RETURN_IF_ERROR(checkVersion("kdtree", version));
-  SP_ASSIGN_OR_RETURN(Header h, readHeader(kFormat, ctx, payload));
-  return headerLevels(h, ctx.bits);
+  return payloadLevels(kFormat, ctx, version, payload);
 }
 
 }  // namespace scanpress

@@ -625,10 +625,7 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   engine.layout = ctx.layout;
   SP_RETURN_IF_ERROR(engine.run(target));
   SP_ASSIGN_OR_RETURN(QuantizedMesh mesh, engine.mesh(ctx.layout));
-  if (target >= ctx.bits && mesh.triangles.size() != h.t)
-    return makeError(ErrorCode::kMalformed, "octree payload: decoded " + std::to_string(mesh.triangles.size()) +
-                                                " triangles, header says " + std::to_string(h.t));
-  SP_RETURN_IF_ERROR(validateTile(ctx, mesh));
+  SP_RETURN_IF_ERROR(checkDecoded(kCodec, ctx, h, target, mesh));
   return mesh;
 }
 
@@ -654,9 +651,7 @@ Result<QuantizedMesh> octreeDecodeLevel(const TileContext& ctx, uint16_t version
 
 Result<std::vector<CodecLevel>> octreeLevels(const TileContext& ctx, uint16_t version,
                                              std::span<const uint8_t> payload) {
-  SP_RETURN_IF_ERROR(checkVersion(kCodec, version));
-  SP_ASSIGN_OR_RETURN(Header h, readHeader(kFormat, ctx, payload));
-  return headerLevels(h, ctx.bits);
+  return payloadLevels(kFormat, ctx, version, payload);
 }
 
 }  // namespace scanpress

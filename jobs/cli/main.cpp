@@ -130,7 +130,7 @@ centers of the container's grid; they are written as float, or as double when fl
 
 options:
   --tiles ID,ID,...   decode only these tiles (welded together)
-  --level L           progressive codecs (kdtree): the mesh of level L, cells of 2^(bits-L) grid cells as
+  --level L           progressive codecs (kdtree, octree): the mesh of level L, cells of 2^(bits-L) grid cells as
                       vertices at their centers with that level's triangles (L = grid bits: lossless)
   --bytes N           progressive codecs: the finest level whose payloads fit in N bytes (info --json lists
                       the bytes of every level)
