@@ -263,17 +263,21 @@ u8 consistentOrientation(const TriKey& t, u8 ot, const TriKey& u, u32 x, u32 y) 
   return static_cast<u8>(forward(u, x, y) == dir_t);  // u must not run x->y where t does
 }
 
-std::vector<std::array<u32, 4>> edgeThirds(const std::vector<TriKey>& keys) {
-  std::vector<std::array<u32, 4>> adj;
-  adj.reserve(3 * keys.size());
+EdgeThirds::EdgeThirds(const std::vector<TriKey>& keys) {
+  u32 n = 0;
+  for (const auto& k : keys) n = std::max(n, k[2] + 1);
+  start.assign(n + 1, 0);
+  for (const auto& k : keys) ++start[k[0] + 1], ++start[k[0] + 1], ++start[k[1] + 1];
+  for (u32 v = 0; v < n; ++v) start[v + 1] += start[v];
+  items.resize(start[n]);
+  std::vector<u32> at(start.begin(), start.end() - 1);
   for (size_t t = 0; t < keys.size(); ++t) {
     const auto& k = keys[t];
-    adj.push_back({k[0], k[1], k[2], u32(t)});
-    adj.push_back({k[1], k[2], k[0], u32(t)});
-    adj.push_back({k[0], k[2], k[1], u32(t)});
+    items[at[k[0]]++] = {k[1], k[2], u32(t)};
+    items[at[k[0]]++] = {k[2], k[1], u32(t)};
+    items[at[k[1]]++] = {k[2], k[0], u32(t)};
   }
-  std::sort(adj.begin(), adj.end());
-  return adj;
+  for (u32 v = 0; v < n; ++v) std::sort(items.begin() + start[v], items.begin() + start[v + 1]);
 }
 
 std::vector<u8> orientWithoutCodes(const std::vector<TriKey>& keys) {

@@ -208,14 +208,18 @@ inline int centroidBin(const std::vector<u32>& nb, const std::vector<Vec3u>& c2,
 
 // --- templates -------------------------------------------------------------------------------------------------
 
-// Edges of the keys, each with its third corner and triangle index, sorted: (lo, hi, third, triangle).
-std::vector<std::array<u32, 4>> edgeThirds(const std::vector<TriKey>& keys);
+// The triangles on each edge of the keys: for each smaller corner lo, (hi, third corner, triangle index) sorted.
+struct EdgeThirds {
+  std::vector<u32> start;  // per vertex lo, into items; one extra entry at the end
+  std::vector<std::array<u32, 3>> items;
+  explicit EdgeThirds(const std::vector<TriKey>& keys);
+};
 
 template <class Visit>
 void breadthFirst(const std::vector<TriKey>& keys, std::vector<u8>& orient, Visit visit) {
   const size_t nt = keys.size();
   orient.assign(nt, 0);
-  const auto adj = edgeThirds(keys);
+  const EdgeThirds adj(keys);
   std::vector<u8> seen(nt, 0);
   std::vector<u32> queue;
   for (size_t root = 0; root < nt; ++root) {
@@ -229,9 +233,10 @@ void breadthFirst(const std::vector<TriKey>& keys, std::vector<u8>& orient, Visi
       for (int side = 0; side < 3; ++side) {
         const u32 x = k[side], y = k[(side + 1) % 3];
         const u32 lo = std::min(x, y), hi = std::max(x, y);
-        auto it = std::lower_bound(adj.begin(), adj.end(), std::array<u32, 4>{lo, hi, 0, 0});
-        for (; it != adj.end() && (*it)[0] == lo && (*it)[1] == hi; ++it) {
-          const u32 u = (*it)[3];
+        const auto end = adj.items.begin() + adj.start[lo + 1];
+        auto it = std::lower_bound(adj.items.begin() + adj.start[lo], end, std::array<u32, 3>{hi, 0, 0});
+        for (; it != end && (*it)[0] == hi; ++it) {
+          const u32 u = (*it)[2];
           if (seen[u]) continue;
           seen[u] = 1;
           orient[u] = visit(u, int(t), x, y);

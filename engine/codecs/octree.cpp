@@ -370,20 +370,20 @@ class Engine {
   // link_ / link_start_ hold the link's adjacency by index. Unsplit manifold stars are walked around their cycle.
   void linkOrder() {
     const u32 k = u32(nbrs_.size());
-    pairs_.clear();
-    for (u32 i = 0; i < k; ++i)
-      for (u32 y : nb_[nbrs_[i]]) {
-        auto it = std::lower_bound(nbrs_.begin(), nbrs_.end(), y);
-        if (it != nbrs_.end() && *it == y) pairs_.push_back({i, u32(it - nbrs_.begin())});
-      }
-    std::sort(pairs_.begin(), pairs_.end());
+    if (mark_.size() < lo_.size()) mark_.resize(lo_.size(), 0);
+    for (u32 i = 0; i < k; ++i) mark_[nbrs_[i]] = i + 1;
     link_start_.assign(k + 1, 0);
-    link_.clear();
-    for (const auto& [i, j] : pairs_) {
-      ++link_start_[i + 1];
-      link_.push_back(j);
-    }
+    for (u32 i = 0; i < k; ++i)
+      for (u32 y : nb_[nbrs_[i]])
+        if (mark_[y]) ++link_start_[i + 1];
     for (u32 i = 0; i < k; ++i) link_start_[i + 1] += link_start_[i];
+    link_.resize(link_start_[k]);
+    for (u32 i = 0; i < k; ++i) {
+      u32 at = link_start_[i];
+      for (u32 y : nb_[nbrs_[i]])
+        if (mark_[y]) link_[at++] = mark_[y] - 1;
+    }
+    for (u32 i = 0; i < k; ++i) mark_[nbrs_[i]] = 0;
     cls_.assign(k, kUncoded);
     order_.clear();
     stack_.clear();
@@ -397,7 +397,7 @@ class Engine {
         const u32 i = stack_.back();
         stack_.pop_back();
         order_.push_back(i);
-        for (u32 a = link_start_[i + 1]; a-- > link_start_[i];)  // smallest index on top
+        for (u32 a = link_start_[i + 1]; a-- > link_start_[i];)
           if (!pushed[link_[a]]) {
             pushed[link_[a]] = 1;
             stack_.push_back(link_[a]);
@@ -477,7 +477,7 @@ class Engine {
   std::vector<u32> next_;  // step of the next split, kNone
   std::vector<std::vector<u32>> nb_;
   std::vector<u32> nbrs_, link_, link_start_, order_, stack_;
-  std::vector<std::pair<u32, u32>> pairs_;
+  std::vector<u32> mark_;  // per vertex: 1 + its index among the split vertex's neighbours, 0 otherwise
   std::vector<u8> cls_, pushed_;
   std::vector<Triangle> triangles_;
   std::vector<OctNormal> normals_;
