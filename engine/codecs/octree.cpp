@@ -372,17 +372,14 @@ class Engine {
     const u32 k = u32(nbrs_.size());
     if (mark_.size() < lo_.size()) mark_.resize(lo_.size(), 0);
     for (u32 i = 0; i < k; ++i) mark_[nbrs_[i]] = i + 1;
-    link_start_.assign(k + 1, 0);
-    for (u32 i = 0; i < k; ++i)
-      for (u32 y : nb_[nbrs_[i]])
-        if (mark_[y]) ++link_start_[i + 1];
-    for (u32 i = 0; i < k; ++i) link_start_[i + 1] += link_start_[i];
-    link_.resize(link_start_[k]);
+    link_start_.resize(k + 1);
+    link_.clear();
     for (u32 i = 0; i < k; ++i) {
-      u32 at = link_start_[i];
+      link_start_[i] = u32(link_.size());
       for (u32 y : nb_[nbrs_[i]])
-        if (mark_[y]) link_[at++] = mark_[y] - 1;
+        if (mark_[y]) link_.push_back(mark_[y] - 1);
     }
+    link_start_[k] = u32(link_.size());
     for (u32 i = 0; i < k; ++i) mark_[nbrs_[i]] = 0;
     cls_.assign(k, kUncoded);
     order_.clear();
