@@ -18,9 +18,11 @@
 //  - Adaptive range coding with contexts instead of fixed Huffman tables (the issue asks for it; gains measured in
 //    bench/RESULTS.md): RF bits by where the centroid of the vertex's neighbours lies relative to the split plane
 //    (geometry predicted from connectivity), by the split's axis and by whether the vertex still has a split
-//    ahead; edge classes by where the neighbour lies relative to the split plane (in half-cells: the neighbour has
-//    or has not been refined in this step yet) and by the DUPLICATEs so far; the connecting-edge flag by the
-//    number of DUPLICATEs; next-split differences by old/new vertex, remaining levels and degree class.
+//    ahead; edge classes, coded depth-first along the split vertex's link (its neighbours that are adjacent to
+//    each other) rather than in list order, by where the neighbour lies relative to the split plane (in
+//    half-cells: the neighbour has or has not been refined in this step yet), by the classes of its link
+//    neighbours coded before it and by the DUPLICATEs so far; the connecting-edge flag by the number of
+//    DUPLICATEs; next-split differences by old/new vertex, remaining levels and degree class.
 //  - The volume is the smallest cube aligned to the scan's global grid holding the tile (not the tile's bounding
 //    box), so level L means cells of 2^(bits-L) grid cells in every tile and tiles decoded at one level weld. The
 //    axis order is the paper's: the encoder merges along the tile's shortest extent first in every level, so the
