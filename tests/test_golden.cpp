@@ -1,0 +1,104 @@
+// Golden streams: one container per codec and format version (tests/golden/<codec>-v<version>.spz), written once
+// and kept forever. Every build decodes each to the mesh it was made from, and the encoder of the version it writes
+// must still produce exactly those bytes: changing a format means a new version and a new golden file, never an
+// edit of an old one. SCANPRESS_WRITE_GOLDEN=1 writes the files that are missing (it never overwrites one).
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+
+#include "engine/container/container.h"
+#include "engine/quantize.h"
+#include "engine/shapes.h"
+#include "test_util.h"
+
+namespace scanpress {
+namespace {
+
+struct Golden {
+  Grid grid;
+  AttributeLayout layout{12, 3};
+  QuantizedMesh mesh;
+};
+
+// A small mesh with what the codecs must keep: normals and colors, a vertex at the position of another with a
+// different normal, a duplicated and a reversed triangle, an isolated vertex.
+const Golden& golden() {
+  static const Golden g = [] {
+    Golden x;
+    Mesh sphere = icosphere(2);
+    for (const auto& p : sphere.positions) {
+      sphere.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
+      sphere.colors.push_back({uint8_t(128 + 100 * p[0]), uint8_t(128 + 100 * p[1]), uint8_t(128 + 100 * p[2]), 255});
+    }
+    sphere.color_channels = 3;
+    x.grid = *makeGrid(boundingBox(sphere), 12);
+    x.mesh = *quantizeMesh(sphere, x.grid, x.layout, nullptr);
+    QuantizedMesh& m = x.mesh;
+    const uint32_t twin = uint32_t(m.positions.size());
+    m.positions.push_back(m.positions[0]);
+    m.normals.push_back({uint16_t(m.normals[0][0] ^ 1), m.normals[0][1]});
+    m.colors.push_back(m.colors[0]);
+    size_t far = 0;  // a triangle away from vertex 0, to share an edge with the twin
+    while (m.positions[m.triangles[far][1]] == m.positions[0] || m.positions[m.triangles[far][2]] == m.positions[0]) ++far;
+    m.triangles.push_back({twin, m.triangles[far][1], m.triangles[far][2]});
+    m.triangles.push_back(m.triangles[7]);
+    m.triangles.push_back({m.triangles[9][0], m.triangles[9][2], m.triangles[9][1]});
+    m.positions.push_back({2048, 2048, 2048});  // isolated, inside the sphere
+    m.normals.push_back({0, 0});
+    m.colors.push_back({0, 0, 0, 255});
+    return x;
+  }();
+  return g;
+}
+
+std::string goldenPath(const CodecInfo& codec) {
+  return std::string(SCANPRESS_GOLDEN) + "/" + std::string(codec.name) + "-v" + std::to_string(codec.version) +
+         ".spz";
+}
+
+class GoldenStream : public ::testing::TestWithParam<CodecId> {};
+
+TEST_P(GoldenStream, DecodesToItsMeshAndTheEncoderStillWritesIt) {
+  const CodecInfo& codec = *findCodec(GetParam());
+  const Golden& g = golden();
+  const QuantizedMesh tiles[] = {g.mesh};
+  auto now = encodeContainer(g.grid, g.layout, codec, tiles);
+  ASSERT_TRUE(now.isOk()) << now.status().toString();
+  const std::string path = goldenPath(codec);
+  if (!std::filesystem::exists(path)) {
+    const char* write = std::getenv("SCANPRESS_WRITE_GOLDEN");
+    ASSERT_TRUE(write && std::string(write) == "1")
+        << path << " is missing: a new codec or version needs its golden stream (SCANPRESS_WRITE_GOLDEN=1)";
+    testing::writeBytes(path, std::string(now->begin(), now->end()));
+  }
+  const auto bytes = testing::readBytes(path);
+  auto parsed = parseContainer(bytes, path);
+  ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
+  ASSERT_EQ(parsed->tiles.size(), 1u);
+  const auto& e = parsed->tiles[0];
+  EXPECT_EQ(e.codec, codec.id);
+  EXPECT_EQ(e.codec_version, codec.version);
+  auto payload = parseTileChunk(std::span(bytes).subspan(e.offset, e.chunk_bytes), e, path);
+  ASSERT_TRUE(payload.isOk()) << payload.status().toString();
+  auto decoded = decodeTilePayload(parsed->header, e, *payload, path);
+  ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
+  EXPECT_TRUE(testing::cornerMultiset(*decoded, g.layout.normal_bits) ==
+              testing::cornerMultiset(g.mesh, g.layout.normal_bits));
+  EXPECT_TRUE(*now == bytes) << "this build writes " << codec.name << " v" << codec.version
+                             << " differently from its golden stream: a format change needs a new version";
+}
+
+std::vector<CodecId> everyCodec() {
+  std::vector<CodecId> ids;
+  for (const auto& c : allCodecs()) ids.push_back(c.id);
+  return ids;
+}
+
+INSTANTIATE_TEST_SUITE_P(Codecs, GoldenStream, ::testing::ValuesIn(everyCodec()),
+                         [](const ::testing::TestParamInfo<CodecId>& info) {
+                           return std::string(findCodec(info.param)->name);
+                         });
+
+}  // namespace
+}  // namespace scanpress
