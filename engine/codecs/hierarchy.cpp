@@ -171,18 +171,6 @@ Result<Header> readHeader(const HeaderFormat& f, const TileContext& ctx, std::sp
   return h;
 }
 
-}  // namespace scanpress::hierarchy
-
-namespace scanpress {
-uint64_t hierarchyPayloadVertices(std::span<const uint8_t> payload) {
-  ByteReader r(payload, "payload");
-  uint64_t n = 0;
-  return r.varint(n).isOk() ? n : 0;
-}
-}  // namespace scanpress
-
-namespace scanpress::hierarchy {
-
 std::vector<CodecLevel> headerLevels(const Header& h, int bits) {
   std::vector<CodecLevel> levels;
   u64 end = h.header_bytes;
@@ -280,12 +268,16 @@ EdgeThirds::EdgeThirds(const std::vector<TriKey>& keys) {
   for (u32 v = 0; v < n; ++v) std::sort(items.begin() + start[v], items.begin() + start[v + 1]);
 }
 
-std::vector<u8> orientWithoutCodes(const std::vector<TriKey>& keys) {
+std::vector<Triangle> orientedTriangles(const std::vector<TriKey>& keys) {
   std::vector<u8> orient;
   breadthFirst(keys, orient, [&](size_t u, int t, u32 x, u32 y) -> u8 {
     return t < 0 ? 0 : consistentOrientation(keys[t], orient[t], keys[u], x, y);
   });
-  return orient;
+  std::vector<Triangle> out;
+  out.reserve(keys.size());
+  for (size_t t = 0; t < keys.size(); ++t)
+    out.push_back(orient[t] ? Triangle{keys[t][0], keys[t][2], keys[t][1]} : Triangle{keys[t][0], keys[t][1], keys[t][2]});
+  return out;
 }
 
 void addCoarseAttributes(QuantizedMesh& m, const AttributeLayout& layout) {
@@ -308,3 +300,13 @@ void addCoarseAttributes(QuantizedMesh& m, const AttributeLayout& layout) {
 }
 
 }  // namespace scanpress::hierarchy
+
+namespace scanpress {
+
+uint64_t hierarchyPayloadVertices(std::span<const uint8_t> payload) {
+  ByteReader r(payload, "payload");
+  uint64_t n = 0;
+  return r.varint(n).isOk() ? n : 0;
+}
+
+}  // namespace scanpress

@@ -134,8 +134,8 @@ u8 consistentOrientation(const TriKey& t, u8 ot, const TriKey& u, u32 x, u32 y);
 template <class Visit>
 void breadthFirst(const std::vector<TriKey>& keys, std::vector<u8>& orient, Visit visit);
 
-// Orientations that agree across shared edges where they can (for coarse levels, which carry no codes).
-std::vector<u8> orientWithoutCodes(const std::vector<TriKey>& keys);
+// The keys as triangles, oriented to agree across shared edges where they can (coarse levels carry no codes).
+std::vector<Triangle> orientedTriangles(const std::vector<TriKey>& keys);
 
 // The triangles of the final level: for each key (breadth-first), one copy as the parent's orientation predicts,
 // one copy the other way, or explicit counts of both. `truth` (encoder) holds keys and copies over the same

@@ -299,13 +299,9 @@ class Engine {
       for (int a = 0; a < 3; ++a) p[a] += (1u << (bits_ - splitsAlong(depth_[c.s], a))) >> 1;
       m.positions.push_back(p);
     }
-    const auto keys = triangleKeys();
-    const auto orient = orientWithoutCodes(keys);
-    for (size_t t = 0; t < keys.size(); ++t) {
-      auto k = keys[t];
-      if (orient[t]) std::swap(k[1], k[2]);
-      m.triangles.push_back({index[k[0]], index[k[1]], index[k[2]]});
-    }
+    m.triangles = orientedTriangles(triangleKeys());
+    for (auto& t : m.triangles)
+      for (auto& v : t) v = index[v];
     addCoarseAttributes(m, layout);
     return m;
   }

@@ -185,12 +185,7 @@ class Engine {
       return 1;
     });
     SP_RETURN_IF_ERROR(status);
-    const auto orient = orientWithoutCodes(keys);
-    for (size_t t = 0; t < keys.size(); ++t) {
-      auto k = keys[t];
-      if (orient[t]) std::swap(k[1], k[2]);
-      m.triangles.push_back({k[0], k[1], k[2]});
-    }
+    m.triangles = orientedTriangles(keys);
     addCoarseAttributes(m, layout);
     return m;
   }
