@@ -51,6 +51,11 @@ class SurfaceIndex {
   // With a hint (a triangle likely near p, e.g. the previous answer for a nearby query), the search starts from
   // the distance to that triangle instead of an unbounded radius: the same exact result, far fewer nodes.
   Closest closest(const Vec3d& p, uint32_t hint = UINT32_MAX) const;
+  // closest() for many points, out[i] for points[i], the same exact distances. Meant for points that come in
+  // runs of neighbours (surface samples in triangle order): a run shares one Embree query that gathers every
+  // triangle that can be nearest to any of its points (from a bound given by the previous answer), and each
+  // point then takes the minimum over that short list.
+  void closestMany(std::span<const Vec3d> points, std::span<Closest> out) const;
 
   struct Hit {
     bool hit = false;

@@ -13,6 +13,7 @@
 #include <random>
 
 #include "engine/geometry.h"
+#include "engine/metro.h"
 #include "engine/shapes.h"
 #include "jobs/commands.h"
 #include "jobs/measure.h"
@@ -125,6 +126,106 @@ TEST(Measure, RandomMeshesMatchBruteForce) {
       ASSERT_NEAR(vlen(vsub(got.point, p)), got.distance, 1e-12);
     }
   }
+}
+
+// closestMany must give, for every point, the distance closest() gives (the same double: both are the minimum
+// of the same exact point-triangle distances), and the reported point and triangle must agree with it.
+void expectSameAsOneByOne(const SurfaceIndex& index, const Mesh& m, std::span<const Vec3d> points) {
+  std::vector<SurfaceIndex::Closest> many(points.size());
+  index.closestMany(points, many);
+  for (size_t i = 0; i < points.size(); ++i) {
+    const auto one = index.closest(points[i]);
+    ASSERT_EQ(many[i].distance, one.distance) << "point " << i;
+    ASSERT_LT(many[i].triangle, m.triangles.size()) << "point " << i;
+    ASSERT_NEAR(vlen(vsub(many[i].point, points[i])), many[i].distance, 1e-12 * (1 + many[i].distance));
+    const auto& t = m.triangles[many[i].triangle];
+    const Vec3d q =
+        closestPointOnTriangle(points[i], m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]);
+    ASSERT_EQ(std::sqrt(vdot(vsub(q, points[i]), vsub(q, points[i]))), many[i].distance) << "point " << i;
+  }
+}
+
+TEST(Measure, ManyQueriesMatchBruteForceOnRandomSoups) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int round = 0; round < 5; ++round) {
+    Mesh m;
+    for (int t = 0; t < 200; ++t) {
+      const Vec3d c{u(rng) * 3, u(rng) * 3, u(rng) * 3};
+      const double size = round % 2 ? 0.05 : 1.0;  // tiny or large triangles against the same spread of points
+      for (int k = 0; k < 3; ++k)
+        m.positions.push_back({c[0] + size * u(rng), c[1] + size * u(rng), c[2] + size * u(rng)});
+      m.triangles.push_back({uint32_t(3 * t), uint32_t(3 * t + 1), uint32_t(3 * t + 2)});
+    }
+    // Clusters of nearby points (they share gathers) and scattered points, interleaved.
+    std::vector<Vec3d> points;
+    for (int cl = 0; cl < 100; ++cl) {
+      const Vec3d c{u(rng) * 4, u(rng) * 4, u(rng) * 4};
+      const double spread = cl % 3 == 0 ? 1e-3 : cl % 3 == 1 ? 0.05 : 0.5;
+      for (int k = 0; k < 12; ++k) points.push_back({c[0] + spread * u(rng), c[1] + spread * u(rng), c[2] + spread * u(rng)});
+      points.push_back({u(rng) * 6, u(rng) * 6, u(rng) * 6});
+    }
+    auto index = SurfaceIndex::build(device(), m.positions, m.triangles);
+    ASSERT_TRUE(index.isOk());
+    std::vector<SurfaceIndex::Closest> many(points.size());
+    index->closestMany(points, many);
+    for (size_t q = 0; q < points.size(); ++q) {
+      double ref = 1e300;
+      for (const auto& t : m.triangles)
+        ref = std::min(ref, referenceDistance(points[q], m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]));
+      ASSERT_NEAR(many[q].distance, ref, 1e-6 * ref + 1e-12) << "round " << round << " query " << q;
+    }
+    expectSameAsOneByOne(*index, m, points);
+  }
+}
+
+TEST(Measure, ManyQueriesOnASurfaceAgreeWithSingleQueries) {
+  // Samples of a wavy sheet against a coarser tessellation of it (the shape of a real measurement: many samples
+  // per run, distances far below the triangle size), and the reverse.
+  auto wavy = [](int n) {
+    Mesh m = grid(n, 0.0);
+    for (auto& p : m.positions) p[2] = 0.05 * std::sin(7 * p[0]) * std::cos(5 * p[1]);
+    return m;
+  };
+  const Mesh fine = wavy(120), coarse = wavy(23);
+  for (int way = 0; way < 2; ++way) {
+    const Mesh& from = way ? coarse : fine;
+    const Mesh& to = way ? fine : coarse;
+    SampleOptions opt;
+    opt.density = 40000;
+    std::vector<Vec3d> samples;
+    sampleSurface(from.positions, from.triangles, opt, samples);
+    auto index = SurfaceIndex::build(device(), to.positions, to.triangles);
+    ASSERT_TRUE(index.isOk());
+    expectSameAsOneByOne(*index, to, samples);
+  }
+}
+
+TEST(Measure, ManyQueriesWithDegenerateTrianglesAndOutlyingPoints) {
+  Mesh m = grid(10, 0.0);
+  // Zero-area triangles: a repeated corner and three collinear corners.
+  m.positions.push_back({0.5, 0.5, 0.2});
+  m.positions.push_back({0.6, 0.5, 0.2});
+  m.positions.push_back({0.7, 0.5, 0.2});
+  const uint32_t a = uint32_t(m.positions.size()) - 3;
+  m.triangles.push_back({a, a, a + 1});
+  m.triangles.push_back({a, a + 1, a + 2});
+  std::vector<Vec3d> points;
+  for (int k = 0; k < 50; ++k) points.push_back({0.6 + 1e-3 * k, 0.5, 0.21});  // above the degenerate ones
+  for (int k = 0; k < 50; ++k) points.push_back({0.3, 0.3, 0.0});             // one point, many times
+  points.push_back({1e15, -1e15, 3e14});                                      // far outside any grid
+  points.push_back({1e15, -1e15, 3e14 + 1});
+  points.push_back({-2e9, 0.5, 0.5});
+  for (int k = 0; k < 20; ++k) points.push_back({5.0 + 1e-4 * k, 5.0, 5.0});   // a run far from the surface
+  auto index = SurfaceIndex::build(device(), m.positions, m.triangles);
+  ASSERT_TRUE(index.isOk());
+  expectSameAsOneByOne(*index, m, points);
+  // Nothing to do, and a single point.
+  std::vector<SurfaceIndex::Closest> none;
+  index->closestMany({}, none);
+  std::vector<SurfaceIndex::Closest> one(1);
+  index->closestMany(std::span(points).first(1), one);
+  EXPECT_EQ(one[0].distance, index->closest(points[0]).distance);
 }
 
 TEST(Measure, SameNumbersAtAnyThreadCount) {
