@@ -61,13 +61,48 @@ struct SurfaceIndex::Impl {
   // the origin, 16 floats, one cache line): a lower bound of a point's distance to the triangle in four dot
   // products (closestMany).
   std::vector<float> planes;
-  // Per triangle, its three corners in double: the exact tests read one place instead of four.
+  // Per triangle, its three corners in double: closestMany's exact tests read one place instead of four.
   std::vector<Vec3d> corners;
+  std::once_flag records;  // planes and corners are built on closestMany's first batch
   double mean_radius = 0;  // of the triangles' bounding spheres (sizes closestMany's runs)
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
   }
 };
+
+namespace {
+
+// closestMany's per-triangle records, built on its first use (closest() and intersect() do without them).
+void buildRecords(SurfaceIndex::Impl& m) {
+  m.corners.resize(m.triangles.size() * 3);
+  for (size_t t = 0; t < m.triangles.size(); ++t)
+    for (int k = 0; k < 3; ++k) m.corners[3 * t + k] = m.positions[m.triangles[t][k]];
+  m.planes.assign(m.triangles.size() * 16, 0.f);
+  for (size_t t = 0; t < m.triangles.size(); ++t) {
+    const Vec3d v[3] = {vsub(m.positions[m.triangles[t][0]], m.origin), vsub(m.positions[m.triangles[t][1]], m.origin),
+                        vsub(m.positions[m.triangles[t][2]], m.origin)};
+    Vec3d n = vcross(vsub(v[1], v[0]), vsub(v[2], v[0]));
+    const double len = vlen(n);
+    if (!(len > 0)) continue;  // degenerate: all zeros, a bound of 0 (never rejects)
+    n = vmul(n, 1.0 / len);
+    float* out = &m.planes[16 * t];
+    for (int a = 0; a < 3; ++a) out[a] = static_cast<float>(n[a]);
+    out[3] = static_cast<float>(vdot(n, v[0]));
+    for (int e = 0; e < 3; ++e) {
+      const Vec3d& a = v[e];
+      const Vec3d& b = v[(e + 1) % 3];
+      Vec3d mo = vcross(vsub(b, a), n);  // in the plane, perpendicular to the edge, away from the third vertex
+      const double ml = vlen(mo);
+      if (!(ml > 0)) continue;
+      mo = vmul(mo, 1.0 / ml);
+      for (int k = 0; k < 3; ++k) out[4 + 4 * e + k] = static_cast<float>(mo[k]);
+      out[4 + 4 * e + 3] = static_cast<float>(vdot(mo, a));
+    }
+  }
+
+}
+
+}  // namespace
 
 SurfaceIndex::SurfaceIndex(SurfaceIndex&&) noexcept = default;
 SurfaceIndex& SurfaceIndex::operator=(SurfaceIndex&&) noexcept = default;
@@ -115,31 +150,6 @@ Result<SurfaceIndex> SurfaceIndex::build(std::shared_ptr<EmbreeDevice> device, s
     m.mean_radius += r;
   }
   if (!triangles.empty()) m.mean_radius /= double(triangles.size());
-  m.corners.resize(triangles.size() * 3);
-  for (size_t t = 0; t < triangles.size(); ++t)
-    for (int k = 0; k < 3; ++k) m.corners[3 * t + k] = positions[triangles[t][k]];
-  m.planes.assign(triangles.size() * 16, 0.f);
-  for (size_t t = 0; t < triangles.size(); ++t) {
-    const Vec3d v[3] = {vsub(positions[triangles[t][0]], m.origin), vsub(positions[triangles[t][1]], m.origin),
-                        vsub(positions[triangles[t][2]], m.origin)};
-    Vec3d n = vcross(vsub(v[1], v[0]), vsub(v[2], v[0]));
-    const double len = vlen(n);
-    if (!(len > 0)) continue;  // degenerate: all zeros, a bound of 0 (never rejects)
-    n = vmul(n, 1.0 / len);
-    float* out = &m.planes[16 * t];
-    for (int a = 0; a < 3; ++a) out[a] = static_cast<float>(n[a]);
-    out[3] = static_cast<float>(vdot(n, v[0]));
-    for (int e = 0; e < 3; ++e) {
-      const Vec3d& a = v[e];
-      const Vec3d& b = v[(e + 1) % 3];
-      Vec3d mo = vcross(vsub(b, a), n);  // in the plane, perpendicular to the edge, away from the third vertex
-      const double ml = vlen(mo);
-      if (!(ml > 0)) continue;
-      mo = vmul(mo, 1.0 / ml);
-      for (int k = 0; k < 3; ++k) out[4 + 4 * e + k] = static_cast<float>(mo[k]);
-      out[4 + 4 * e + 3] = static_cast<float>(vdot(mo, a));
-    }
-  }
 
   RTCDevice dev = static_cast<RTCDevice>(m.device->handle());
   m.scene = rtcNewScene(dev);
@@ -185,8 +195,8 @@ static bool closestCallback(RTCPointQueryFunctionArguments* args) {
   const float dx = q->px - sp[0], dy = q->py - sp[1], dz = q->pz - sp[2];
   const float reach = q->best_f + sp[3];
   if (dx * dx + dy * dy + dz * dz > reach * reach * (1.0f + 8 * std::numeric_limits<float>::epsilon())) return false;
-  const Vec3d* t = &impl.corners[3 * size_t(args->primID)];
-  const Vec3d c = closestPointOnTriangle(q->p, t[0], t[1], t[2]);
+  const Triangle& t = impl.triangles[args->primID];
+  const Vec3d c = closestPointOnTriangle(q->p, impl.positions[t[0]], impl.positions[t[1]], impl.positions[t[2]]);
   const Vec3d d = vsub(c, q->p);
   const double d2 = vdot(d, d);
   if (d2 >= q->best_d2) return false;
@@ -218,8 +228,8 @@ SurfaceIndex::Closest SurfaceIndex::closest(const Vec3d& p, uint32_t hint) const
   query.time = 0.f;
   query.radius = std::numeric_limits<float>::infinity();
   if (hint < impl_->triangles.size()) {
-    const Vec3d* t = &impl_->corners[3 * size_t(hint)];
-    const Vec3d c = closestPointOnTriangle(p, t[0], t[1], t[2]);
+    const Triangle& t = impl_->triangles[hint];
+    const Vec3d c = closestPointOnTriangle(p, impl_->positions[t[0]], impl_->positions[t[1]], impl_->positions[t[2]]);
     const Vec3d d = vsub(c, p);
     q.best_d2 = vdot(d, d);
     q.best = c;
@@ -342,6 +352,7 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     order[i] = {key, uint32_t(i)};
   }
   std::sort(order.begin(), order.end());
+  std::call_once(impl_->records, [this] { buildRecords(*impl_); });
 
   Candidates found;
   std::vector<uint32_t> prims;
