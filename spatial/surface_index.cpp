@@ -79,11 +79,15 @@ void buildRecords(SurfaceIndex::Impl& m) {
     for (int k = 0; k < 3; ++k) m.corners[3 * t + k] = m.positions[m.triangles[t][k]];
   m.planes.assign(m.triangles.size() * 16, 0.f);
   for (size_t t = 0; t < m.triangles.size(); ++t) {
-    const Vec3d v[3] = {vsub(m.positions[m.triangles[t][0]], m.origin), vsub(m.positions[m.triangles[t][1]], m.origin),
-                        vsub(m.positions[m.triangles[t][2]], m.origin)};
-    Vec3d n = vcross(vsub(v[1], v[0]), vsub(v[2], v[0]));
+    const Triangle& tri = m.triangles[t];
+    const Vec3d v[3] = {vsub(m.positions[tri[0]], m.origin), vsub(m.positions[tri[1]], m.origin),
+                        vsub(m.positions[tri[2]], m.origin)};
+    const Vec3d e1 = vsub(v[1], v[0]), e2 = vsub(v[2], v[0]);
+    Vec3d n = vcross(e1, e2);
     const double len = vlen(n);
-    if (!(len > 0)) continue;  // degenerate: all zeros, a bound of 0 (never rejects)
+    // Degenerate or needle-thin (sine of the angle below 1e-6, where the normal's direction loses precision): all
+    // zeros, a bound of 0, never rejected.
+    if (!(len > 1e-6 * vlen(e1) * vlen(e2))) continue;
     n = vmul(n, 1.0 / len);
     float* out = &m.planes[16 * t];
     for (int a = 0; a < 3; ++a) out[a] = static_cast<float>(n[a]);
@@ -99,7 +103,6 @@ void buildRecords(SurfaceIndex::Impl& m) {
       out[4 + 4 * e + 3] = static_cast<float>(vdot(mo, a));
     }
   }
-
 }
 
 }  // namespace

@@ -203,6 +203,7 @@ TEST(Measure, ManyQueriesOnASurfaceAgreeWithSingleQueries) {
 
 TEST(Measure, ManyQueriesWithDegenerateTrianglesAndOutlyingPoints) {
   Mesh m = grid(10, 0.0);
+  std::vector<Vec3d> points;
   // Zero-area triangles: a repeated corner and three collinear corners.
   m.positions.push_back({0.5, 0.5, 0.2});
   m.positions.push_back({0.6, 0.5, 0.2});
@@ -210,7 +211,13 @@ TEST(Measure, ManyQueriesWithDegenerateTrianglesAndOutlyingPoints) {
   const uint32_t a = uint32_t(m.positions.size()) - 3;
   m.triangles.push_back({a, a, a + 1});
   m.triangles.push_back({a, a + 1, a + 2});
-  std::vector<Vec3d> points;
+  // A needle: its third corner 1e-12 off the line of the other two.
+  m.positions.push_back({0.2, 0.2, 0.1});
+  m.positions.push_back({0.8, 0.8, 0.1});
+  m.positions.push_back({0.5, 0.5 + 1e-12, 0.1});
+  const uint32_t b = uint32_t(m.positions.size()) - 3;
+  m.triangles.push_back({b, b + 1, b + 2});
+  for (int k = 0; k < 30; ++k) points.push_back({0.3 + 0.01 * k, 0.3 + 0.01 * k + 1e-4, 0.1 + 1e-4});
   for (int k = 0; k < 50; ++k) points.push_back({0.6 + 1e-3 * k, 0.5, 0.21});  // above the degenerate ones
   for (int k = 0; k < 50; ++k) points.push_back({0.3, 0.3, 0.0});             // one point, many times
   points.push_back({1e15, -1e15, 3e14});                                      // far outside any grid
