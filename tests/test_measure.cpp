@@ -104,23 +104,35 @@ double referenceDistance(const Vec3d& p, const Vec3d& a, const Vec3d& b, const V
   return best;
 }
 
+// `count` separate triangles, corners within `size` of centers spread over [-3, 3]^3.
+Mesh randomSoup(std::mt19937& rng, int count, double size) {
+  std::uniform_real_distribution<double> u(-1, 1);
+  Mesh m;
+  for (int t = 0; t < count; ++t) {
+    const Vec3d c{u(rng) * 3, u(rng) * 3, u(rng) * 3};
+    for (int k = 0; k < 3; ++k) m.positions.push_back({c[0] + size * u(rng), c[1] + size * u(rng), c[2] + size * u(rng)});
+    m.triangles.push_back({uint32_t(3 * t), uint32_t(3 * t + 1), uint32_t(3 * t + 2)});
+  }
+  return m;
+}
+
+double bruteForceDistance(const Mesh& m, const Vec3d& p) {
+  double best = 1e300;
+  for (const auto& t : m.triangles)
+    best = std::min(best, referenceDistance(p, m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]));
+  return best;
+}
+
 TEST(Measure, RandomMeshesMatchBruteForce) {
   std::mt19937 rng(21);
   std::uniform_real_distribution<double> u(-1, 1);
   for (int round = 0; round < 5; ++round) {
-    Mesh m;
-    for (int t = 0; t < 60; ++t) {
-      const Vec3d c{u(rng) * 3, u(rng) * 3, u(rng) * 3};
-      for (int k = 0; k < 3; ++k) m.positions.push_back({c[0] + u(rng), c[1] + u(rng), c[2] + u(rng)});
-      m.triangles.push_back({uint32_t(3 * t), uint32_t(3 * t + 1), uint32_t(3 * t + 2)});
-    }
+    const Mesh m = randomSoup(rng, 60, 1.0);
     auto index = SurfaceIndex::build(device(), m.positions, m.triangles);
     ASSERT_TRUE(index.isOk());
     for (int q = 0; q < 2000; ++q) {
       const Vec3d p{u(rng) * 5, u(rng) * 5, u(rng) * 5};
-      double ref = 1e300;
-      for (const auto& t : m.triangles)
-        ref = std::min(ref, referenceDistance(p, m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]));
+      const double ref = bruteForceDistance(m, p);
       const auto got = index->closest(p);
       ASSERT_NEAR(got.distance, ref, 1e-6 * ref + 1e-12) << "query " << q;
       ASSERT_NEAR(vlen(vsub(got.point, p)), got.distance, 1e-12);
@@ -149,14 +161,8 @@ TEST(Measure, ManyQueriesMatchBruteForceOnRandomSoups) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(-1, 1);
   for (int round = 0; round < 5; ++round) {
-    Mesh m;
-    for (int t = 0; t < 200; ++t) {
-      const Vec3d c{u(rng) * 3, u(rng) * 3, u(rng) * 3};
-      const double size = round % 2 ? 0.05 : 1.0;  // tiny or large triangles against the same spread of points
-      for (int k = 0; k < 3; ++k)
-        m.positions.push_back({c[0] + size * u(rng), c[1] + size * u(rng), c[2] + size * u(rng)});
-      m.triangles.push_back({uint32_t(3 * t), uint32_t(3 * t + 1), uint32_t(3 * t + 2)});
-    }
+    // Tiny or large triangles against the same spread of points.
+    const Mesh m = randomSoup(rng, 200, round % 2 ? 0.05 : 1.0);
     // Clusters of nearby points (they share gathers) and scattered points, interleaved.
     std::vector<Vec3d> points;
     for (int cl = 0; cl < 100; ++cl) {
@@ -170,9 +176,7 @@ TEST(Measure, ManyQueriesMatchBruteForceOnRandomSoups) {
     std::vector<SurfaceIndex::Closest> many(points.size());
     index->closestMany(points, many);
     for (size_t q = 0; q < points.size(); ++q) {
-      double ref = 1e300;
-      for (const auto& t : m.triangles)
-        ref = std::min(ref, referenceDistance(points[q], m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]));
+      const double ref = bruteForceDistance(m, points[q]);
       ASSERT_NEAR(many[q].distance, ref, 1e-6 * ref + 1e-12) << "round " << round << " query " << q;
     }
     expectSameAsOneByOne(*index, m, points);
