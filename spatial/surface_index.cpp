@@ -234,11 +234,14 @@ SurfaceIndex::Closest SurfaceIndex::closest(const Vec3d& p, uint32_t hint) const
     const Triangle& t = impl_->triangles[hint];
     const Vec3d c = closestPointOnTriangle(p, impl_->positions[t[0]], impl_->positions[t[1]], impl_->positions[t[2]]);
     const Vec3d d = vsub(c, p);
-    q.best_d2 = vdot(d, d);
-    q.best = c;
-    q.triangle = hint;
-    query.radius = q.best_f =
-        static_cast<float>(std::sqrt(q.best_d2)) * (1.0f + 4 * std::numeric_limits<float>::epsilon()) + impl_->slack;
+    const double d2 = vdot(d, d);
+    if (!std::isnan(d2)) {  // NaN when p is not finite: then ignored, the answer is the same as without a hint
+      q.best_d2 = d2;
+      q.best = c;
+      q.triangle = hint;
+      query.radius = q.best_f =
+          static_cast<float>(std::sqrt(d2)) * (1.0f + 4 * std::numeric_limits<float>::epsilon()) + impl_->slack;
+    }
   }
   RTCPointQueryContext context;
   rtcInitPointQueryContext(&context);
@@ -346,13 +349,14 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
   const double cell = kCellRadii * m.mean_radius;
   std::vector<std::pair<uint64_t, uint32_t>> order(points.size());
   for (size_t i = 0; i < points.size(); ++i) {
-    uint64_t key = 0;
+    uint64_t key = 0;  // 63 bits: UINT64_MAX is free for the non-finite points
+    bool finite = true;
     for (int a = 0; a < 3; ++a) {
       const double g = std::floor((points[i][a] - m.origin[a]) / cell) + double(1 << 20);
       key = key << 21 | (g >= 0 ? uint64_t(std::min(g, double((1 << 21) - 1))) : 0);
-      if (!std::isfinite(g)) key = UINT64_MAX;
+      finite = finite && std::isfinite(g);
     }
-    order[i] = {key, uint32_t(i)};
+    order[i] = {finite ? key : UINT64_MAX, uint32_t(i)};
   }
   std::sort(order.begin(), order.end());
   std::call_once(impl_->records, [this] { buildRecords(*impl_); });

@@ -239,6 +239,28 @@ TEST(Measure, ManyQueriesWithDegenerateTrianglesAndOutlyingPoints) {
   EXPECT_EQ(one[0].distance, index->closest(points[0]).distance);
 }
 
+TEST(Measure, ManyQueriesSetNonFinitePointsApart) {
+  // A non-finite point in the middle of a run of near ones (and one whose first coordinate alone is NaN) must
+  // neither join the run nor change its answers; it gets what closest() gives it.
+  const Mesh m = grid(10, 0.0);
+  std::vector<Vec3d> points;
+  for (int k = 0; k < 20; ++k) points.push_back({0.31 + 1e-3 * k, 0.32, 0.01});
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  points.insert(points.begin() + 5, Vec3d{nan, 0.32, 0.01});
+  points.insert(points.begin() + 9, Vec3d{0.31, std::numeric_limits<double>::infinity(), 0.01});
+  auto index = SurfaceIndex::build(device(), m.positions, m.triangles);
+  ASSERT_TRUE(index.isOk());
+  std::vector<SurfaceIndex::Closest> many(points.size());
+  index->closestMany(points, many);
+  for (size_t i = 0; i < points.size(); ++i) {
+    const auto one = index->closest(points[i]);
+    if (std::isnan(one.distance))
+      EXPECT_TRUE(std::isnan(many[i].distance)) << "point " << i;
+    else
+      EXPECT_EQ(many[i].distance, one.distance) << "point " << i;
+  }
+}
+
 TEST(Measure, SameNumbersAtAnyThreadCount) {
   const Mesh sphere = icosphere(4), ico = icosphere(1);
   MeasureSettings s;
