@@ -60,7 +60,8 @@ typedef float Lanes __attribute__((vector_size(4 * kLanes), aligned(4)));
 // and their corners in double (for exact tests).
 struct ClusterSet {
   RTCScene scene = nullptr;
-  std::vector<float> boxes;     // per cluster: lower xyz, 0, upper xyz, 0 (relative to the origin, rounded outward)
+  std::vector<float> boxes;     // per cluster: lower xyz, 0, upper xyz, 0 (relative to the origin, rounded outward);
+                                // for Embree's build, then freed
   std::vector<uint32_t> first;  // cluster k's blocks are [first[k], first[k + 1])
   std::vector<float> rows;      // per block: 16 rows of kLanes floats (row r = component r of the records)
   std::vector<uint32_t> ids;    // per slot (block * kLanes + lane): the triangle, UINT32_MAX in an unused lane
@@ -153,6 +154,26 @@ float roundUp(double x) {
   return f < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
 }
 
+// Grows the box [lo, hi] to take in [add_lo, add_hi] if the result's half-diagonal stays within `half`; false
+// (box unchanged) otherwise.
+bool growWithin(Vec3d& lo, Vec3d& hi, const Vec3d& add_lo, const Vec3d& add_hi, double half) {
+  Vec3d l2, h2;
+  for (int a = 0; a < 3; ++a) l2[a] = std::min(lo[a], add_lo[a]), h2[a] = std::max(hi[a], add_hi[a]);
+  if (!(0.5 * vlen(vsub(h2, l2)) <= half)) return false;
+  lo = l2, hi = h2;
+  return true;
+}
+
+// Lane `at` of blocks of plane records (16 rows of kLanes floats), starting a block when `at` is its first lane
+// (unused lanes: plane offset -inf, a bound of +inf). The record's component r goes to the result[r * kLanes].
+float* appendLane(std::vector<float>& rows, size_t at) {
+  if (at % kLanes == 0) {
+    rows.resize(rows.size() + 16 * kLanes, 0.f);
+    std::fill_n(rows.end() - 13 * kLanes, kLanes, -std::numeric_limits<float>::infinity());
+  }
+  return rows.data() + (at / kLanes) * 16 * kLanes + at % kLanes;
+}
+
 void clusterBounds(const RTCBoundsFunctionArguments* args) {
   const float* b = &static_cast<const ClusterSet*>(args->geometryUserPtr)->boxes[8 * size_t(args->primID)];
   args->bounds_o->lower_x = b[0], args->bounds_o->lower_y = b[1], args->bounds_o->lower_z = b[2];
@@ -191,27 +212,19 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m, RTCDevice
     for (int k = 0; k < 3; ++k) v[k] = vsub(m.positions[m.triangles[t][k]], m.origin);
     for (int a = 0; a < 3; ++a)
       tlo[a] = std::min({v[0][a], v[1][a], v[2][a]}), thi[a] = std::max({v[0][a], v[1][a], v[2][a]});
-    if (size > 0) {
-      Vec3d l2, h2;
-      for (int a = 0; a < 3; ++a) l2[a] = std::min(lo[a], tlo[a]), h2[a] = std::max(hi[a], thi[a]);
-      if (size == kClusterSize || !(0.5 * vlen(vsub(h2, l2)) <= limit)) {
-        close();
-        size = 0;
-      } else {
-        lo = l2, hi = h2;
-      }
+    if (size > 0 && (size == kClusterSize || !growWithin(lo, hi, tlo, thi, limit))) {
+      close();
+      size = 0;
     }
     if (size == 0) lo = tlo, hi = thi;
-    if (size % kLanes == 0) {  // a new block; unused lanes: plane offset -inf, a bound of +inf
-      set->rows.resize(set->rows.size() + 16 * kLanes, 0.f);
-      std::fill_n(set->rows.end() - 13 * kLanes, kLanes, -std::numeric_limits<float>::infinity());
+    if (size % kLanes == 0) {  // a new block
       set->ids.resize(set->ids.size() + kLanes, UINT32_MAX);
       set->corners.resize(set->corners.size() + 3 * kLanes, Vec3d{0, 0, 0});
     }
     const size_t slot = set->ids.size() - kLanes + size % kLanes;
     float record[16];
     planeRecord(v, record);
-    float* dst = set->rows.data() + (slot / kLanes) * 16 * kLanes + slot % kLanes;
+    float* dst = appendLane(set->rows, slot);
     for (size_t a = 0; a < 16; ++a) dst[a * kLanes] = record[a];
     set->ids[slot] = t;
     for (int k = 0; k < 3; ++k) set->corners[3 * slot + k] = m.positions[m.triangles[t][k]];
@@ -232,6 +245,7 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m, RTCDevice
   }
   rtcCommitScene(set->scene);
   if (rtcGetDeviceError(device) != RTC_ERROR_NONE) return nullptr;
+  std::vector<float>().swap(set->boxes);  // read by Embree's build only (the scene is never committed again)
   return set;
 }
 
@@ -473,10 +487,7 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     Vec3d lo = points[order[i].second], hi = lo;
     for (j = i + 1; j < order.size() && order[i].first != UINT64_MAX; ++j) {
       const Vec3d& p = points[order[j].second];
-      Vec3d l2, h2;
-      for (int a = 0; a < 3; ++a) l2[a] = std::min(lo[a], p[a]), h2[a] = std::max(hi[a], p[a]);
-      if (!(0.5 * vlen(vsub(h2, l2)) <= run_half)) break;
-      lo = l2, hi = h2;
+      if (!growWithin(lo, hi, p, p, run_half)) break;
     }
     runs.push_back({i, j, vmul(vadd(lo, hi), 0.5), 0.5 * vlen(vsub(hi, lo))});
   }
@@ -530,13 +541,9 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
       lowerBounds2(&set->rows[b0 * 16 * kLanes], b1 - b0, current.cf, near);
       for (size_t n = 0; n < (b1 - b0) * kLanes; ++n) {
         if (!(near[n] <= within)) continue;  // also every unused lane (+inf)
-        const size_t slot = b0 * kLanes + n, at = slots.size();
-        if (at % kLanes == 0) {  // a new block, unused lanes bound to +inf (plane offset -inf)
-          rows.resize(rows.size() + 16 * kLanes, 0.f);
-          std::fill_n(rows.end() - 13 * kLanes, kLanes, -std::numeric_limits<float>::infinity());
-        }
+        const size_t slot = b0 * kLanes + n;
         const float* src = &set->rows[(slot / kLanes) * 16 * kLanes + slot % kLanes];
-        float* dst = &rows[(at / kLanes) * 16 * kLanes + at % kLanes];
+        float* dst = appendLane(rows, slots.size());
         for (size_t a = 0; a < 16; ++a) dst[a * kLanes] = src[a * kLanes];
         slots.push_back(uint32_t(slot));
         const char* corners = reinterpret_cast<const char*>(&set->corners[3 * slot]);

@@ -11,8 +11,9 @@
 // Besides Embree's BVH, an index keeps per triangle a bounding sphere (16 bytes). closestMany's first call adds
 // its clusters: per triangle a plane record (64 bytes: plane and edge lines in float, for lower bounds), its
 // corners in double (72: an exact test reads one place instead of four) and its id (4), in clusters of up to 8
-// nearby triangles stored in blocks of 4 (a cluster's unused lanes cost the same), per cluster a box (32) and an
-// offset (4), and a second, small Embree scene over the clusters: about 180 bytes per triangle in all.
+// nearby triangles stored in blocks of 4 (a cluster's unused lanes cost the same), per cluster an offset (4), and
+// a second, small Embree scene over the clusters (built from the clusters' boxes, 32 bytes each, freed after):
+// about 180 bytes per triangle in all.
 //
 // Thread safety: closest(), closestMany() and intersect() may be called from many threads at once.
 #pragma once
