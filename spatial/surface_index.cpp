@@ -109,16 +109,38 @@ uint64_t spreadBits(uint64_t v) {
   return v;
 }
 
-// Morton key of the grid cell (of size `cell`, centered on the origin) holding v (relative to the origin); 63
-// bits. Coordinates beyond the grid's 2^21 cells share its border cells; not finite: UINT64_MAX.
-uint64_t mortonKey(const Vec3d& v, double cell) {
+// Morton key of the grid cell (of size 1 / inv_cell, centered on the origin) holding v (relative to the origin);
+// 63 bits. Coordinates beyond the grid's 2^21 cells share its border cells; not finite: UINT64_MAX.
+uint64_t mortonKey(const Vec3d& v, double inv_cell) {
   uint64_t key = 0;
   for (int a = 0; a < 3; ++a) {
-    const double g = std::floor(v[a] / cell) + double(1 << 20);
+    const double g = v[a] * inv_cell + double(1 << 20);
     if (!std::isfinite(g)) return UINT64_MAX;
-    key |= spreadBits(g >= 0 ? uint64_t(std::min(g, double((1 << 21) - 1))) : 0) << (2 - a);
+    key |= spreadBits(uint64_t(int64_t(std::clamp(g, 0.0, double((1 << 21) - 1))))) << (2 - a);  // floor here
   }
   return key;
+}
+
+// Sorts (key, index) pairs as std::sort would, given distinct indices in increasing order: a stable radix sort
+// on the bytes where keys differ (a batch of nearby points shares most of its keys' bits), the UINT64_MAX keys
+// (points not finite) last.
+void sortByKey(std::vector<std::pair<uint64_t, uint32_t>>& v) {
+  const size_t n = std::stable_partition(v.begin(), v.end(), [](const auto& e) { return e.first != UINT64_MAX; }) -
+                   v.begin();
+  uint64_t differ = 0;
+  for (size_t k = 1; k < n; ++k) differ |= v[k].first ^ v[0].first;
+  std::vector<std::pair<uint64_t, uint32_t>> scratch(n);
+  auto* from = v.data();
+  auto* to = scratch.data();
+  for (int shift = 0; shift < 64; shift += 8) {
+    if (((differ >> shift) & 0xff) == 0) continue;  // the same byte in every key
+    size_t start[257] = {};
+    for (size_t k = 0; k < n; ++k) ++start[((from[k].first >> shift) & 0xff) + 1];
+    for (size_t d = 1; d < 257; ++d) start[d] += start[d - 1];
+    for (size_t k = 0; k < n; ++k) to[start[(from[k].first >> shift) & 0xff]++] = from[k];
+    std::swap(from, to);
+  }
+  if (from != v.data()) std::copy(from, from + n, v.data());
 }
 
 // The plane record of a triangle (corners relative to the origin): unit normal and offset, then each edge's
@@ -159,7 +181,8 @@ float roundUp(double x) {
 bool growWithin(Vec3d& lo, Vec3d& hi, const Vec3d& add_lo, const Vec3d& add_hi, double half) {
   Vec3d l2, h2;
   for (int a = 0; a < 3; ++a) l2[a] = std::min(lo[a], add_lo[a]), h2[a] = std::max(hi[a], add_hi[a]);
-  if (!(0.5 * vlen(vsub(h2, l2)) <= half)) return false;
+  const Vec3d d = vsub(h2, l2);
+  if (!(0.25 * vdot(d, d) <= half * half)) return false;
   lo = l2, hi = h2;
   return true;
 }
@@ -189,7 +212,7 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m, RTCDevice
   for (size_t t = 0; t < m.triangles.size(); ++t) {
     Vec3d c{0, 0, 0};
     for (uint32_t v : m.triangles[t]) c = vadd(c, vsub(m.positions[v], m.origin));
-    const uint64_t key = mortonKey(vmul(c, 1.0 / 3), m.mean_radius);
+    const uint64_t key = mortonKey(vmul(c, 1.0 / 3), 1.0 / m.mean_radius);
     bool finite = true;
     for (uint32_t v : m.triangles[t])
       for (double x : m.positions[v]) finite = finite && std::isfinite(x);
@@ -470,10 +493,10 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     for (size_t i = 0; i < points.size(); ++i) out[i] = closest(points[i]);
     return;
   }
-  const double cell = kCellRadii * m.mean_radius, run_half = kRunRadii * m.mean_radius;
+  const double inv_cell = 1 / (kCellRadii * m.mean_radius), run_half = kRunRadii * m.mean_radius;
   std::vector<std::pair<uint64_t, uint32_t>> order(points.size());
-  for (size_t i = 0; i < points.size(); ++i) order[i] = {mortonKey(vsub(points[i], m.origin), cell), uint32_t(i)};
-  std::sort(order.begin(), order.end());
+  for (size_t i = 0; i < points.size(); ++i) order[i] = {mortonKey(vsub(points[i], m.origin), inv_cell), uint32_t(i)};
+  sortByKey(order);
 
   // Runs first; each run's gather is made one run ahead, so that the memory its clusters need is on its way while
   // the run before is processed.
