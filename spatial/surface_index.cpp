@@ -187,14 +187,17 @@ bool growWithin(Vec3d& lo, Vec3d& hi, const Vec3d& add_lo, const Vec3d& add_hi, 
   return true;
 }
 
-// Lane `at` of blocks of plane records (16 rows of kLanes floats), starting a block when `at` is its first lane
-// (unused lanes: plane offset -inf, a bound of +inf). The record's component r goes to the result[r * kLanes].
-float* appendLane(std::vector<float>& rows, size_t at) {
-  if (at % kLanes == 0) {
-    rows.resize(rows.size() + 16 * kLanes, 0.f);
-    std::fill_n(rows.end() - 13 * kLanes, kLanes, -std::numeric_limits<float>::infinity());
-  }
-  return rows.data() + (at / kLanes) * 16 * kLanes + at % kLanes;
+// Lane `at` of blocks of plane records (16 rows of kLanes floats): the record's component r is result[r * kLanes].
+template <typename Float>
+Float* laneOf(Float* rows, size_t at) {
+  return rows + (at / kLanes) * 16 * kLanes + at % kLanes;
+}
+
+// Copies the record of lane `from` into lane `to`, or, without `from`, makes `to` unused: plane offset -inf, a
+// bound of +inf (its triangle is never tested).
+void setLane(float* to, const float* from) {
+  for (size_t a = 0; a < 16; ++a)
+    to[a * kLanes] = from ? from[a * kLanes] : a == 3 ? -std::numeric_limits<float>::infinity() : 0.f;
 }
 
 void clusterBounds(const RTCBoundsFunctionArguments* args) {
@@ -247,7 +250,11 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m, RTCDevice
     const size_t slot = set->ids.size() - kLanes + size % kLanes;
     float record[16];
     planeRecord(v, record);
-    float* dst = appendLane(set->rows, slot);
+    if (size % kLanes == 0) {  // the new block's lanes start unused
+      set->rows.resize(set->rows.size() + 16 * kLanes);
+      for (size_t l = 0; l < kLanes; ++l) setLane(laneOf(set->rows.data(), slot + l), nullptr);
+    }
+    float* dst = laneOf(set->rows.data(), slot);
     for (size_t a = 0; a < 16; ++a) dst[a * kLanes] = record[a];
     set->ids[slot] = t;
     for (int k = 0; k < 3; ++k) set->corners[3 * slot + k] = m.positions[m.triangles[t][k]];
@@ -441,7 +448,17 @@ void lowerBounds2(const float* rows, size_t blocks, const float* p, float* __res
   }
 }
 
-// Index of the least of v[0, count) (count a multiple of kLanes).
+typedef int LaneInts __attribute__((vector_size(4 * kLanes), aligned(4)));
+
+// Bit l set where a[l] <= b[l] (one movmskps on x86).
+inline unsigned lanesAtMost(Lanes a, Lanes b) {
+  const LaneInts m = a <= b;
+  unsigned bits = 0;
+  for (size_t l = 0; l < kLanes; ++l) bits |= unsigned(m[l] & 1) << l;
+  return bits;
+}
+
+// Index of the least of v[0, count), read in whole blocks of kLanes (v padded with +inf).
 size_t argminOf(const float* v, size_t count) {
   const Lanes* r = reinterpret_cast<const Lanes*>(v);
   Lanes low = r[0];
@@ -557,25 +574,26 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     // The run's candidates: the triangles of its clusters that may lie within R of c (by their bound), their plane
     // records in blocks of kLanes and their slots.
     const float within = current.reach_f * current.reach_f * (1 + 16 * kEps);
-    rows.clear(), slots.clear();
+    size_t lanes = 0;  // candidates so far
+    for (uint32_t k : current.clusters) lanes += (set->first[k + 1] - set->first[k]) * kLanes;
+    if (slots.size() < lanes) slots.resize(lanes), rows.resize(lanes * 16), bounds.resize(lanes);
+    lanes = 0;
     for (uint32_t k : current.clusters) {
       const size_t b0 = set->first[k], b1 = set->first[k + 1];
-      float near[kClusterSize];
-      lowerBounds2(&set->rows[b0 * 16 * kLanes], b1 - b0, current.cf, near);
-      for (size_t n = 0; n < (b1 - b0) * kLanes; ++n) {
-        if (!(near[n] <= within)) continue;  // also every unused lane (+inf)
-        const size_t slot = b0 * kLanes + n;
-        const float* src = &set->rows[(slot / kLanes) * 16 * kLanes + slot % kLanes];
-        float* dst = appendLane(rows, slots.size());
-        for (size_t a = 0; a < 16; ++a) dst[a * kLanes] = src[a * kLanes];
-        slots.push_back(uint32_t(slot));
-        const char* corners = reinterpret_cast<const char*>(&set->corners[3 * slot]);
-        __builtin_prefetch(corners);
-        __builtin_prefetch(corners + 3 * sizeof(Vec3d) - 1);
-      }
+      Lanes near[kClusterSize / kLanes];
+      lowerBounds2(&set->rows[b0 * 16 * kLanes], b1 - b0, current.cf, reinterpret_cast<float*>(near));
+      for (size_t b = b0; b < b1; ++b)
+        for (unsigned bits = lanesAtMost(near[b - b0], Lanes{} + within); bits; bits &= bits - 1) {  // no unused lane
+          const size_t slot = b * kLanes + __builtin_ctz(bits);
+          setLane(laneOf(rows.data(), lanes), laneOf(set->rows.data(), slot));
+          slots[lanes++] = uint32_t(slot);
+          const char* corners = reinterpret_cast<const char*>(&set->corners[3 * slot]);
+          __builtin_prefetch(corners);
+          __builtin_prefetch(corners + 3 * sizeof(Vec3d) - 1);
+        }
     }
-    const size_t count = slots.size();
-    bounds.resize(rows.size() / 16);
+    const size_t count = lanes;
+    for (; lanes % kLanes; ++lanes) setLane(laneOf(rows.data(), lanes), nullptr);  // the last block's rest
     double farthest = 0;
     for (size_t k = i; k < j; ++k) {
       const Vec3d& p = points[order[k].second];
@@ -600,7 +618,7 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
         }
       };
       if (count) {
-        lowerBounds2(rows.data(), rows.size() / (16 * kLanes), pf, bounds.data());
+        lowerBounds2(rows.data(), lanes / kLanes, pf, bounds.data());
         // The least bound first (nearly always the answer), then any bound still below the best distance.
         const size_t first = argminOf(bounds.data(), count);
         test(slots[first]);
