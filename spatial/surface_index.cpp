@@ -458,16 +458,18 @@ inline unsigned lanesAtMost(Lanes a, Lanes b) {
   return bits;
 }
 
-// Index of the least of v[0, count), read in whole blocks of kLanes (v padded with +inf).
-size_t argminOf(const float* v, size_t count) {
-  const Lanes* r = reinterpret_cast<const Lanes*>(v);
-  Lanes low = r[0];
-  for (size_t b = 1; b * kLanes < count; ++b) low = r[b] < low ? r[b] : low;
+// lowerBounds2 for the first `blocks` blocks (at least one), and the index of the least bound (the first of
+// equals).
+size_t boundsAndLeast(const float* rows, size_t blocks, const float* p, float* __restrict out) {
+  lowerBounds2(rows, blocks, p, out);
+  const Lanes* v = reinterpret_cast<const Lanes*>(out);
+  Lanes low = v[0];
+  for (size_t b = 1; b < blocks; ++b) low = v[b] < low ? v[b] : low;
   float least = low[0];
   for (size_t l = 1; l < kLanes; ++l) least = low[l] < least ? low[l] : least;
-  for (size_t n = 0; n < count; ++n)
-    if (v[n] == least) return n;
-  return 0;
+  for (size_t b = 0; b < blocks; ++b)
+    if (const unsigned bits = lanesAtMost(v[b], Lanes{} + least)) return b * kLanes + __builtin_ctz(bits);
+  return 0;  // NaN bounds only
 }
 
 // Embree's gather: every cluster whose box the query sphere reaches.
@@ -618,12 +620,15 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
         }
       };
       if (count) {
-        lowerBounds2(rows.data(), lanes / kLanes, pf, bounds.data());
         // The least bound first (nearly always the answer), then any bound still below the best distance.
-        const size_t first = argminOf(bounds.data(), count);
-        test(slots[first]);
-        for (size_t n = 0; n < count; ++n)
-          if (bounds[n] <= below && n != first) test(slots[n]);
+        const size_t first = boundsAndLeast(rows.data(), lanes / kLanes, pf, bounds.data());
+        if (first < count) test(slots[first]);
+        const Lanes* bound = reinterpret_cast<const Lanes*>(bounds.data());
+        for (size_t b = 0; b < lanes / kLanes; ++b)
+          for (unsigned bits = lanesAtMost(bound[b], Lanes{} + below); bits; bits &= bits - 1) {
+            const size_t n = b * kLanes + __builtin_ctz(bits);
+            if (n != first && n < count && bounds[n] <= below) test(slots[n]);  // `below` may have shrunk since
+          }
       }
       o.distance = std::sqrt(o.distance);
       if (!(o.distance + vlen(vsub(p, c)) <= reach))
