@@ -63,7 +63,7 @@ class SurfaceIndex {
   // runs; a run shares one Embree query on the cluster scene that gathers every cluster that can hold the nearest
   // triangle of any of its points, and each point then takes the minimum over those clusters' triangles,
   // certified exact against the gather's radius (else queried alone). Faster than closest() one by one by
-  // 1.6-1.8x with 7.4 points per triangle (igea's samples against its 10% simplification) and 1.1-1.3x with 0.75
+  // 1.8-2.0x with 7.4 points per triangle (igea's samples against its 10% simplification) and 1.3-1.4x with 0.75
   // (the reverse); it costs the cluster records above (igea: 1.15 slots per triangle, 6 triangles per cluster).
   void closestMany(std::span<const Vec3d> points, std::span<Closest> out) const;
 
