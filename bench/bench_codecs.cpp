@@ -2,9 +2,8 @@
 // (Mtri/s, bits per vertex). Scans come from ../shared/data (the bundled bunny when it is missing).
 #include <benchmark/benchmark.h>
 
-#include <functional>
-
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <stdexcept>
 

@@ -221,7 +221,7 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m, RTCDevice
       for (double x : m.positions[v]) finite = finite && std::isfinite(x);
     if (key != UINT64_MAX && finite) order.push_back({key, uint32_t(t)});
   }
-  std::sort(order.begin(), order.end());
+  sortByKey(order);
   const double limit = kClusterRadii * m.mean_radius;
   set->first.push_back(0);
   Vec3d lo{0, 0, 0}, hi{0, 0, 0};
@@ -243,17 +243,15 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m, RTCDevice
       size = 0;
     }
     if (size == 0) lo = tlo, hi = thi;
-    if (size % kLanes == 0) {  // a new block
+    if (size % kLanes == 0) {  // a new block, its lanes unused
       set->ids.resize(set->ids.size() + kLanes, UINT32_MAX);
       set->corners.resize(set->corners.size() + 3 * kLanes, Vec3d{0, 0, 0});
+      set->rows.resize(set->rows.size() + 16 * kLanes);
+      for (size_t l = set->ids.size() - kLanes; l < set->ids.size(); ++l) setLane(laneOf(set->rows.data(), l), nullptr);
     }
     const size_t slot = set->ids.size() - kLanes + size % kLanes;
     float record[16];
     planeRecord(v, record);
-    if (size % kLanes == 0) {  // the new block's lanes start unused
-      set->rows.resize(set->rows.size() + 16 * kLanes);
-      for (size_t l = 0; l < kLanes; ++l) setLane(laneOf(set->rows.data(), slot + l), nullptr);
-    }
     float* dst = laneOf(set->rows.data(), slot);
     for (size_t a = 0; a < 16; ++a) dst[a * kLanes] = record[a];
     set->ids[slot] = t;
@@ -576,10 +574,10 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     // The run's candidates: the triangles of its clusters that may lie within R of c (by their bound), their plane
     // records in blocks of kLanes and their slots.
     const float within = current.reach_f * current.reach_f * (1 + 16 * kEps);
+    size_t gathered = 0;  // lanes of the run's clusters: room for every candidate
+    for (uint32_t k : current.clusters) gathered += (set->first[k + 1] - set->first[k]) * kLanes;
+    if (slots.size() < gathered) slots.resize(gathered), rows.resize(gathered * 16), bounds.resize(gathered);
     size_t lanes = 0;  // candidates so far
-    for (uint32_t k : current.clusters) lanes += (set->first[k + 1] - set->first[k]) * kLanes;
-    if (slots.size() < lanes) slots.resize(lanes), rows.resize(lanes * 16), bounds.resize(lanes);
-    lanes = 0;
     for (uint32_t k : current.clusters) {
       const size_t b0 = set->first[k], b1 = set->first[k + 1];
       Lanes near[kClusterSize / kLanes];
