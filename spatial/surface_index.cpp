@@ -432,21 +432,23 @@ namespace {
 constexpr float kEps = std::numeric_limits<float>::epsilon();
 static_assert(kClusterSize % kLanes == 0);
 
-// Squared lower bounds of the distance from p (relative to the origin) to the triangles of `blocks` blocks of
-// plane records: the distance to the plane and, within the plane, beyond the farthest of the edge lines.
+// Squared lower bounds of the distance from p = (x, y, z) (relative to the origin) to the kLanes triangles of one
+// block of plane records: the distance to the plane and, within the plane, beyond the farthest of the edge lines.
+inline Lanes blockBounds2(const Lanes* r, Lanes x, Lanes y, Lanes z) {
+  const Lanes h = r[0] * x + r[1] * y + r[2] * z - r[3];
+  const Lanes e0 = r[4] * x + r[5] * y + r[6] * z - r[7];
+  const Lanes e1 = r[8] * x + r[9] * y + r[10] * z - r[11];
+  const Lanes e2 = r[12] * x + r[13] * y + r[14] * z - r[15];
+  Lanes e = e0 > e1 ? e0 : e1;
+  e = e > e2 ? e : e2;
+  e = e > Lanes{} ? e : Lanes{};
+  return h * h + e * e;
+}
+// blockBounds2 for `blocks` blocks.
 void lowerBounds2(const float* rows, size_t blocks, const float* p, float* __restrict out) {
   const Lanes* r = reinterpret_cast<const Lanes*>(rows);
-  const Lanes x = Lanes{} + p[0], y = Lanes{} + p[1], z = Lanes{} + p[2], zero = {};
-  for (size_t b = 0; b < blocks; ++b, r += 16, out += kLanes) {
-    const Lanes h = r[0] * x + r[1] * y + r[2] * z - r[3];
-    const Lanes e0 = r[4] * x + r[5] * y + r[6] * z - r[7];
-    const Lanes e1 = r[8] * x + r[9] * y + r[10] * z - r[11];
-    const Lanes e2 = r[12] * x + r[13] * y + r[14] * z - r[15];
-    Lanes e = e0 > e1 ? e0 : e1;
-    e = e > e2 ? e : e2;
-    e = e > zero ? e : zero;
-    *reinterpret_cast<Lanes*>(out) = h * h + e * e;
-  }
+  const Lanes x = Lanes{} + p[0], y = Lanes{} + p[1], z = Lanes{} + p[2];
+  for (size_t b = 0; b < blocks; ++b, r += 16, out += kLanes) *reinterpret_cast<Lanes*>(out) = blockBounds2(r, x, y, z);
 }
 
 typedef int LaneInts __attribute__((vector_size(4 * kLanes), aligned(4)));
@@ -465,12 +467,16 @@ inline unsigned lanesAtMost(Lanes a, Lanes b) {
 }
 
 // lowerBounds2 for the first `blocks` blocks (at least one), and the index of the least bound (the first of
-// equals).
+// equals), in one pass.
 size_t boundsAndLeast(const float* rows, size_t blocks, const float* p, float* __restrict out) {
-  lowerBounds2(rows, blocks, p, out);
-  const Lanes* v = reinterpret_cast<const Lanes*>(out);
-  Lanes low = v[0];
-  for (size_t b = 1; b < blocks; ++b) low = v[b] < low ? v[b] : low;
+  const Lanes* r = reinterpret_cast<const Lanes*>(rows);
+  const Lanes x = Lanes{} + p[0], y = Lanes{} + p[1], z = Lanes{} + p[2];
+  Lanes* v = reinterpret_cast<Lanes*>(out);
+  Lanes low = v[0] = blockBounds2(r, x, y, z);
+  for (size_t b = 1; b < blocks; ++b) {
+    v[b] = blockBounds2(r + 16 * b, x, y, z);
+    low = v[b] < low ? v[b] : low;
+  }
   float least = low[0];
   for (size_t l = 1; l < kLanes; ++l) least = low[l] < least ? low[l] : least;
   for (size_t b = 0; b < blocks; ++b)
