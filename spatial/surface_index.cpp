@@ -56,8 +56,9 @@ namespace {
 constexpr size_t kLanes = 4;  // one SSE register; GCC's vector extension keeps this portable
 typedef float Lanes __attribute__((vector_size(4 * kLanes), aligned(4)));
 
-// closestMany's view of the triangles: clusters of at most kClusterSize nearby triangles (median splits), each a primitive of a second Embree scene (user geometry, its box as bounds),
-// so that one gather returns a few clusters instead of tens of triangles. A cluster's triangles sit together:
+// closestMany's view of the triangles: clusters of at most kClusterSize nearby triangles (median splits), each a
+// primitive of a second Embree scene (user geometry, its box as bounds), so that one gather returns a few
+// clusters instead of tens of triangles. A cluster's triangles sit together:
 // their plane records (plane and edge lines in float, for lower bounds) transposed in blocks of kLanes, their ids
 // and their corners in double (for exact tests).
 struct ClusterSet {
@@ -236,7 +237,10 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m, RTCDevice
     Vec3d lo, hi;
     Item it{{}, uint32_t(t)};
     bool finite = triangleBox(uint32_t(t), lo, hi);
-    for (int a = 0; a < 3; ++a) it.c[a] = static_cast<float>(lo[a] + hi[a]), finite = finite && std::isfinite(it.c[a]);
+    for (int a = 0; a < 3; ++a) {
+      it.c[a] = static_cast<float>(lo[a] + hi[a]);
+      finite = finite && std::isfinite(it.c[a]);
+    }
     if (finite) items.push_back(it);
   }
   // Clusters by median splits along the longest axis of the centers' box, at multiples of kClusterSize (so that
@@ -256,7 +260,10 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m, RTCDevice
       Vec3d lo, hi, tlo, thi;
       triangleBox(items[b].t, lo, hi);
       bool small = true;
-      for (uint32_t k = b + 1; k < e && small; ++k) triangleBox(items[k].t, tlo, thi), small = growWithin(lo, hi, tlo, thi, limit);
+      for (uint32_t k = b + 1; k < e && small; ++k) {
+        triangleBox(items[k].t, tlo, thi);
+        small = growWithin(lo, hi, tlo, thi, limit);
+      }
       if (n == 1 || small) {
         parts.push_back({b, e});
         blocks += (n + kLanes - 1) / kLanes;
@@ -302,7 +309,8 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m, RTCDevice
       for (int c = 0; c < 3; ++c) set->corners[3 * slot + c] = m.positions[m.triangles[t][c]];
     }
     const size_t end = block + (e - b + kLanes - 1) / kLanes;
-    for (size_t slot = block * kLanes + (e - b); slot < end * kLanes; ++slot) setLane(laneOf(set->rows.data(), slot), nullptr);
+    for (size_t slot = block * kLanes + (e - b); slot < end * kLanes; ++slot)  // the last block's rest
+      setLane(laneOf(set->rows.data(), slot), nullptr);
     block = end;
     for (int a = 0; a < 3; ++a) set->boxes.push_back(roundDown(lo[a]));
     set->boxes.push_back(0.f);
@@ -496,7 +504,8 @@ inline Lanes blockBounds2(const Lanes* r, Lanes x, Lanes y, Lanes z) {
 void lowerBounds2(const float* rows, size_t blocks, const float* p, float* __restrict out) {
   const Lanes* r = reinterpret_cast<const Lanes*>(rows);
   const Lanes x = Lanes{} + p[0], y = Lanes{} + p[1], z = Lanes{} + p[2];
-  for (size_t b = 0; b < blocks; ++b, r += 16, out += kLanes) *reinterpret_cast<Lanes*>(out) = blockBounds2(r, x, y, z);
+  for (size_t b = 0; b < blocks; ++b, r += 16, out += kLanes)
+    *reinterpret_cast<Lanes*>(out) = blockBounds2(r, x, y, z);
 }
 
 typedef int LaneInts __attribute__((vector_size(4 * kLanes), aligned(4)));
