@@ -248,7 +248,7 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m, RTCDevice
   // kClusterRadii mean radii (or a single triangle). The clusters come out in the splits' (spatial) order. On
   // igea, 7.98 triangles per cluster within 2.5 radii; Morton order cut greedily gave 6.1 within 2.45.
   const double limit = kClusterRadii * m.mean_radius;
-  std::vector<std::pair<uint32_t, uint32_t>> parts;  // item ranges, one per cluster
+  std::vector<std::pair<uint32_t, uint32_t>> parts;  // item ranges, one per cluster (its box into set->boxes)
   std::vector<std::pair<uint32_t, uint32_t>> todo{{0u, uint32_t(items.size())}};
   size_t blocks = 0;
   while (!todo.empty()) {
@@ -267,6 +267,10 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m, RTCDevice
       if (n == 1 || small) {
         parts.push_back({b, e});
         blocks += (n + kLanes - 1) / kLanes;
+        for (int a = 0; a < 3; ++a) set->boxes.push_back(roundDown(lo[a]));
+        set->boxes.push_back(0.f);
+        for (int a = 0; a < 3; ++a) set->boxes.push_back(roundUp(hi[a]));
+        set->boxes.push_back(0.f);
         continue;
       }
     }
@@ -287,17 +291,12 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m, RTCDevice
   set->ids.assign(blocks * kLanes, UINT32_MAX);
   set->corners.resize(blocks * kLanes * 3);
   set->rows.resize(blocks * 16 * kLanes);
-  set->boxes.reserve(parts.size() * 8);
   set->first.reserve(parts.size() + 1);
   set->first.push_back(0);
   size_t block = 0;
   for (const auto& [b, e] : parts) {
-    Vec3d lo{0, 0, 0}, hi{0, 0, 0}, tlo, thi;
     for (uint32_t k = b; k < e; ++k) {
       const uint32_t t = items[k].t;
-      triangleBox(t, tlo, thi);
-      if (k == b) lo = tlo, hi = thi;
-      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], tlo[a]), hi[a] = std::max(hi[a], thi[a]);
       const size_t slot = block * kLanes + (k - b);
       Vec3d v[3];
       for (int c = 0; c < 3; ++c) v[c] = vsub(m.positions[m.triangles[t][c]], m.origin);
@@ -312,10 +311,6 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m, RTCDevice
     for (size_t slot = block * kLanes + (e - b); slot < end * kLanes; ++slot)  // the last block's rest
       setLane(laneOf(set->rows.data(), slot), nullptr);
     block = end;
-    for (int a = 0; a < 3; ++a) set->boxes.push_back(roundDown(lo[a]));
-    set->boxes.push_back(0.f);
-    for (int a = 0; a < 3; ++a) set->boxes.push_back(roundUp(hi[a]));
-    set->boxes.push_back(0.f);
     set->first.push_back(uint32_t(block));
   }
   const size_t clusters = set->first.size() - 1;
@@ -703,10 +698,11 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
             if (n != first && n < count && bounds[n] <= below) test(slots[n]);  // `below` may have shrunk since
           }
       }
-      if (o.triangle != UINT32_MAX && !(std::sqrt(o.distance) + vlen(vsub(p, c)) <= reach)) {
+      const double best = std::sqrt(o.distance);
+      if (o.triangle != UINT32_MAX && !(best + vlen(vsub(p, c)) <= reach)) {
         // Not certified: every triangle nearer than the best so far is in a cluster within that distance of p.
         // (A query of the triangle scene, which closestMany leaves cold, cost ~5,700 cycles here.)
-        gather(p, std::sqrt(o.distance), own);
+        gather(p, best, own);
         for (uint32_t k : own.clusters)
           for (size_t b = set->first[k]; b < set->first[k + 1]; ++b) {
             const Lanes bound = blockBounds2(reinterpret_cast<const Lanes*>(&set->rows[b * 16 * kLanes]),
@@ -715,7 +711,7 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
               test(b * kLanes + __builtin_ctz(bits));
           }
       }
-      o.distance = std::sqrt(o.distance);
+      o.distance = std::sqrt(o.distance);  // `best`, unless the own gather found a nearer triangle
       if (o.triangle == UINT32_MAX) o = closest(p, hint);
       farthest = std::max(farthest, o.distance);
       hint = o.triangle;
