@@ -113,38 +113,52 @@ uint64_t spreadBits(uint64_t v) {
   return v;
 }
 
-// Morton key of the grid cell (of size 1 / inv_cell, centered on the origin) holding v (relative to the origin);
-// 63 bits. Coordinates beyond the grid's 2^21 cells share its border cells; not finite: UINT64_MAX.
-uint64_t mortonKey(const Vec3d& v, double inv_cell) {
-  uint64_t key = 0;
-  for (int a = 0; a < 3; ++a) {
-    const double g = v[a] * inv_cell + double(1 << 20);
-    if (!std::isfinite(g)) return UINT64_MAX;
-    key |= spreadBits(uint64_t(int64_t(std::clamp(g, 0.0, double((1 << 21) - 1))))) << (2 - a);  // floor here
+// The points in Morton order of their cells, the points not finite last, ties in index order, as one word each:
+// the cell's Morton key, then the point's index in the lowest `index_bits` bits; bit 63 set for a point not
+// finite. Cells are cubes of size 1 / inv_cell from the finite points' lower corner, larger if the batch spans more
+// than the 2^b cells per axis that fit (b = (63 - index_bits) / 3, at most 21). A stable radix sort of these words
+// on the bytes where they differ: a batch of nearby points shares most of its keys' bits. (Pairs of key and index
+// sorted after a partition of the points not finite took twice as long.)
+void mortonOrder(std::span<const Vec3d> points, double inv_cell, int index_bits, std::vector<uint64_t>& order,
+                 std::vector<uint64_t>& scratch) {
+  const size_t n = points.size();
+  order.resize(n);
+  scratch.resize(n);
+  auto finite = [](const Vec3d& p) { return std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]); };
+  Vec3d lo, hi;
+  for (int a = 0; a < 3; ++a) lo[a] = std::numeric_limits<double>::infinity(), hi[a] = -lo[a];
+  for (const Vec3d& p : points)
+    if (finite(p))
+      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+  const int bits = std::min(21, (63 - index_bits) / 3);
+  const double top = double((1 << bits) - 1);
+  double scale = inv_cell;
+  for (int a = 0; a < 3; ++a)
+    if ((hi[a] - lo[a]) * scale > top) scale = top / (hi[a] - lo[a]);
+  for (size_t i = 0; i < n; ++i) {
+    const Vec3d& p = points[i];
+    if (!finite(p)) {
+      order[i] = uint64_t(1) << 63 | i;
+      continue;
+    }
+    uint64_t key = 0;
+    for (int a = 0; a < 3; ++a)  // the conversion floors: the values are not negative
+      key |= spreadBits(uint64_t(std::clamp((p[a] - lo[a]) * scale, 0.0, top))) << (2 - a);
+    order[i] = key << index_bits | i;
   }
-  return key;
-}
-
-// Sorts (key, index) pairs as std::sort would, given distinct indices in increasing order: a stable radix sort
-// on the bytes where keys differ (a batch of nearby points shares most of its keys' bits), the UINT64_MAX keys
-// (points not finite) last.
-void sortByKey(std::vector<std::pair<uint64_t, uint32_t>>& v) {
-  const size_t n = std::stable_partition(v.begin(), v.end(), [](const auto& e) { return e.first != UINT64_MAX; }) -
-                   v.begin();
-  uint64_t differ = 0;
-  for (size_t k = 1; k < n; ++k) differ |= v[k].first ^ v[0].first;
-  std::vector<std::pair<uint64_t, uint32_t>> scratch(n);
-  auto* from = v.data();
-  auto* to = scratch.data();
-  for (int shift = 0; shift < 64; shift += 8) {
-    if (((differ >> shift) & 0xff) == 0) continue;  // the same byte in every key
-    size_t start[257] = {};
-    for (size_t k = 0; k < n; ++k) ++start[((from[k].first >> shift) & 0xff) + 1];
+  uint64_t vary = 0;
+  for (size_t i = 1; i < n; ++i) vary |= order[i] ^ order[0];
+  uint64_t* from = order.data();
+  uint64_t* to = scratch.data();
+  for (int shift = index_bits; shift < 64; shift += 8) {
+    if (((vary >> shift) & 0xff) == 0) continue;  // the same byte in every word
+    uint32_t start[257] = {};
+    for (size_t k = 0; k < n; ++k) ++start[((from[k] >> shift) & 0xff) + 1];
     for (size_t d = 1; d < 257; ++d) start[d] += start[d - 1];
-    for (size_t k = 0; k < n; ++k) to[start[(from[k].first >> shift) & 0xff]++] = from[k];
+    for (size_t k = 0; k < n; ++k) to[start[(from[k] >> shift) & 0xff]++] = from[k];
     std::swap(from, to);
   }
-  if (from != v.data()) std::copy(from, from + n, v.data());
+  if (from != order.data()) order.swap(scratch);
 }
 
 // The plane record of a triangle (corners relative to the origin): unit normal and offset, then each edge's
@@ -578,9 +592,12 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     return;
   }
   const double inv_cell = 1 / (kCellRadii * m.mean_radius), run_half = kRunRadii * m.mean_radius;
-  std::vector<std::pair<uint64_t, uint32_t>> order(points.size());
-  for (size_t i = 0; i < points.size(); ++i) order[i] = {mortonKey(vsub(points[i], m.origin), inv_cell), uint32_t(i)};
-  sortByKey(order);
+  const int index_bits = std::max(1, 64 - __builtin_clzll(points.size() - 1));
+  const uint64_t index_mask = (uint64_t(1) << index_bits) - 1;
+  std::vector<uint64_t> order, scratch;
+  mortonOrder(points, inv_cell, index_bits, order, scratch);
+  auto at = [&](size_t k) { return size_t(order[k] & index_mask); };  // the point at place k of the order
+  auto finite = [&](size_t k) { return !(order[k] >> 63); };
 
   // Runs first; each run's gather is made one run ahead, so that the memory its clusters need is on its way while
   // the run before is processed.
@@ -591,9 +608,9 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
   };
   std::vector<Run> runs;
   for (size_t i = 0, j = 0; i < order.size(); i = j) {
-    Vec3d lo = points[order[i].second], hi = lo;
-    for (j = i + 1; j < order.size() && order[i].first != UINT64_MAX; ++j) {
-      const Vec3d& p = points[order[j].second];
+    Vec3d lo = points[at(i)], hi = lo;
+    for (j = i + 1; j < order.size() && finite(i); ++j) {
+      const Vec3d& p = points[at(j)];
       if (!growWithin(lo, hi, p, p, run_half)) break;
     }
     runs.push_back({i, j, vmul(vadd(lo, hi), 0.5), 0.5 * vlen(vsub(hi, lo))});
@@ -623,7 +640,7 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     rtcPointQuery(set->scene, &query, &context, gatherCallback, &callback);
   };
   auto gatherRun = [&](const Run& run, Gathered& g) {
-    if (order[run.i].first == UINT64_MAX) return g.clusters.clear();  // not finite: queried alone
+    if (!finite(run.i)) return g.clusters.clear();  // not finite: queried alone
     gather(run.c, run.half + extra, g);
   };
   Gathered current, next, own;
@@ -635,8 +652,8 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     std::swap(current, next);
     if (r + 1 < runs.size()) gatherRun(runs[r + 1], next);
     const size_t i = runs[r].i, j = runs[r].j;
-    if (order[i].first == UINT64_MAX) {
-      out[order[i].second] = closest(points[order[i].second]);
+    if (!finite(i)) {
+      out[at(i)] = closest(points[at(i)]);
       continue;
     }
     const Vec3d& c = runs[r].c;
@@ -666,8 +683,8 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     for (; lanes % kLanes; ++lanes) setLane(laneOf(rows.data(), lanes), nullptr);  // the last block's rest
     double farthest = 0;
     for (size_t k = i; k < j; ++k) {
-      const Vec3d& p = points[order[k].second];
-      Closest& o = out[order[k].second];
+      const Vec3d& p = points[at(k)];
+      Closest& o = out[at(k)];
       o.distance = std::numeric_limits<double>::infinity();  // squared until the end
       o.triangle = UINT32_MAX;
       const float pf[3] = {static_cast<float>(p[0] - m.origin[0]), static_cast<float>(p[1] - m.origin[1]),
