@@ -532,20 +532,19 @@ inline unsigned lanesAtMost(Lanes a, Lanes b) {
 #endif
 }
 
-// lowerBounds2 for the first `blocks` blocks (at least one), and the index of the least bound (the first of
-// equals), in one pass.
-size_t boundsAndLeast(const float* rows, size_t blocks, const float* p, float* __restrict out) {
-  const Lanes* r = reinterpret_cast<const Lanes*>(rows);
+// The bounds of the `count` blocks of plane records at rows[0], rows[1], ... (at least one), and the index of the
+// least bound (the first of equals), in one pass.
+size_t boundsAndLeast(const float* const* rows, size_t count, const float* p, float* __restrict out) {
   const Lanes x = Lanes{} + p[0], y = Lanes{} + p[1], z = Lanes{} + p[2];
   Lanes* v = reinterpret_cast<Lanes*>(out);
-  Lanes low = v[0] = blockBounds2(r, x, y, z);
-  for (size_t b = 1; b < blocks; ++b) {
-    v[b] = blockBounds2(r + 16 * b, x, y, z);
+  Lanes low = v[0] = blockBounds2(reinterpret_cast<const Lanes*>(rows[0]), x, y, z);
+  for (size_t b = 1; b < count; ++b) {
+    v[b] = blockBounds2(reinterpret_cast<const Lanes*>(rows[b]), x, y, z);
     low = v[b] < low ? v[b] : low;
   }
   float least = low[0];
   for (size_t l = 1; l < kLanes; ++l) least = low[l] < least ? low[l] : least;
-  for (size_t b = 0; b < blocks; ++b)
+  for (size_t b = 0; b < count; ++b)
     if (const unsigned bits = lanesAtMost(v[b], Lanes{} + least)) return b * kLanes + __builtin_ctz(bits);
   return 0;  // NaN bounds only
 }
@@ -554,6 +553,7 @@ size_t boundsAndLeast(const float* rows, size_t blocks, const float* p, float* _
 struct Gather {
   const ClusterSet* set;
   std::vector<uint32_t>* clusters;
+  bool corners;  // prefetch the clusters' corners too (a run that bounds its clusters in place)
 };
 
 bool gatherCallback(RTCPointQueryFunctionArguments* args) {
@@ -561,11 +561,13 @@ bool gatherCallback(RTCPointQueryFunctionArguments* args) {
   const ClusterSet& set = *g->set;
   const size_t k = args->primID;
   g->clusters->push_back(uint32_t(k));
-  // The cluster's plane records and ids, to L2, while Embree goes on (its corners are asked for once one of its
-  // triangles passes the run's filter).
+  // The cluster's plane records, ids and corners, to L2, while Embree goes on.
   const size_t b0 = set.first[k], b1 = set.first[k + 1];
-  const char* rows = reinterpret_cast<const char*>(&set.rows[b0 * 16 * kLanes]);
-  for (size_t off = 0; off < (b1 - b0) * 16 * kLanes * sizeof(float); off += 64) __builtin_prefetch(rows + off, 0, 2);
+  auto prefetch = [](const void* from, size_t bytes) {
+    for (size_t off = 0; off < bytes; off += 64) __builtin_prefetch(static_cast<const char*>(from) + off, 0, 2);
+  };
+  prefetch(&set.rows[b0 * 16 * kLanes], (b1 - b0) * 16 * kLanes * sizeof(float));
+  if (g->corners) prefetch(&set.corners[b0 * kLanes * 3], (b1 - b0) * kLanes * 3 * sizeof(Vec3d));
   __builtin_prefetch(&set.ids[b0 * kLanes], 0, 2);
   return false;
 }
@@ -577,6 +579,12 @@ bool gatherCallback(RTCPointQueryFunctionArguments* args) {
 // radii beat 2 by median in four sweeps of 5-10 rounds (by 5-20%) on igea against its 10% simplification and were
 // as fast the other way; 1, 1.25, 2.5 and 3 were not faster, nor was a cap of 8 or 12 points per run.
 constexpr double kCellRadii = 1.0, kRunRadii = 1.5, kReachMin = 0.1, kReachMax = 2.0;
+// A run of at most kDirectPoints points bounds its clusters' blocks where they are (its gather prefetches their
+// corners too); a larger run first copies out the triangles that may lie within its reach, so that each of its
+// points bounds fewer. Against copying out for every run (7 A/B rounds, median): 8 points was 11% faster coming
+// back from igea's 10% simplification (3.5 points per run) and as fast going out (13.7 points per run); 4, 6 and 11
+// were not better; bounding in place for every run was 17% slower going out.
+constexpr size_t kDirectPoints = 8;
 
 }  // namespace
 
@@ -625,14 +633,14 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     std::vector<uint32_t> clusters;
   };
   double extra = kReachMin * m.mean_radius;
-  auto gather = [&](const Vec3d& c, double reach, Gathered& g) {
+  auto gather = [&](const Vec3d& c, double reach, Gathered& g, bool corners) {
     g.clusters.clear();
     g.reach = reach;
     for (int a = 0; a < 3; ++a) g.cf[a] = static_cast<float>(c[a] - m.origin[a]);
     // Float rounding: well inside 16 slacks plus 64 ulps of |c|.
     const float margin_c = 16 * m.slack + 64 * kEps * (std::abs(g.cf[0]) + std::abs(g.cf[1]) + std::abs(g.cf[2]));
     g.reach_f = static_cast<float>(g.reach) * (1 + 4 * kEps) + margin_c;
-    Gather callback{set, &g.clusters};
+    Gather callback{set, &g.clusters, corners};
     RTCPointQuery query;
     query.x = g.cf[0], query.y = g.cf[1], query.z = g.cf[2], query.time = 0.f, query.radius = g.reach_f;
     RTCPointQueryContext context;
@@ -641,10 +649,11 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
   };
   auto gatherRun = [&](const Run& run, Gathered& g) {
     if (!finite(run.i)) return g.clusters.clear();  // not finite: queried alone
-    gather(run.c, run.half + extra, g);
+    gather(run.c, run.half + extra, g, run.j - run.i <= kDirectPoints);
   };
   Gathered current, next, own;
   std::vector<float> rows, bounds;
+  std::vector<const float*> blocks;
   std::vector<uint32_t> slots;
   uint32_t hint = UINT32_MAX;
   if (!runs.empty()) gatherRun(runs[0], next);
@@ -658,29 +667,39 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     }
     const Vec3d& c = runs[r].c;
     const double reach = current.reach;
-    // The run's candidates: the triangles of its clusters that may lie within R of c (by their bound), their plane
-    // records in blocks of kLanes and their slots.
-    const float within = current.reach_f * current.reach_f * (1 + 16 * kEps);
+    // The run's candidates: blocks of kLanes plane records (`blocks`) and the slot of each lane (`slots`; the
+    // first `count` lanes). A small run takes its clusters' blocks (unused lanes are never nearest). A larger run
+    // copies out the triangles that may lie within R of c (by their bound).
     size_t gathered = 0;  // lanes of the run's clusters: room for every candidate
     for (uint32_t k : current.clusters) gathered += (set->first[k + 1] - set->first[k]) * kLanes;
     if (slots.size() < gathered) slots.resize(gathered), rows.resize(gathered * 16), bounds.resize(gathered);
-    size_t lanes = 0;  // candidates so far
-    for (uint32_t k : current.clusters) {
-      const size_t b0 = set->first[k], b1 = set->first[k + 1];
-      Lanes near[kClusterSize / kLanes];
-      lowerBounds2(&set->rows[b0 * 16 * kLanes], b1 - b0, current.cf, reinterpret_cast<float*>(near));
-      for (size_t b = b0; b < b1; ++b)
-        for (unsigned bits = lanesAtMost(near[b - b0], Lanes{} + within); bits; bits &= bits - 1) {  // no unused lane
-          const size_t slot = b * kLanes + __builtin_ctz(bits);
-          setLane(laneOf(rows.data(), lanes), laneOf(set->rows.data(), slot));
-          slots[lanes++] = uint32_t(slot);
-          const char* corners = reinterpret_cast<const char*>(&set->corners[3 * slot]);
-          __builtin_prefetch(corners);
-          __builtin_prefetch(corners + 3 * sizeof(Vec3d) - 1);
+    blocks.clear();
+    size_t count = 0;
+    if (j - i <= kDirectPoints) {
+      for (uint32_t k : current.clusters)
+        for (size_t b = set->first[k]; b < set->first[k + 1]; ++b) {
+          blocks.push_back(&set->rows[b * 16 * kLanes]);
+          for (size_t l = 0; l < kLanes; ++l) slots[count++] = uint32_t(b * kLanes + l);
         }
+    } else {
+      const float within = current.reach_f * current.reach_f * (1 + 16 * kEps);
+      for (uint32_t k : current.clusters) {
+        const size_t b0 = set->first[k], b1 = set->first[k + 1];
+        Lanes near[kClusterSize / kLanes];
+        lowerBounds2(&set->rows[b0 * 16 * kLanes], b1 - b0, current.cf, reinterpret_cast<float*>(near));
+        for (size_t b = b0; b < b1; ++b)
+          for (unsigned bits = lanesAtMost(near[b - b0], Lanes{} + within); bits; bits &= bits - 1) {
+            const size_t slot = b * kLanes + __builtin_ctz(bits);  // not an unused lane: its bound is infinite
+            setLane(laneOf(rows.data(), count), laneOf(set->rows.data(), slot));
+            slots[count++] = uint32_t(slot);
+            const char* corners = reinterpret_cast<const char*>(&set->corners[3 * slot]);
+            __builtin_prefetch(corners);
+            __builtin_prefetch(corners + 3 * sizeof(Vec3d) - 1);
+          }
+      }
+      for (size_t lanes = count; lanes % kLanes; ++lanes) setLane(laneOf(rows.data(), lanes), nullptr);  // the rest
+      for (size_t b = 0; b * kLanes < count; ++b) blocks.push_back(&rows[b * 16 * kLanes]);
     }
-    const size_t count = lanes;
-    for (; lanes % kLanes; ++lanes) setLane(laneOf(rows.data(), lanes), nullptr);  // the last block's rest
     double farthest = 0;
     for (size_t k = i; k < j; ++k) {
       const Vec3d& p = points[at(k)];
@@ -706,10 +725,10 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
       };
       if (count) {
         // The least bound first (nearly always the answer), then any bound still below the best distance.
-        const size_t first = boundsAndLeast(rows.data(), lanes / kLanes, pf, bounds.data());
+        const size_t first = boundsAndLeast(blocks.data(), blocks.size(), pf, bounds.data());
         if (first < count) test(slots[first]);
         const Lanes* bound = reinterpret_cast<const Lanes*>(bounds.data());
-        for (size_t b = 0; b < lanes / kLanes; ++b)
+        for (size_t b = 0; b < blocks.size(); ++b)
           for (unsigned bits = lanesAtMost(bound[b], Lanes{} + below); bits; bits &= bits - 1) {
             const size_t n = b * kLanes + __builtin_ctz(bits);
             if (n != first && n < count && bounds[n] <= below) test(slots[n]);  // `below` may have shrunk since
@@ -719,7 +738,7 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
       if (o.triangle != UINT32_MAX && !(best + vlen(vsub(p, c)) <= reach)) {
         // Not certified: every triangle nearer than the best so far is in a cluster within that distance of p.
         // (A query of the triangle scene, which closestMany leaves cold, cost ~5,700 cycles here.)
-        gather(p, best, own);
+        gather(p, best, own, false);
         for (uint32_t k : own.clusters)
           for (size_t b = set->first[k]; b < set->first[k + 1]; ++b) {
             const Lanes bound = blockBounds2(reinterpret_cast<const Lanes*>(&set->rows[b * 16 * kLanes]),
