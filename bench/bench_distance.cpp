@@ -25,6 +25,7 @@ using Primitive = CGAL::AABB_triangle_primitive<K, std::vector<CgalTriangle>::co
 using Tree = CGAL::AABB_tree<CGAL::AABB_traits<K, Primitive>>;
 
 struct Fixture {
+  std::string scan;  // the file's name: igea from ../shared/data, or the bundled bunny when that is missing
   Mesh full, reduced;
   std::vector<Vec3d> on_full, on_reduced;  // query points
 };
@@ -34,6 +35,7 @@ const Fixture& fixture() {
     Fixture x;
     std::string path = std::string(SCANPRESS_SHARED_DATA) + "/igea.ply.zst";
     if (!std::filesystem::exists(path)) path = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
+    x.scan = std::filesystem::path(path).filename().string();
     auto m = readMeshFile(path);
     if (!m.isOk()) throw std::runtime_error(m.status().toString());
     x.full = std::move(m).value();
@@ -93,6 +95,7 @@ void BM_ScanpressClosest(benchmark::State& state, bool to_reduced, bool batch) {
   state.counters["Mqueries/s"] =
       benchmark::Counter(double(queries.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
   state.counters["mean_distance"] = sum / double(queries.size());
+  state.SetLabel(f.scan);
 }
 
 void BM_CgalClosest(benchmark::State& state, bool to_reduced) {
@@ -114,6 +117,7 @@ void BM_CgalClosest(benchmark::State& state, bool to_reduced) {
   state.counters["Mqueries/s"] =
       benchmark::Counter(double(queries.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
   state.counters["mean_distance"] = sum / double(queries.size());
+  state.SetLabel(f.scan);
 }
 
 BENCHMARK_CAPTURE(BM_ScanpressClosest, igea_to_10pct, true, true)->Unit(benchmark::kMillisecond);
