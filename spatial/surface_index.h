@@ -63,8 +63,8 @@ class SurfaceIndex {
   // runs; a run shares one Embree query on the cluster scene that gathers every cluster that can hold the nearest
   // triangle of any of its points, and each point then takes the minimum over those clusters' triangles,
   // certified exact against the gather's radius (else it gathers the clusters within its best distance itself).
-  // Faster than closest() one by one by 2.2-2.4x with 7.4 points per triangle (igea's samples against its 10%
-  // simplification) and 1.5-2.0x with 0.75 (the reverse); it costs the cluster records above.
+  // Faster than closest() one by one by 2.4-2.6x with 7.4 points per triangle (igea's samples against its 10%
+  // simplification) and 1.8-2.1x with 0.75 (the reverse); it costs the cluster records above.
   void closestMany(std::span<const Vec3d> points, std::span<Closest> out) const;
 
   struct Hit {
