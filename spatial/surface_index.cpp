@@ -142,8 +142,10 @@ void mortonOrder(std::span<const Vec3d> points, double inv_cell, int index_bits,
       continue;
     }
     uint64_t key = 0;
-    for (int a = 0; a < 3; ++a)  // the conversion floors: the values are not negative
-      key |= spreadBits(uint64_t(std::clamp((p[a] - lo[a]) * scale, 0.0, top))) << (2 - a);
+    for (int a = 0; a < 3; ++a) {  // NaN (an infinite span times a zero scale) counts as 0; the conversion floors
+      const double g = (p[a] - lo[a]) * scale;
+      key |= spreadBits(uint64_t(g > 0 ? std::min(g, top) : 0.0)) << (2 - a);
+    }
     order[i] = key << index_bits | i;
   }
   uint64_t vary = 0;

@@ -261,6 +261,22 @@ TEST(Measure, ManyQueriesSetNonFinitePointsApart) {
   }
 }
 
+TEST(Measure, ManyQueriesSpanningTheWholeDoubleRange) {
+  // A batch whose extent overflows (1e308 and -1e308 apart) orders its points on a grid of zero scale; every
+  // answer must still be closest()'s.
+  const Mesh m = grid(10, 0.0);
+  std::vector<Vec3d> points;
+  for (int k = 0; k < 20; ++k) points.push_back({0.31 + 1e-3 * k, 0.32, 0.01});
+  points.push_back({1e308, 0.5, 0.0});
+  points.push_back({-1e308, 0.5, -1e308});
+  points.push_back({0.5, 1e300, 0.0});
+  auto index = SurfaceIndex::build(device(), m.positions, m.triangles);
+  ASSERT_TRUE(index.isOk());
+  std::vector<SurfaceIndex::Closest> many(points.size());
+  index->closestMany(points, many);
+  for (size_t i = 0; i < points.size(); ++i) EXPECT_EQ(many[i].distance, index->closest(points[i]).distance) << i;
+}
+
 TEST(Measure, SameNumbersAtAnyThreadCount) {
   const Mesh sphere = icosphere(4), ico = icosphere(1);
   MeasureSettings s;
