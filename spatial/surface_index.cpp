@@ -649,9 +649,10 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     rtcInitPointQueryContext(&context);
     rtcPointQuery(set->scene, &query, &context, gatherCallback, &callback);
   };
+  auto inPlace = [](const Run& run) { return run.j - run.i <= kDirectPoints; };  // bounds its clusters in place
   auto gatherRun = [&](const Run& run, Gathered& g) {
     if (!finite(run.i)) return g.clusters.clear();  // not finite: queried alone
-    gather(run.c, run.half + extra, g, run.j - run.i <= kDirectPoints);
+    gather(run.c, run.half + extra, g, inPlace(run));
   };
   Gathered current, next, own;
   std::vector<float> rows, bounds;
@@ -677,7 +678,7 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     if (slots.size() < gathered) slots.resize(gathered), rows.resize(gathered * 16), bounds.resize(gathered);
     blocks.clear();
     size_t count = 0;
-    if (j - i <= kDirectPoints) {
+    if (inPlace(runs[r])) {
       for (uint32_t k : current.clusters)
         for (size_t b = set->first[k]; b < set->first[k + 1]; ++b) {
           blocks.push_back(&set->rows[b * 16 * kLanes]);
@@ -748,8 +749,10 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
             for (unsigned bits = lanesAtMost(bound, Lanes{} + below); bits; bits &= bits - 1)
               test(b * kLanes + __builtin_ctz(bits));
           }
+        o.distance = std::sqrt(o.distance);
+      } else {
+        o.distance = best;
       }
-      o.distance = std::sqrt(o.distance);  // `best`, unless the own gather found a nearer triangle
       if (o.triangle == UINT32_MAX) o = closest(p, hint);
       farthest = std::max(farthest, o.distance);
       hint = o.triangle;
