@@ -61,6 +61,14 @@ const Fixture& fixture() {
   return f;
 }
 
+// The counters both kinds of benchmark report: queries per second and the mean distance of the last pass.
+void report(benchmark::State& state, const Fixture& f, size_t queries, double sum) {
+  state.counters["Mqueries/s"] =
+      benchmark::Counter(double(queries) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["mean_distance"] = sum / double(queries);
+  state.SetLabel(f.scan);
+}
+
 // batch: closestMany over blocks of 1024 samples, as `scanpress measure` queries; otherwise one closest() per
 // sample, each starting from the previous answer.
 void BM_ScanpressClosest(benchmark::State& state, bool to_reduced, bool batch) {
@@ -93,10 +101,7 @@ void BM_ScanpressClosest(benchmark::State& state, bool to_reduced, bool batch) {
     benchmark::DoNotOptimize(s);
     sum = s;
   }
-  state.counters["Mqueries/s"] =
-      benchmark::Counter(double(queries.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
-  state.counters["mean_distance"] = sum / double(queries.size());
-  state.SetLabel(f.scan);
+  report(state, f, queries.size(), sum);
 }
 
 void BM_CgalClosest(benchmark::State& state, bool to_reduced) {
@@ -115,10 +120,7 @@ void BM_CgalClosest(benchmark::State& state, bool to_reduced) {
     benchmark::DoNotOptimize(s);
     sum = s;
   }
-  state.counters["Mqueries/s"] =
-      benchmark::Counter(double(queries.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
-  state.counters["mean_distance"] = sum / double(queries.size());
-  state.SetLabel(f.scan);
+  report(state, f, queries.size(), sum);
 }
 
 // Five repetitions each, reported as mean, median, stddev and cv, the repetitions of all six run in random order
