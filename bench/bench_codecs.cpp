@@ -46,8 +46,9 @@ void BM_Encode(benchmark::State& state, const CodecInfo* codec, std::string scan
   const Prepared& p = prepared(scan, bits);
   std::vector<uint8_t> out;
   for (auto _ : state) {
-    out.clear();
-    if (!codec->encode(p.ctx, p.mesh, out).isOk()) state.SkipWithError("encode failed");
+    auto encoded = encodeMesh(*codec, p.ctx, p.mesh);
+    if (!encoded.isOk()) return state.SkipWithError("encode failed");
+    out = std::move(encoded->payload);
     benchmark::DoNotOptimize(out.data());
   }
   const double tris = double(p.mesh.triangles.size());
@@ -58,10 +59,11 @@ void BM_Encode(benchmark::State& state, const CodecInfo* codec, std::string scan
 
 void BM_Decode(benchmark::State& state, const CodecInfo* codec, std::string scan, int bits) {
   const Prepared& p = prepared(scan, bits);
-  std::vector<uint8_t> out;
-  if (!codec->encode(p.ctx, p.mesh, out).isOk()) return state.SkipWithError("encode failed");
+  auto encoded = encodeMesh(*codec, p.ctx, p.mesh);
+  if (!encoded.isOk()) return state.SkipWithError("encode failed");
+  const std::vector<uint8_t>& out = encoded->payload;
   for (auto _ : state) {
-    auto m = codec->decode(p.ctx, codec->version, out);
+    auto m = codec->decode(p.ctx, codec->version, out, limitsOf(encoded->decoded));
     if (!m.isOk()) state.SkipWithError("decode failed");
     benchmark::DoNotOptimize(m);
   }
@@ -142,10 +144,10 @@ int registerAll() {
       ->Arg(16384)->Arg(131072)->Unit(benchmark::kMillisecond);
   const StatsEncoder kdtree = &kdtreeEncodeWithStats;
   const StatsEncoder octree = [](const TileContext& c, const QuantizedMesh& m, std::vector<uint8_t>& o,
-                                 CodecStats* s) { return octreeEncodeWithStats(c, m, o, s, true); };
+                                 CodecStats* s) { return octreeEncodeWithStats(c, m, o, s, OctreeOptions{true}); };
   // Without contexts (one adaptive model per symbol kind): what the contexts gain. Not decodable.
   const StatsEncoder octree_flat = [](const TileContext& c, const QuantizedMesh& m, std::vector<uint8_t>& o,
-                                      CodecStats* s) { return octreeEncodeWithStats(c, m, o, s, false); };
+                                      CodecStats* s) { return octreeEncodeWithStats(c, m, o, s, OctreeOptions{false}); };
   for (const char* scan : kAllScans) {
     benchmark::RegisterBenchmark((std::string("KdtreeBits/") + scan + "/12").c_str(), BM_Bits, kdtree,
                                  std::string(scan), 12)

@@ -129,14 +129,14 @@ void runScan(const std::string& path, int bits, const Options& opt, std::vector<
   for (const auto& codec : allCodecs()) {
     Row row = base(std::string("scanpress ") + std::string(codec.name));
     const TileContext ctx{bits, {}};
-    std::vector<uint8_t> bytes;
+    EncodedTile encoded;
     QuantizedMesh out;
     timeCodec(runs, q.triangles.size(), [&] {
-      bytes.clear();
-      (void)codec.encode(ctx, q, bytes);
-      return bytes.size();
+      auto e = encodeMesh(codec, ctx, q);
+      if (e.isOk()) encoded = std::move(e).value();
+      return encoded.payload.size();
     }, [&] {
-      auto r = codec.decode(ctx, codec.version, bytes);
+      auto r = codec.decode(ctx, codec.version, encoded.payload, limitsOf(encoded.decoded));
       if (r.isOk()) out = std::move(r).value();
     }, row);
     row.lossless = canonical(out.positions, out.triangles) == want;

@@ -2,6 +2,7 @@
 
 #include <oneapi/tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "jobs/container_file.h"
@@ -27,39 +28,53 @@ Result<std::vector<const TileEntry*>> chooseTiles(const ContainerFile& file, con
   return chosen;
 }
 
-// Payload bytes each level needs over the chosen tiles (index = level, 0..bits); a tile whose first level is
-// coarser than L needs its first level's bytes.
+// Payload bytes each level needs over the chosen tiles (index = level number, 0 to the last level of any chosen
+// tile); a tile needs its first level's bytes for levels coarser than that, its last level's for levels past it.
 Result<std::vector<uint64_t>> levelBytes(const ContainerFile& file, const std::vector<const TileEntry*>& chosen) {
-  const uint32_t bits = uint32_t(file.header().grid.bits);
-  std::vector<uint64_t> total(bits + 1, 0);
+  std::vector<std::vector<CodecLevel>> per_tile;
+  uint32_t last = 0;
   for (const TileEntry* e : chosen) {
     SP_ASSIGN_OR_RETURN(auto levels, file.tileLevels(*e));
     if (levels.empty())
-      return makeError(ErrorCode::kInvalidArgument, file.path() + ": tile " + std::to_string(e->tile_id) +
-                                                        " uses a single-rate codec; it has no coarser levels");
-    addLevelBytes(levels, total);
+      return makeError(ErrorCode::kInvalidArgument,
+                       file.path() + ": tile " + std::to_string(e->tile_id) + " uses codec " + codecName(e->codec) +
+                           ", which is single-rate: it has no levels to choose from (decode it without --level or "
+                           "--bytes)");
+    last = std::max(last, levels.back().level);
+    per_tile.push_back(std::move(levels));
   }
+  std::vector<uint64_t> total(size_t(last) + 1, 0);
+  for (const auto& levels : per_tile) addLevelBytes(levels, total);
   return total;
 }
 
-// Decodes the chosen tiles (at `level` when given) and welds them.
+// Decodes the chosen tiles (at `level` when given) and welds them. Tiles decoded at a coarse level carry
+// attributes derived from their own triangles, which differ between tiles along a seam: such tiles weld by
+// position, and the attributes are derived again from the welded mesh.
 Result<QuantizedMesh> decodeChosen(const ContainerFile& file, const std::vector<const TileEntry*>& chosen,
                                    std::optional<uint32_t> level) {
-  if (level && *level > uint32_t(file.header().grid.bits))
-    return makeError(ErrorCode::kInvalidArgument, file.path() + ": level " + std::to_string(*level) +
-                                                      " is past the last (" +
-                                                      std::to_string(file.header().grid.bits) + ")");
   // Tiles decode independently: in parallel, then welded in index order (deterministic).
   std::vector<QuantizedMesh> decoded(chosen.size());
   std::vector<Status> errors(chosen.size());
+  std::vector<uint8_t> complete(chosen.size(), 1);
   tbb::parallel_for(size_t(0), chosen.size(), [&](size_t i) {
-    auto m = file.decodeTile(*chosen[i], level);
-    if (m.isOk()) decoded[i] = std::move(m).value();
-    else errors[i] = m.status();
+    try {
+      bool done = true;
+      auto m = file.decodeTile(*chosen[i], level, &done);
+      complete[i] = done;
+      if (m.isOk()) decoded[i] = std::move(m).value();
+      else errors[i] = m.status();
+    } catch (const std::exception& e) {
+      errors[i] = makeError(ErrorCode::kInternal, file.path() + ": tile " + std::to_string(chosen[i]->tile_id) +
+                                                      ": " + e.what());
+    }
   });
   for (const Status& e : errors) SP_RETURN_IF_ERROR(e);
   if (decoded.empty()) return QuantizedMesh();
-  return weldTiles(decoded);
+  if (std::find(complete.begin(), complete.end(), 0) == complete.end()) return weldTiles(decoded);
+  QuantizedMesh welded = weldTiles(decoded, WeldBy::kPosition);
+  deriveAttributes(welded, file.header().layout);
+  return welded;
 }
 
 }  // namespace
@@ -93,6 +108,10 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   std::optional<uint32_t> level = settings.level;
   if (settings.level || settings.bytes) {
     SP_ASSIGN_OR_RETURN(auto bytes, levelBytes(file, chosen));
+    if (level && *level >= bytes.size())
+      return makeError(ErrorCode::kInvalidArgument, settings.input + ": level " + std::to_string(*level) +
+                                                        " is past the last (" + std::to_string(bytes.size() - 1) +
+                                                        ")");
     if (settings.bytes) {
       if (bytes[0] > *settings.bytes)
         return makeError(ErrorCode::kInvalidArgument,

@@ -42,6 +42,7 @@ struct StageSeconds {
   double write = 0;     // index, footer, sync and rename
 };
 
+// A tile of an encode: the counts its decoder yields (for a failed tile, the counts it had as built).
 struct TileReport {
   uint32_t id = 0;
   uint32_t vertices = 0;

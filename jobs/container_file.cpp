@@ -32,10 +32,11 @@ Result<std::span<const uint8_t>> ContainerFile::readPayload(const TileEntry& ent
   return parseTileChunk(chunk, entry, path());
 }
 
-Result<QuantizedMesh> ContainerFile::decodeTile(const TileEntry& entry, std::optional<uint32_t> level) const {
+Result<QuantizedMesh> ContainerFile::decodeTile(const TileEntry& entry, std::optional<uint32_t> level,
+                                                bool* complete) const {
   std::vector<uint8_t> chunk;
   SP_ASSIGN_OR_RETURN(auto payload, readPayload(entry, chunk));
-  return decodeTilePayload(header_, entry, payload, path(), level);
+  return decodeTilePayload(header_, entry, payload, path(), level, complete);
 }
 
 Result<std::vector<CodecLevel>> ContainerFile::tileLevels(const TileEntry& entry) const {
@@ -43,9 +44,7 @@ Result<std::vector<CodecLevel>> ContainerFile::tileLevels(const TileEntry& entry
   if (!codec || !codec->levels) return std::vector<CodecLevel>{};
   std::vector<uint8_t> chunk;
   SP_ASSIGN_OR_RETURN(auto payload, readPayload(entry, chunk));
-  auto levels = codec->levels(TileContext{header_.grid.bits, header_.layout}, entry.codec_version, payload);
-  if (!levels.isOk()) return levels.status().withContext(path() + ": tile " + std::to_string(entry.tile_id));
-  return levels;
+  return tilePayloadLevels(header_, entry, payload, path());
 }
 
 }  // namespace scanpress

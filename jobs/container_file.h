@@ -19,8 +19,9 @@ class ContainerFile {
   uint64_t size() const { return file_->size(); }
   const std::string& path() const { return file_->path(); }
   const TileEntry* findTile(uint32_t tile_id) const;
-  // Reads, verifies (both checksums) and decodes one tile.
-  Result<QuantizedMesh> decodeTile(const TileEntry& entry, std::optional<uint32_t> level = std::nullopt) const;
+  // Reads, verifies (both checksums) and decodes one tile (see decodeTilePayload).
+  Result<QuantizedMesh> decodeTile(const TileEntry& entry, std::optional<uint32_t> level = std::nullopt,
+                                   bool* complete = nullptr) const;
   // The levels of a progressive tile (empty for single-rate codecs).
   Result<std::vector<CodecLevel>> tileLevels(const TileEntry& entry) const;
 

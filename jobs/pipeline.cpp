@@ -211,9 +211,9 @@ struct TileJob {
 struct TileResult {
   uint32_t tile = 0;
   Status status;
-  std::vector<uint8_t> payload;
-  uint32_t vertices = 0, faces = 0, border = 0;
-  Vec3u lo{0, 0, 0}, hi{0, 0, 0};
+  EncodedTile encoded;
+  uint32_t border = 0;
+  uint32_t input_vertices = 0, input_faces = 0;  // of the tile as built (a failed tile reports what it lost)
   ErrorAccumulator forward, backward;
 };
 
@@ -290,7 +290,8 @@ Status statusFromException() {
 Status measureTile(const EncodeSettings& s, const CodecInfo& codec, const TileContext& ctx, const Grid& grid,
                    double density, std::shared_ptr<EmbreeDevice> device, const TileMesh& tm,
                    const std::vector<Vec3d>& originals, TileResult& r) {
-  SP_ASSIGN_OR_RETURN(QuantizedMesh decoded_q, codec.decode(ctx, codec.version, r.payload));
+  SP_ASSIGN_OR_RETURN(QuantizedMesh decoded_q,
+                      codec.decode(ctx, codec.version, r.encoded.payload, limitsOf(r.encoded.decoded)));
   std::vector<Vec3d> decoded(decoded_q.positions.size());
   for (size_t i = 0; i < decoded.size(); ++i) {
     decoded[i] = grid.dequantize(decoded_q.positions[i]);
@@ -434,24 +435,27 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
       // the codec is the last stage.
       if (r.status.isOk() && std::find(s.fail_tiles.begin(), s.fail_tiles.end(), job.tile) != s.fail_tiles.end())
         r.status = makeError(ErrorCode::kInternal, "injected failure (test)");
-      if (r.status.isOk()) r.status = codec->encode(ctx, tm.mesh, r.payload);
+      if (r.status.isOk()) {
+        auto encoded = codec->encode(ctx, TileView{tm.mesh, tm.border}, CodecOptions{});
+        if (encoded.isOk()) r.encoded = std::move(encoded).value();
+        else r.status = encoded.status();
+      }
       if (r.status.isOk() && result.measured)  // decode in memory, measure, discard
         r.status = measureTile(s, *codec, ctx, result.grid, density, device, tm, originals, r);
-      r.vertices = static_cast<uint32_t>(decodedVertexCount(*codec, tm.mesh, r.payload));
-      r.faces = static_cast<uint32_t>(tm.mesh.triangles.size());
       r.border = static_cast<uint32_t>(std::count(tm.border.begin(), tm.border.end(), 1));
-      meshBounds(tm.mesh, r.lo, r.hi);
+      r.input_vertices = static_cast<uint32_t>(tm.mesh.positions.size());
+      r.input_faces = static_cast<uint32_t>(tm.mesh.triangles.size());
     } catch (...) {
       r.status = statusFromException();
-      r.payload.clear();
+      r.encoded = EncodedTile{};
     }
     return r;
   };
   auto writeTile = [&](const TileResult& r) {
     TileReport& rep = result.tiles[r.tile];
     rep.id = r.tile;
-    rep.vertices = r.vertices;
-    rep.faces = r.faces;
+    rep.vertices = r.status.isOk() ? r.encoded.decoded.vertices : r.input_vertices;
+    rep.faces = r.status.isOk() ? r.encoded.decoded.faces : r.input_faces;
     rep.border_vertices = r.border;
     rep.status = r.status;
     rep.forward = statsOf(r.forward);
@@ -461,12 +465,12 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
     if (!r.status.isOk()) {
       ++result.failed_tiles;
     } else if (write_status.isOk()) {
-      write_status = writer.addTile(r.tile, *codec, r.vertices, r.faces, r.lo, r.hi, r.payload);
-      rep.bytes = kChunkHeaderSize + r.payload.size();
-      result.tile_vertices += r.vertices;
+      write_status = writer.addTile(r.tile, *codec, r.encoded.decoded, r.encoded.payload);
+      rep.bytes = kChunkHeaderSize + r.encoded.payload.size();
+      result.tile_vertices += r.encoded.decoded.vertices;
     }
     ++written;
-    triangles_done += r.faces;
+    triangles_done += r.input_faces;
     if (progress) progress->tiles(written, tile_count, triangles_done);
   };
 

@@ -11,9 +11,26 @@ namespace {
 
 using nlohmann::json;
 
-std::string codecName(CodecId id) {
-  const CodecInfo* c = findCodec(id);
-  return c ? std::string(c->name) : "unknown(" + std::to_string(static_cast<int>(id)) + ")";
+// One level of a tile: its number, the payload bytes it needs, and what it means.
+json levelJson(const CodecLevel& lv) {
+  json j = {{"level", lv.level}, {"bytes", lv.end_bytes}, {"complete", lv.complete},
+            {"meaning", describeLevel(lv)}};
+  switch (lv.kind) {
+    case LevelKind::kCells:
+      j["kind"] = "cells";
+      j["cell_size"] = uint64_t(1) << lv.cell_bits;  // grid cells per axis
+      break;
+    case LevelKind::kSimplified:
+      j["kind"] = "simplified";
+      j["vertices"] = lv.vertices;
+      j["max_error"] = lv.max_error;  // grid cells
+      break;
+    case LevelKind::kRemeshed:
+      j["kind"] = "remeshed";
+      j["spacing"] = lv.spacing;  // grid cells
+      break;
+  }
+  return j;
 }
 
 json gridJson(const Grid& g) {
@@ -150,9 +167,11 @@ std::string containerInfoJson(const ContainerFile& file) {
   j["bytes"] = file.size();
   j["bpv"] = h.vertices ? 8.0 * file.size() / h.vertices : 0.0;
   json tiles = json::array();
-  // Progressive tiles list their levels (payload bytes needed for each); the container-wide list sums them over
-  // tiles (a tile whose first level is coarser counts its first level's bytes) when every tile is progressive.
-  std::vector<uint64_t> level_total(h.grid.bits + 1, 0);
+  // Progressive tiles list their levels (payload bytes needed for each, and what the level means, as the codec
+  // states it); the container-wide list sums the bytes over tiles (a tile whose first level is coarser counts its
+  // first level's bytes, one whose last level is finer its last one's) when every tile is progressive.
+  std::vector<std::vector<CodecLevel>> tile_levels;
+  uint32_t last_level = 0;
   bool all_progressive = !file.tiles().empty();
   for (const auto& t : file.tiles()) {
     json e = {{"id", t.tile_id},
@@ -168,16 +187,20 @@ std::string containerInfoJson(const ContainerFile& file) {
       e["levels_error"] = levels.status().toString();
       all_progressive = false;
     } else if (levels->empty()) {
+      e["single_rate"] = true;
       all_progressive = false;
     } else {
       json l = json::array();
-      for (const auto& lv : *levels) l.push_back({{"level", lv.level}, {"bytes", lv.end_bytes}});
+      for (const auto& lv : *levels) l.push_back(levelJson(lv));
       e["levels"] = std::move(l);
-      addLevelBytes(*levels, level_total);
+      last_level = std::max(last_level, levels->back().level);
+      tile_levels.push_back(std::move(levels).value());
     }
     tiles.push_back(std::move(e));
   }
   if (all_progressive) {
+    std::vector<uint64_t> level_total(size_t(last_level) + 1, 0);
+    for (const auto& levels : tile_levels) addLevelBytes(levels, level_total);
     json l = json::array();
     for (uint32_t lv = 0; lv < level_total.size(); ++lv) l.push_back({{"level", lv}, {"bytes", level_total[lv]}});
     j["levels"] = std::move(l);

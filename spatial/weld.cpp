@@ -30,7 +30,7 @@ struct KeyHash {
 
 }  // namespace
 
-QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles) {
+QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by) {
   if (tiles.size() == 1) return tiles[0];
   QuantizedMesh out;
   struct Owner {
@@ -43,8 +43,9 @@ QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles) {
     const QuantizedMesh& tile = tiles[t];
     remap.assign(tile.positions.size(), 0);
     for (size_t v = 0; v < tile.positions.size(); ++v) {
-      const Key key{tile.positions[v], tile.normals.empty() ? OctNormal{0, 0} : tile.normals[v],
-                    tile.colors.empty() ? Rgba8{0, 0, 0, 0} : tile.colors[v]};
+      const bool attributes = by == WeldBy::kPositionAndAttributes;
+      const Key key{tile.positions[v], !attributes || tile.normals.empty() ? OctNormal{0, 0} : tile.normals[v],
+                    !attributes || tile.colors.empty() ? Rgba8{0, 0, 0, 0} : tile.colors[v]};
       const uint32_t next = static_cast<uint32_t>(out.positions.size());
       auto [it, inserted] = first.try_emplace(key, Owner{next, t});
       if (!inserted && it->second.tile != t) {

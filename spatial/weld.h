@@ -2,9 +2,11 @@
 //
 // All tiles of a container use the scan's one global grid, so a vertex that lies on a border between tiles has
 // the same integer coordinates (and attributes) in every tile that holds it. weldTiles concatenates tiles and
-// merges vertices of different tiles that share position, normal and color. Two different scan vertices at one
-// quantized position with different attributes stay apart (their attributes survive); vertices that share a
-// position inside one tile are left as the codec returned them: welding never changes what one tile decodes to.
+// merges vertices of different tiles that share the weld key. By default the key is position, normal and color:
+// two different scan vertices at one quantized position with different attributes stay apart (their attributes
+// survive). Tiles decoded at a coarse level carry attributes each tile derived on its own, which differ along a
+// seam: those weld by position alone (the caller derives their attributes again). Vertices that share a position
+// inside one tile are left as the codec returned them: welding never changes what one tile decodes to.
 #pragma once
 
 #include <span>
@@ -13,6 +15,8 @@
 
 namespace scanpress {
 
-QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles);
+enum class WeldBy { kPositionAndAttributes, kPosition };
+
+QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by = WeldBy::kPositionAndAttributes);
 
 }  // namespace scanpress

@@ -156,26 +156,29 @@ TEST(Container, UnknownVersionAndCodecAreTheirOwnErrors) {
 TEST(StoreCodec, HostilePayloadsFailCleanly) {
   Fixture f = makeFixture(1);
   TileContext ctx{f.grid.bits, f.layout};
-  std::vector<uint8_t> payload;
-  ASSERT_TRUE(storeEncode(ctx, f.tiles[0], payload).isOk());
+  auto encoded = encodeMesh(*findCodec(CodecId::kStore), ctx, f.tiles[0]);
+  ASSERT_TRUE(encoded.isOk());
+  const std::vector<uint8_t>& payload = encoded->payload;
+  const DecodeLimits limits = limitsOf(encoded->decoded);
   // Every truncation, and random garbage, with no checksum in front: the decoder itself must hold.
   for (size_t len = 0; len < payload.size(); ++len) {
     std::vector<uint8_t> cut(payload.begin(), payload.begin() + static_cast<ptrdiff_t>(len));
-    EXPECT_FALSE(storeDecode(ctx, 1, cut).isOk());
+    EXPECT_FALSE(storeDecode(ctx, 1, cut, limits).isOk());
   }
   std::mt19937 rng(4);
   for (int i = 0; i < 2000; ++i) {
     auto bytes = payload;
     for (int k = 0; k < 3; ++k) bytes[rng() % bytes.size()] = static_cast<uint8_t>(rng());
-    auto r = storeDecode(ctx, 1, bytes);
+    auto r = storeDecode(ctx, 1, bytes, limits);
     if (r.isOk()) {
       EXPECT_TRUE(validateTile(ctx, *r).isOk());
     }
   }
   // Counts that promise more than the payload holds are rejected before allocating.
   std::vector<uint8_t> huge = {0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF};
-  EXPECT_EQ(storeDecode(ctx, 1, huge).status().code(), ErrorCode::kTruncated);
-  EXPECT_EQ(storeDecode(ctx, 2, payload).status().code(), ErrorCode::kUnknownVersion);
+  EXPECT_EQ(storeDecode(ctx, 1, huge, limits).status().code(), ErrorCode::kMalformed);  // beyond the index
+  EXPECT_EQ(storeDecode(ctx, 1, huge, DecodeLimits{UINT32_MAX, UINT32_MAX}).status().code(), ErrorCode::kTruncated);
+  EXPECT_EQ(storeDecode(ctx, 2, payload, limits).status().code(), ErrorCode::kUnknownVersion);
 }
 
 }  // namespace

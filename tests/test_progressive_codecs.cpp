@@ -27,21 +27,32 @@ QuantizedMesh quantized(const Mesh& m, int bits, const AttributeLayout& layout =
   return *q;
 }
 
-std::vector<uint8_t> encode(const CodecInfo& codec, const TileContext& ctx, const QuantizedMesh& q) {
-  std::vector<uint8_t> out;
-  const Status s = codec.encode(ctx, q, out);
-  EXPECT_TRUE(s.isOk()) << s.toString();
-  return out;
+EncodedTile encode(const CodecInfo& codec, const TileContext& ctx, const QuantizedMesh& q) {
+  auto e = encodeMesh(codec, ctx, q);
+  EXPECT_TRUE(e.isOk()) << e.status().toString();
+  return e.isOk() ? std::move(e).value() : EncodedTile{};
 }
 
 // Decodes and checks the result is the input (triangles with orientation and multiplicity, attributes).
 void expectRoundTrip(const CodecInfo& codec, const TileContext& ctx, const QuantizedMesh& q) {
-  const auto bytes = encode(codec, ctx, q);
-  auto d = codec.decode(ctx, 1, bytes);
+  const EncodedTile enc = encode(codec, ctx, q);
+  auto d = codec.decode(ctx, 1, enc.payload, limitsOf(enc.decoded));
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   EXPECT_EQ(d->triangles.size(), q.triangles.size());
   EXPECT_TRUE(testing::cornerMultiset(*d, ctx.layout.normal_bits) == testing::cornerMultiset(q, ctx.layout.normal_bits));
-  EXPECT_EQ(d->positions.size(), decodedVertexCount(codec, q, bytes));
+  // What the encoder said the decoder yields is what it yields.
+  const TileSummary got = summarize(*d);
+  EXPECT_EQ(got.vertices, enc.decoded.vertices);
+  EXPECT_EQ(got.faces, enc.decoded.faces);
+  EXPECT_EQ(got.lo, enc.decoded.lo);
+  EXPECT_EQ(got.hi, enc.decoded.hi);
+  // A limit one below either count is refused before decoding.
+  if (enc.decoded.vertices > 0)
+    EXPECT_EQ(codec.decode(ctx, 1, enc.payload, DecodeLimits{enc.decoded.vertices - 1, enc.decoded.faces})
+                  .status().code(), ErrorCode::kMalformed);
+  if (enc.decoded.faces > 0)
+    EXPECT_EQ(codec.decode(ctx, 1, enc.payload, DecodeLimits{enc.decoded.vertices, enc.decoded.faces - 1})
+                  .status().code(), ErrorCode::kMalformed);
   // Every input position comes back (isolated vertices included).
   auto positions = [](const QuantizedMesh& m) {
     std::vector<Vec3u> p = m.positions;
@@ -159,16 +170,31 @@ TEST_P(Progressive, EveryLevelDecodesToAValidMesh) {
   Mesh sphere = icosphere(4);
   for (const auto& p : sphere.positions) sphere.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
   const QuantizedMesh q = quantized(sphere, 12, ctx.layout);
-  const auto bytes = encode(codec(), ctx, q);
-  auto levels = codec().levels(ctx, 1, bytes);
+  const EncodedTile enc = encode(codec(), ctx, q);
+  const auto& bytes = enc.payload;
+  const DecodeLimits lim = limitsOf(enc.decoded);
+  auto levels = codec().levels(ctx, 1, bytes, lim);
   ASSERT_TRUE(levels.isOk()) << levels.status().toString();
   ASSERT_EQ(levels->back().level, 12u);
   EXPECT_EQ(levels->back().end_bytes, bytes.size());
+  // Each level says what it means: cells of 2^(bits - L) grid cells, the last one complete; the encoder returned
+  // the same list.
+  ASSERT_EQ(levels->size(), enc.levels.size());
+  for (size_t i = 0; i < levels->size(); ++i) {
+    const CodecLevel& lv = (*levels)[i];
+    EXPECT_EQ(lv.level, enc.levels[i].level);
+    EXPECT_EQ(lv.end_bytes, enc.levels[i].end_bytes);
+    EXPECT_EQ(lv.kind, LevelKind::kCells);
+    EXPECT_EQ(lv.cell_bits, 12 - lv.level);
+    EXPECT_EQ(lv.complete, i + 1 == levels->size());
+  }
+  EXPECT_EQ(describeLevel(levels->front()), "cells of 2^" + std::to_string(levels->front().cell_bits) + " grid cells");
+  EXPECT_EQ(describeLevel(levels->back()), "cells of 2^0 grid cells (complete)");
   size_t last_vertices = 0;
   for (const auto& lv : *levels) {
     SCOPED_TRACE(lv.level);
     const std::span<const uint8_t> prefix(bytes.data(), lv.end_bytes);
-    auto m = codec().decode_level(ctx, 1, prefix, lv.level);
+    auto m = codec().decode_level(ctx, 1, prefix, lv.level, lim);
     ASSERT_TRUE(m.isOk()) << m.status().toString();
     EXPECT_TRUE(validateTile(ctx, *m).isOk());
     for (const auto& t : m->triangles) {
@@ -179,32 +205,34 @@ TEST_P(Progressive, EveryLevelDecodesToAValidMesh) {
     EXPECT_GE(m->positions.size(), last_vertices);
     last_vertices = m->positions.size();
     // The same level from the whole payload.
-    auto full = codec().decode_level(ctx, 1, bytes, lv.level);
+    auto full = codec().decode_level(ctx, 1, bytes, lv.level, lim);
     ASSERT_TRUE(full.isOk());
     EXPECT_EQ(full->positions, m->positions);
     EXPECT_EQ(full->triangles, m->triangles);
     if (lv.level < 12 && lv.end_bytes > 0) {  // one byte short of the level is an error, not a crash
-      auto cut = codec().decode_level(ctx, 1, std::span<const uint8_t>(bytes.data(), lv.end_bytes - 1), lv.level);
+      auto cut = codec().decode_level(ctx, 1, std::span<const uint8_t>(bytes.data(), lv.end_bytes - 1), lv.level, lim);
       if (lv.level > levels->front().level) {
         EXPECT_FALSE(cut.isOk());
       }
     }
   }
-  EXPECT_TRUE(testing::cornerMultiset(*codec().decode_level(ctx, 1, bytes, 12), 12) == testing::cornerMultiset(q, 12));
+  EXPECT_TRUE(testing::cornerMultiset(*codec().decode_level(ctx, 1, bytes, 12, lim), 12) == testing::cornerMultiset(q, 12));
   // Coarse levels look like the mesh: by level 6 it has most of its sphere.
-  auto l6 = codec().decode_level(ctx, 1, bytes, 6);
+  auto l6 = codec().decode_level(ctx, 1, bytes, 6, lim);
   ASSERT_TRUE(l6.isOk());
   EXPECT_GT(l6->triangles.size(), 100u);
 }
 
 TEST_P(Progressive, EveryTruncationFailsCleanly) {
   const TileContext ctx{12, {}};
-  const auto bytes = encode(codec(), ctx, quantized(icosphere(2), 12));
+  const EncodedTile enc = encode(codec(), ctx, quantized(icosphere(2), 12));
+  const auto& bytes = enc.payload;
+  const DecodeLimits lim = limitsOf(enc.decoded);
   for (size_t n = 0; n < bytes.size(); ++n) {
-    auto d = codec().decode(ctx, 1, std::span<const uint8_t>(bytes.data(), n));
+    auto d = codec().decode(ctx, 1, std::span<const uint8_t>(bytes.data(), n), lim);
     EXPECT_FALSE(d.isOk()) << "a payload cut to " << n << " of " << bytes.size() << " bytes decoded";
   }
-  EXPECT_EQ(codec().decode(ctx, 2, bytes).status().code(), ErrorCode::kUnknownVersion);
+  EXPECT_EQ(codec().decode(ctx, 2, bytes, lim).status().code(), ErrorCode::kUnknownVersion);
 }
 
 // Corrupted payloads (no checksum in the way): errors or some valid mesh, never a crash, hang or bad index
@@ -217,7 +245,9 @@ TEST_P(Progressive, RandomCorruptionsNeverCrash) {
     sphere.colors.push_back({1, 2, 3, 255});
   }
   sphere.color_channels = 3;
-  const auto bytes = encode(codec(), ctx, quantized(sphere, 12, ctx.layout));
+  const EncodedTile enc = encode(codec(), ctx, quantized(sphere, 12, ctx.layout));
+  const auto& bytes = enc.payload;
+  const DecodeLimits lim = limitsOf(enc.decoded);
   std::mt19937 rng(11);
   int failures = 0;
   for (int trial = 0; trial < 2000; ++trial) {
@@ -225,7 +255,7 @@ TEST_P(Progressive, RandomCorruptionsNeverCrash) {
     const int flips = 1 + trial % 4;
     for (int f = 0; f < flips; ++f) b[rng() % b.size()] ^= uint8_t(1 + rng() % 255);
     const uint32_t level = trial % 3 == 0 ? uint32_t(rng() % 13) : 12u;
-    auto d = codec().decode_level(ctx, 1, b, level);
+    auto d = codec().decode_level(ctx, 1, b, level, lim);
     if (!d.isOk()) {
       ++failures;
     } else {
@@ -237,13 +267,12 @@ TEST_P(Progressive, RandomCorruptionsNeverCrash) {
 
 TEST_P(Progressive, RejectsWhatItCannotCode) {
   const TileContext ctx{10, {}};
-  std::vector<uint8_t> out;
   // Two corners in one cell (quantizeMesh drops these triangles before any codec sees them).
-  EXPECT_EQ(codec().encode(ctx, rawMesh({{0, 0, 0}, {0, 0, 0}, {1, 1, 1}}, {{0, 1, 2}}), out).code(),
+  EXPECT_EQ(encodeMesh(codec(), ctx, rawMesh({{0, 0, 0}, {0, 0, 0}, {1, 1, 1}}, {{0, 1, 2}})).status().code(),
             ErrorCode::kInvalidArgument);
-  EXPECT_EQ(codec().encode(ctx, rawMesh({{0, 0, 0}, {1, 0, 0}, {1, 1, 1}}, {{0, 1, 3}}), out).code(),
+  EXPECT_EQ(encodeMesh(codec(), ctx, rawMesh({{0, 0, 0}, {1, 0, 0}, {1, 1, 1}}, {{0, 1, 3}})).status().code(),
             ErrorCode::kInvalidArgument);
-  EXPECT_EQ(codec().encode(ctx, rawMesh({{0, 0, 0}, {1, 0, 0}, {1024, 1, 1}}, {{0, 1, 2}}), out).code(),
+  EXPECT_EQ(encodeMesh(codec(), ctx, rawMesh({{0, 0, 0}, {1, 0, 0}, {1024, 1, 1}}, {{0, 1, 2}})).status().code(),
             ErrorCode::kInvalidArgument);
 }
 

@@ -1,17 +1,28 @@
 #include "engine/codecs/codec.h"
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <string>
+
+#include "engine/octahedral.h"
 
 namespace scanpress {
 namespace {
 
+// Payload floors (FORMAT.md, "Codec registry"). store: every vertex but a few costs at least one bit (a tile with
+// a triangle has two distinct positions, so every coordinate has at least one bit on some axis) and every face three
+// index bits. kdtree and octree: entropy-coded, so far below a bit per element on regular input; the floors are what
+// their headers already enforced (at most 1024 points per payload byte, 64 triangles per point).
+constexpr PayloadFloor kStoreFloor{1.0, 3.0, 64};
+constexpr PayloadFloor kHierarchyFloor{8.0 / 1024, 8.0 / (1024 * 64), 1024};
+
 constexpr std::array<CodecInfo, 3> kCodecs = {{
-    {CodecId::kStore, "store", 1, &storeEncode, &storeDecode},
-    {CodecId::kKdtree, "kdtree", 1, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel,
-     &hierarchyPayloadVertices},
-    {CodecId::kOctree, "octree", 1, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel,
-     &hierarchyPayloadVertices},
+    {CodecId::kStore, "store", 1, kStoreFloor, &storeEncode, &storeDecode},
+    {CodecId::kKdtree, "kdtree", 1, kHierarchyFloor, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels,
+     &kdtreeDecodeLevel},
+    {CodecId::kOctree, "octree", 1, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels,
+     &octreeDecodeLevel},
 }};
 
 }  // namespace
@@ -30,6 +41,34 @@ const CodecInfo* findCodec(std::string_view name) {
   return nullptr;
 }
 
+std::string codecNames() {
+  std::string out;
+  for (const auto& c : kCodecs) out += (out.empty() ? "" : ", ") + std::string(c.name);
+  return out;
+}
+
+std::string codecName(CodecId id) {
+  const CodecInfo* c = findCodec(id);
+  return c ? std::string(c->name) : "unknown(" + std::to_string(static_cast<int>(id)) + ")";
+}
+
+std::string describeLevel(const CodecLevel& l) {
+  std::string s;
+  switch (l.kind) {
+    case LevelKind::kCells:
+      s = "cells of 2^" + std::to_string(l.cell_bits) + " grid cells";
+      break;
+    case LevelKind::kSimplified:
+      s = std::to_string(l.vertices) + " vertices within " + std::to_string(l.max_error) + " grid cells";
+      break;
+    case LevelKind::kRemeshed:
+      s = "remeshed on a grid of " + std::to_string(l.spacing) + " grid cells";
+      break;
+  }
+  if (l.complete) s += " (complete)";
+  return s;
+}
+
 void addLevelBytes(std::span<const CodecLevel> levels, std::vector<uint64_t>& total) {
   size_t i = 0;
   for (uint32_t l = 0; l < total.size(); ++l) {
@@ -38,8 +77,56 @@ void addLevelBytes(std::span<const CodecLevel> levels, std::vector<uint64_t>& to
   }
 }
 
-uint64_t decodedVertexCount(const CodecInfo& codec, const QuantizedMesh& mesh, std::span<const uint8_t> payload) {
-  return codec.payload_vertices ? codec.payload_vertices(payload) : mesh.positions.size();
+bool PayloadFloor::admits(uint64_t vertices, uint64_t faces, uint64_t payload_bytes) const {
+  const double need_bits = double(vertices) * bits_per_vertex + double(faces) * bits_per_face;
+  return need_bits <= 8.0 * (double(payload_bytes) + double(slack_bytes));
+}
+
+Result<EncodedTile> encodeMesh(const CodecInfo& codec, const TileContext& ctx, const QuantizedMesh& mesh,
+                               const CodecOptions& options) {
+  return codec.encode(ctx, TileView{mesh, {}}, options);
+}
+
+DecodeLimits limitsOf(const TileSummary& s) { return DecodeLimits{s.vertices, s.faces}; }
+
+Status checkLimits(std::string_view what, uint64_t vertices, uint64_t faces, const DecodeLimits& limits) {
+  if (vertices > limits.vertices || faces > limits.faces)
+    return makeError(ErrorCode::kMalformed, std::string(what) + ": claims " + std::to_string(vertices) +
+                                                " vertices and " + std::to_string(faces) +
+                                                " faces, the tile index allows " + std::to_string(limits.vertices) +
+                                                " and " + std::to_string(limits.faces));
+  return Status::ok();
+}
+
+TileSummary summarize(const QuantizedMesh& mesh) {
+  TileSummary s;
+  s.vertices = static_cast<uint32_t>(mesh.positions.size());
+  s.faces = static_cast<uint32_t>(mesh.triangles.size());
+  for (const auto& p : mesh.positions)
+    for (int a = 0; a < 3; ++a) s.lo[a] = std::min(s.lo[a], p[a]), s.hi[a] = std::max(s.hi[a], p[a]);
+  return s;
+}
+
+void deriveAttributes(QuantizedMesh& m, const AttributeLayout& layout) {
+  m.normals.clear();
+  m.colors.clear();
+  if (layout.hasNormals()) {
+    std::vector<Vec3d> acc(m.positions.size(), Vec3d{0, 0, 0});
+    for (const auto& t : m.triangles) {
+      Vec3d e1, e2;
+      for (int a = 0; a < 3; ++a) {
+        e1[a] = double(m.positions[t[1]][a]) - m.positions[t[0]][a];
+        e2[a] = double(m.positions[t[2]][a]) - m.positions[t[0]][a];
+      }
+      const Vec3d nrm{e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+      for (uint32_t v : t)
+        for (int a = 0; a < 3; ++a) acc[v][a] += nrm[a];
+    }
+    m.normals.reserve(acc.size());
+    for (const auto& a : acc)
+      m.normals.push_back(encodeOctahedral(Vec3f{float(a[0]), float(a[1]), float(a[2])}, layout.normal_bits));
+  }
+  if (layout.hasColors()) m.colors.assign(m.positions.size(), Rgba8{128, 128, 128, 255});
 }
 
 Status validateTile(const TileContext& ctx, const QuantizedMesh& mesh) {

@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <span>
+#include <string>
 #include <string_view>
 #include <vector>
 
@@ -28,68 +29,155 @@ struct TileContext {
   AttributeLayout layout;
 };
 
-// A level of a progressive payload: decoding it needs the first `end_bytes` bytes of the payload. Level L has
-// cells of 2^(bits-L) grid cells per axis; level == bits is the lossless mesh.
+// What a stage or codec receives: the tile's quantized mesh (local indices) and, per vertex, whether it is locked.
+// A locked vertex is a border vertex under the contract in engine/tile.h: lossy stages must not move, remove or
+// merge it, and must keep the chains of border edges between locked vertices. `locked` is empty (nothing locked)
+// or has one entry per vertex. Lossless codecs keep everything and may ignore it.
+struct TileView {
+  const QuantizedMesh& mesh;
+  std::span<const uint8_t> locked;
+};
+
+// The typed options of each codec, one struct per codec, filled by jobs/config.cpp and the CLI. The engine never
+// sees options as strings.
+struct OctreeOptions {
+  // false codes every symbol kind with one adaptive model (measuring what the contexts gain): the payload is not
+  // decodable. Not reachable from the CLI or job files.
+  bool contexts = true;
+};
+struct CodecOptions {
+  OctreeOptions octree;
+};
+
+// What a level means, as its codec states it (see CodecLevel).
+enum class LevelKind : uint8_t {
+  kCells = 1,       // vertices are cells of 2^cell_bits grid cells per axis, at the cells' centers (kdtree, octree)
+  kSimplified = 2,  // a mesh of `vertices` vertices within `max_error` grid cells of the tile (simplification)
+  kRemeshed = 3,    // a resampling on a regular grid of `spacing` grid cells (remeshing)
+};
+
+// One level of a progressive payload, coarse to fine: decoding it needs the first `end_bytes` bytes of the payload.
+// Level numbers are the codec's own and increase towards the last level, which is the tile as encoded
+// (`complete`). A level number coarser than a tile's first level decodes that first level; one past its last
+// decodes the last.
 struct CodecLevel {
   uint32_t level = 0;
   uint64_t end_bytes = 0;
+  LevelKind kind = LevelKind::kCells;
+  bool complete = false;  // the tile as encoded (lossless for the lossless codecs)
+  uint32_t cell_bits = 0;  // kCells
+  uint64_t vertices = 0;   // kSimplified
+  double max_error = 0;    // kSimplified, in grid cells
+  double spacing = 0;      // kRemeshed, in grid cells
 };
 
+// What the level means, in words ("cells of 2^4 grid cells", "complete (lossless)").
+std::string describeLevel(const CodecLevel& level);
+
 // Adds to total[L], for every level L < total.size(), the payload bytes a tile with these levels (as `levels`
-// lists them, coarse to fine, non-empty) needs for L; a level coarser than the tile's first needs the first one's.
+// lists them, coarse to fine, non-empty) needs for L: a level coarser than the tile's first needs the first one's,
+// a level past its last needs the last one's.
 void addLevelBytes(std::span<const CodecLevel> levels, std::vector<uint64_t>& total);
+
+// What a decoder of a payload yields: counts and quantized bounds of the decoded tile's vertices (inclusive; lo >
+// hi when it has none). The encoder returns it with the payload; the container's index records it.
+struct TileSummary {
+  uint32_t vertices = 0;
+  uint32_t faces = 0;
+  Vec3u lo{UINT32_MAX, UINT32_MAX, UINT32_MAX};
+  Vec3u hi{0, 0, 0};
+};
+
+struct EncodedTile {
+  std::vector<uint8_t> payload;
+  TileSummary decoded;
+  std::vector<CodecLevel> levels;  // progressive codecs; empty for single-rate ones
+};
+
+// Hard limits on what a decoder may produce, from the container's index entry for the tile (DESIGN.md decision
+// 10): a payload that claims more is rejected before anything is allocated. Coarse levels stay within them too.
+struct DecodeLimits {
+  uint32_t vertices = 0;
+  uint32_t faces = 0;
+};
+
+// The least a payload of a codec can spend, documented per codec in engine/container/FORMAT.md: a tile of V
+// vertices and F faces needs at least ceil((V * per_vertex + F * per_face) / 8) - slack_bytes payload bytes.
+// Checked against the index's counts before any payload is read, so that an index cannot claim more than its
+// file could hold; the writer checks it too, so that no file it writes is refused.
+struct PayloadFloor {
+  double bits_per_vertex = 0;
+  double bits_per_face = 0;
+  uint64_t slack_bytes = 0;
+  bool admits(uint64_t vertices, uint64_t faces, uint64_t payload_bytes) const;
+};
 
 struct CodecInfo {
   CodecId id;
   std::string_view name;
   uint16_t version;  // the version this build writes
-  // Appends the encoded tile to `out`.
-  Status (*encode)(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out);
-  Result<QuantizedMesh> (*decode)(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload);
+  PayloadFloor floor;
+  // Encodes a tile; returns the payload and what the decoder will yield from it.
+  Result<EncodedTile> (*encode)(const TileContext& ctx, const TileView& tile, const CodecOptions& options);
+  // The whole tile, within `limits`.
+  Result<QuantizedMesh> (*decode)(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                  const DecodeLimits& limits);
   // Progressive codecs only (nullptr otherwise): the levels a payload holds, and the mesh of one level from a
   // payload that may be cut after that level's end_bytes.
   Result<std::vector<CodecLevel>> (*levels)(const TileContext& ctx, uint16_t version,
-                                            std::span<const uint8_t> payload) = nullptr;
+                                            std::span<const uint8_t> payload, const DecodeLimits& limits) = nullptr;
   Result<QuantizedMesh> (*decode_level)(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
-                                        uint32_t level) = nullptr;
-  // Codecs whose decoder yields a different vertex count than the encoder was given (kdtree merges vertices
-  // that share position and attributes): that count, read from a payload this build wrote. nullptr: the same.
-  uint64_t (*payload_vertices)(std::span<const uint8_t> payload) = nullptr;
+                                        uint32_t level, const DecodeLimits& limits) = nullptr;
+  bool progressive() const { return levels != nullptr; }
 };
-
-// The vertex count the codec's decoder will produce for `payload`, encoded from `mesh`.
-uint64_t decodedVertexCount(const CodecInfo& codec, const QuantizedMesh& mesh, std::span<const uint8_t> payload);
 
 std::span<const CodecInfo> allCodecs();
 const CodecInfo* findCodec(CodecId id);
 const CodecInfo* findCodec(std::string_view name);
+// "store, kdtree, octree": for messages.
+std::string codecNames();
+// The codec's name, or "unknown(ID)".
+std::string codecName(CodecId id);
+
+// Encodes a whole tile with nothing locked (tests, benchmarks, whole-mesh tools).
+Result<EncodedTile> encodeMesh(const CodecInfo& codec, const TileContext& ctx, const QuantizedMesh& mesh,
+                               const CodecOptions& options = {});
+// Limits that admit exactly the counts of `summary` (what the index will record for an encoded tile).
+DecodeLimits limitsOf(const TileSummary& summary);
 
 // Checks a decoded tile: attribute arrays sized to the vertex count, indices in range, coordinates on the grid.
 Status validateTile(const TileContext& ctx, const QuantizedMesh& mesh);
+// Checks counts a payload claims against the limits, naming `what` (the codec's payload) in the message.
+Status checkLimits(std::string_view what, uint64_t vertices, uint64_t faces, const DecodeLimits& limits);
+// The summary of a mesh: counts and bounds.
+TileSummary summarize(const QuantizedMesh& mesh);
+// Coarse-level attributes derived from geometry: area-weighted normals from the triangles, gray colors (as the
+// layout asks); replaces whatever normals and colors the mesh had.
+void deriveAttributes(QuantizedMesh& mesh, const AttributeLayout& layout);
 
 // `store`: the reference codec (store.cpp).
-Status storeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out);
-Result<QuantizedMesh> storeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload);
+Result<EncodedTile> storeEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options);
+Result<QuantizedMesh> storeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                  const DecodeLimits& limits);
 
-// The progressive hierarchy codecs (kdtree, octree) merge vertices that share position and attributes: the
-// vertex count their decoders yield, read from the payload's header.
-uint64_t hierarchyPayloadVertices(std::span<const uint8_t> payload);
-
-// `kdtree`: progressive lossless coding after Gandoin & Devillers (kdtree.cpp).
-Status kdtreeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out);
-Result<QuantizedMesh> kdtreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload);
+// `kdtree`: progressive lossless coding after Gandoin & Devillers (kdtree.cpp). The progressive hierarchy codecs
+// (kdtree, octree) merge vertices that share position and attributes, so they may yield fewer vertices than given.
+Result<EncodedTile> kdtreeEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options);
+Result<QuantizedMesh> kdtreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                   const DecodeLimits& limits);
 Result<std::vector<CodecLevel>> kdtreeLevels(const TileContext& ctx, uint16_t version,
-                                             std::span<const uint8_t> payload);
+                                             std::span<const uint8_t> payload, const DecodeLimits& limits);
 Result<QuantizedMesh> kdtreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
-                                        uint32_t level);
+                                        uint32_t level, const DecodeLimits& limits);
 
 // `octree`: embedded mesh coding after Magnor & Girod (octree.cpp).
-Status octreeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out);
-Result<QuantizedMesh> octreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload);
+Result<EncodedTile> octreeEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options);
+Result<QuantizedMesh> octreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                   const DecodeLimits& limits);
 Result<std::vector<CodecLevel>> octreeLevels(const TileContext& ctx, uint16_t version,
-                                             std::span<const uint8_t> payload);
+                                             std::span<const uint8_t> payload, const DecodeLimits& limits);
 Result<QuantizedMesh> octreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
-                                        uint32_t level);
+                                        uint32_t level, const DecodeLimits& limits);
 
 // What a progressive encoding (kdtree, octree) spent, in bits (ideal arithmetic-coding costs; the bytes add flushes and headers).
 struct CodecStats {
@@ -104,9 +192,7 @@ struct CodecStats {
 };
 Status kdtreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
                              CodecStats* stats);
-// `contexts` false codes every symbol kind with one adaptive model (no contexts): for measuring what the contexts
-// gain; such a payload is not decodable.
 Status octreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
-                             CodecStats* stats, bool contexts = true);
+                             CodecStats* stats, const OctreeOptions& options = {});
 
 }  // namespace scanpress

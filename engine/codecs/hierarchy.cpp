@@ -126,12 +126,14 @@ Status checkVersion(std::string_view codec, uint16_t version) {
   return Status::ok();
 }
 
-Result<Header> readHeader(const HeaderFormat& f, const TileContext& ctx, std::span<const u8> payload) {
+Result<Header> readHeader(const HeaderFormat& f, const TileContext& ctx, std::span<const u8> payload,
+                          const DecodeLimits& limits) {
   ByteReader r(payload, std::string(f.codec) + " payload");
   Header h;
   u64 n = 0;
   SP_RETURN_IF_ERROR(r.varint(n));
   SP_RETURN_IF_ERROR(r.varint(h.t));
+  SP_RETURN_IF_ERROR(checkLimits(std::string(f.codec) + " payload", n, h.t, limits));
   if (n > kMaxPoints || h.t > kMaxTriangles)
     return r.error(ErrorCode::kLimitExceeded, "tile claims " + std::to_string(n) + " vertices and " +
                                                   std::to_string(h.t) + " triangles (limits 2^26, 2^28)");
@@ -173,27 +175,50 @@ Result<Header> readHeader(const HeaderFormat& f, const TileContext& ctx, std::sp
 
 std::vector<CodecLevel> headerLevels(const Header& h, int bits) {
   std::vector<CodecLevel> levels;
+  auto level = [&](int l, u64 end) {
+    CodecLevel c;
+    c.level = u32(l);
+    c.end_bytes = end;
+    c.kind = LevelKind::kCells;
+    c.cell_bits = u32(bits - l);
+    c.complete = l == bits;
+    levels.push_back(c);
+  };
   u64 end = h.header_bytes;
   if (h.n == 0) {
-    levels.push_back({u32(bits), end});
+    level(bits, end);
     return levels;
   }
-  levels.push_back({u32(h.k0), end});
+  level(h.k0, end);
   for (size_t i = 0; i + 1 < h.seg_len.size(); ++i) {
     end += h.seg_len[i];
-    levels.push_back({u32(h.k0 + i + 1), end});
+    level(h.k0 + int(i) + 1, end);
   }
   end += h.seg_len.back();
   if (levels.back().level == u32(bits)) levels.back().end_bytes = end;
-  else levels.push_back({u32(bits), end});
+  else level(bits, end);
   return levels;
 }
 
 Result<std::vector<CodecLevel>> payloadLevels(const HeaderFormat& f, const TileContext& ctx, uint16_t version,
-                                              std::span<const u8> payload) {
+                                              std::span<const u8> payload, const DecodeLimits& limits) {
   SP_RETURN_IF_ERROR(checkVersion(f.codec, version));
-  SP_ASSIGN_OR_RETURN(Header h, readHeader(f, ctx, payload));
+  SP_ASSIGN_OR_RETURN(Header h, readHeader(f, ctx, payload, limits));
   return headerLevels(h, ctx.bits);
+}
+
+Result<EncodedTile> encodedTile(const HeaderFormat& f, const TileContext& ctx, const QuantizedMesh& mesh,
+                                std::vector<u8> payload) {
+  SP_ASSIGN_OR_RETURN(Header h, readHeader(f, ctx, payload, DecodeLimits{UINT32_MAX, UINT32_MAX}));
+  EncodedTile e;
+  const TileSummary bounds = summarize(mesh);
+  e.decoded.vertices = h.n;
+  e.decoded.faces = u32(h.t);
+  e.decoded.lo = bounds.lo;
+  e.decoded.hi = bounds.hi;
+  e.levels = headerLevels(h, ctx.bits);
+  e.payload = std::move(payload);
+  return e;
 }
 
 Status checkDecoded(std::string_view codec, const TileContext& ctx, const Header& h, int target,
@@ -280,33 +305,4 @@ std::vector<Triangle> orientedTriangles(const std::vector<TriKey>& keys) {
   return out;
 }
 
-void addCoarseAttributes(QuantizedMesh& m, const AttributeLayout& layout) {
-  if (layout.hasNormals()) {
-    std::vector<Vec3d> acc(m.positions.size(), Vec3d{0, 0, 0});
-    for (const auto& t : m.triangles) {
-      Vec3d e1, e2;
-      for (int a = 0; a < 3; ++a) {
-        e1[a] = double(m.positions[t[1]][a]) - m.positions[t[0]][a];
-        e2[a] = double(m.positions[t[2]][a]) - m.positions[t[0]][a];
-      }
-      const Vec3d nrm{e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
-      for (u32 v : t)
-        for (int a = 0; a < 3; ++a) acc[v][a] += nrm[a];
-    }
-    for (const auto& a : acc)
-      m.normals.push_back(encodeOctahedral(Vec3f{float(a[0]), float(a[1]), float(a[2])}, layout.normal_bits));
-  }
-  if (layout.hasColors()) m.colors.assign(m.positions.size(), Rgba8{128, 128, 128, 255});
-}
-
 }  // namespace scanpress::hierarchy
-
-namespace scanpress {
-
-uint64_t hierarchyPayloadVertices(std::span<const uint8_t> payload) {
-  ByteReader r(payload, "payload");
-  uint64_t n = 0;
-  return r.varint(n).isOk() ? n : 0;
-}
-
-}  // namespace scanpress

@@ -63,12 +63,18 @@ struct HeaderFormat {
 };
 void writeHeader(const HeaderFormat& f, const Header& h, int bits, const std::vector<std::vector<u8>>& segments,
                  std::vector<u8>& out);
-Result<Header> readHeader(const HeaderFormat& f, const TileContext& ctx, std::span<const u8> payload);
+// Checks the counts against `limits` (the index's) before anything is allocated.
+Result<Header> readHeader(const HeaderFormat& f, const TileContext& ctx, std::span<const u8> payload,
+                          const DecodeLimits& limits);
 Status checkVersion(std::string_view codec, uint16_t version);
 std::vector<CodecLevel> headerLevels(const Header& h, int bits);
 // A payload's levels, from its header (CodecInfo::levels).
 Result<std::vector<CodecLevel>> payloadLevels(const HeaderFormat& f, const TileContext& ctx, uint16_t version,
-                                              std::span<const u8> payload);
+                                              std::span<const u8> payload, const DecodeLimits& limits);
+// What the encoder returns for a payload it wrote from `mesh`: the payload, the counts its header gives (the
+// distinct points, every triangle), the bounds of the mesh's positions (the points'), the levels.
+Result<EncodedTile> encodedTile(const HeaderFormat& f, const TileContext& ctx, const QuantizedMesh& mesh,
+                                std::vector<u8> payload);
 // The checks on a decoded mesh: the header's triangle count at the lossless level, then validateTile.
 Status checkDecoded(std::string_view codec, const TileContext& ctx, const Header& h, int target,
                     const QuantizedMesh& mesh);
@@ -148,9 +154,6 @@ Status codeFaceCopies(Io& io, std::string_view codec, SymbolModel* orient_models
 template <class Io>
 void codeRawAttributes(Io& io, const AttributeLayout& layout, u32 n, const Points* truth, std::vector<OctNormal>& normals,
                        std::vector<Rgba8>& colors);
-
-// Coarse levels: normals from the incident triangles' areas, gray colors (as the layout asks).
-void addCoarseAttributes(QuantizedMesh& m, const AttributeLayout& layout);
 
 template <class T>
 bool eraseOne(std::vector<T>& v, T x) {

@@ -302,7 +302,7 @@ class Engine {
     m.triangles = orientedTriangles(triangleKeys());
     for (auto& t : m.triangles)
       for (auto& v : t) v = index[v];
-    addCoarseAttributes(m, layout);
+    deriveAttributes(m, layout);
     return m;
   }
 
@@ -841,9 +841,10 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
   return Status::ok();
 }
 
-Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::span<const u8> payload, u32 level) {
+Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::span<const u8> payload, u32 level,
+                                 const DecodeLimits& limits) {
   SP_RETURN_IF_ERROR(checkVersion("kdtree", version));
-  SP_ASSIGN_OR_RETURN(Header h, readHeader(kFormat, ctx, payload));
+  SP_ASSIGN_OR_RETURN(Header h, readHeader(kFormat, ctx, payload, limits));
   if (h.n == 0) return QuantizedMesh{};
   const int target = int(std::min<u32>(level, u32(ctx.bits)));
   DecodeIo io;
@@ -860,8 +861,10 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
 
 }  // namespace
 
-Status kdtreeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out) {
-  return encodeImpl(ctx, mesh, out, nullptr);
+Result<EncodedTile> kdtreeEncode(const TileContext& ctx, const TileView& tile, const CodecOptions&) {
+  std::vector<u8> out;
+  SP_RETURN_IF_ERROR(encodeImpl(ctx, tile.mesh, out, nullptr));
+  return encodedTile(kFormat, ctx, tile.mesh, std::move(out));
 }
 
 Status kdtreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
@@ -869,18 +872,19 @@ Status kdtreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, 
   return encodeImpl(ctx, mesh, out, stats);
 }
 
-Result<QuantizedMesh> kdtreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload) {
-  return decodeImpl(ctx, version, payload, u32(ctx.bits));
+Result<QuantizedMesh> kdtreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                   const DecodeLimits& limits) {
+  return decodeImpl(ctx, version, payload, u32(ctx.bits), limits);
 }
 
 Result<QuantizedMesh> kdtreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
-                                        uint32_t level) {
-  return decodeImpl(ctx, version, payload, level);
+                                        uint32_t level, const DecodeLimits& limits) {
+  return decodeImpl(ctx, version, payload, level, limits);
 }
 
 Result<std::vector<CodecLevel>> kdtreeLevels(const TileContext& ctx, uint16_t version,
-                                             std::span<const uint8_t> payload) {
-  return payloadLevels(kFormat, ctx, version, payload);
+                                             std::span<const uint8_t> payload, const DecodeLimits& limits) {
+  return payloadLevels(kFormat, ctx, version, payload, limits);
 }
 
 }  // namespace scanpress

@@ -57,7 +57,13 @@ using namespace hierarchy;
 using i64 = int64_t;
 
 constexpr u32 kNone = UINT32_MAX;  // no further split
-constexpr int kLevelClasses = 12;  // levels remaining after the step (0..10), coincident rounds (11)
+constexpr int kLevelClasses = 12;
+// A coarse level shows every three-clique of its vertex graph, which the index's counts bound only loosely: at most
+// this many per vertex and face of the tile (FORMAT.md). The scans of ../shared/data stay below 1.1 at every level.
+constexpr u64 kCoarseTrianglesPerElement = 4;
+u64 coarseTriangleLimit(const DecodeLimits& limits) {
+  return kCoarseTrianglesPerElement * (u64(limits.vertices) + limits.faces) + 64;
+}  // levels remaining after the step (0..10), coincident rounds (11)
 constexpr int kDegreeClasses = 3;
 constexpr int kPlaneBins = 10;     // a neighbour's offset from the split plane (9 bins), coincident splits (1)
 enum : u8 { kStay = 0, kMove = 1, kDuplicate = 2, kUncoded = 3 };
@@ -176,9 +182,10 @@ class Engine {
     std::vector<TriKey> keys;
     Status status = Status::ok();
     forEachClique(lists, [&](u32 a, u32 b, u32 c, int) {
-      if (keys.size() >= kMaxTriangles) {
-        status = makeError(ErrorCode::kLimitExceeded, "octree payload: more than 2^28 triangles at level " +
-                                                          std::to_string(level_));
+      if (keys.size() >= max_cliques_) {
+        status = makeError(ErrorCode::kMalformed, "octree payload: more than " + std::to_string(max_cliques_) +
+                                                      " triangles at level " + std::to_string(level_) +
+                                                      " (the tile index bounds a coarse level)");
         return -1;
       }
       keys.push_back({a, b, c});
@@ -186,11 +193,12 @@ class Engine {
     });
     SP_RETURN_IF_ERROR(status);
     m.triangles = orientedTriangles(keys);
-    addCoarseAttributes(m, layout);
+    deriveAttributes(m, layout);
     return m;
   }
 
   AttributeLayout layout;  // set by the caller before run()
+  u64 max_cliques_ = kMaxTriangles;  // coarse levels' triangles (set by the decoder from the index)
   bool flat_ = false;      // one model per symbol kind (measuring the contexts' gain)
   u64 splits_ = 0;
   std::vector<std::array<u32, 2>> range_;   // encoder: the points [s, e) of each vertex
@@ -607,9 +615,10 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
   return Status::ok();
 }
 
-Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::span<const u8> payload, u32 level) {
+Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::span<const u8> payload, u32 level,
+                                 const DecodeLimits& limits) {
   SP_RETURN_IF_ERROR(checkVersion(kCodec, version));
-  SP_ASSIGN_OR_RETURN(Header h, readHeader(kFormat, ctx, payload));
+  SP_ASSIGN_OR_RETURN(Header h, readHeader(kFormat, ctx, payload, limits));
   if (h.n == 0) return QuantizedMesh{};
   const int target = int(std::min<u32>(level, u32(ctx.bits)));
   DecodeIo io;
@@ -617,6 +626,7 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   SP_ASSIGN_OR_RETURN(io.segments, levelSegments(kCodec, h, ctx.bits, payload, target));
   Engine<DecodeIo> engine(io, ctx.bits, h, nullptr);
   engine.layout = ctx.layout;
+  engine.max_cliques_ = std::min<u64>(kMaxTriangles, coarseTriangleLimit(limits));
   SP_RETURN_IF_ERROR(engine.run(target));
   SP_ASSIGN_OR_RETURN(QuantizedMesh mesh, engine.mesh(ctx.layout));
   SP_RETURN_IF_ERROR(checkDecoded(kCodec, ctx, h, target, mesh));
@@ -625,27 +635,30 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
 
 }  // namespace
 
-Status octreeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out) {
-  return encodeImpl(ctx, mesh, out, nullptr, true);
+Result<EncodedTile> octreeEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options) {
+  std::vector<u8> out;
+  SP_RETURN_IF_ERROR(encodeImpl(ctx, tile.mesh, out, nullptr, options.octree.contexts));
+  return encodedTile(kFormat, ctx, tile.mesh, std::move(out));
 }
 
 Status octreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
-                             CodecStats* stats, bool contexts) {
-  return encodeImpl(ctx, mesh, out, stats, contexts);
+                             CodecStats* stats, const OctreeOptions& options) {
+  return encodeImpl(ctx, mesh, out, stats, options.contexts);
 }
 
-Result<QuantizedMesh> octreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload) {
-  return decodeImpl(ctx, version, payload, u32(ctx.bits));
+Result<QuantizedMesh> octreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                   const DecodeLimits& limits) {
+  return decodeImpl(ctx, version, payload, u32(ctx.bits), limits);
 }
 
 Result<QuantizedMesh> octreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
-                                        uint32_t level) {
-  return decodeImpl(ctx, version, payload, level);
+                                        uint32_t level, const DecodeLimits& limits) {
+  return decodeImpl(ctx, version, payload, level, limits);
 }
 
 Result<std::vector<CodecLevel>> octreeLevels(const TileContext& ctx, uint16_t version,
-                                             std::span<const uint8_t> payload) {
-  return payloadLevels(kFormat, ctx, version, payload);
+                                             std::span<const uint8_t> payload, const DecodeLimits& limits) {
+  return payloadLevels(kFormat, ctx, version, payload, limits);
 }
 
 }  // namespace scanpress

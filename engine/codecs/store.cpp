@@ -18,17 +18,20 @@
 
 namespace scanpress {
 
-Status storeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out) {
+Result<EncodedTile> storeEncode(const TileContext& ctx, const TileView& tile, const CodecOptions&) {
+  const QuantizedMesh& mesh = tile.mesh;
   const size_t n = mesh.positions.size();
   if (n > UINT32_MAX || mesh.triangles.size() > UINT32_MAX)
     return makeError(ErrorCode::kLimitExceeded, "tile has more than 2^32-1 vertices or triangles");
+  EncodedTile result;
+  result.decoded = summarize(mesh);
+  std::vector<uint8_t>& out = result.payload;
   ByteWriter w(out);
   w.u32(static_cast<uint32_t>(n));
   w.u32(static_cast<uint32_t>(mesh.triangles.size()));
-  if (n == 0) return Status::ok();
-  Vec3u lo{UINT32_MAX, UINT32_MAX, UINT32_MAX}, hi{0, 0, 0};
-  for (const auto& p : mesh.positions)
-    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+  if (n == 0) return result;
+  const Vec3u& lo = result.decoded.lo;
+  const Vec3u& hi = result.decoded.hi;
   int axis_bits[3];
   for (int a = 0; a < 3; ++a) {
     axis_bits[a] = bitsFor(hi[a] - lo[a]);
@@ -47,10 +50,11 @@ Status storeEncode(const TileContext& ctx, const QuantizedMesh& mesh, std::vecto
     for (const auto& c : mesh.colors)
       for (int k = 0; k < ctx.layout.color_channels; ++k) bw.put(c[k], 8);
   bw.flush();
-  return Status::ok();
+  return result;
 }
 
-Result<QuantizedMesh> storeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload) {
+Result<QuantizedMesh> storeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                  const DecodeLimits& limits) {
   if (version != 1)
     return makeError(ErrorCode::kUnknownVersion, "store codec version " + std::to_string(version) +
                                                      " is not known to this build (knows 1)");
@@ -58,6 +62,7 @@ Result<QuantizedMesh> storeDecode(const TileContext& ctx, uint16_t version, std:
   uint32_t n = 0, t = 0;
   SP_RETURN_IF_ERROR(r.u32(n));
   SP_RETURN_IF_ERROR(r.u32(t));
+  SP_RETURN_IF_ERROR(checkLimits("store payload", n, t, limits));
   QuantizedMesh mesh;
   if (n == 0) {
     if (t != 0) return r.error(ErrorCode::kMalformed, "triangles without vertices");

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <new>
 #include <string>
 
 #include "engine/io/bytes.h"
@@ -98,35 +99,23 @@ Status ContainerWriter::begin() {
   return Status::ok();
 }
 
-void meshBounds(const QuantizedMesh& mesh, Vec3u& lo, Vec3u& hi) {
-  lo = {UINT32_MAX, UINT32_MAX, UINT32_MAX};
-  hi = {0, 0, 0};
-  for (const auto& p : mesh.positions)
-    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
-}
-
-Status ContainerWriter::addTile(uint32_t tile_id, const CodecInfo& codec, const QuantizedMesh& mesh,
+Status ContainerWriter::addTile(uint32_t tile_id, const CodecInfo& codec, const TileSummary& decoded,
                                 std::span<const uint8_t> payload) {
-  if (mesh.positions.size() > UINT32_MAX || mesh.triangles.size() > UINT32_MAX)
-    return makeError(ErrorCode::kLimitExceeded, "tile has more than 2^32-1 vertices or faces");
-  Vec3u lo, hi;
-  meshBounds(mesh, lo, hi);
-  return addTile(tile_id, codec, static_cast<uint32_t>(decodedVertexCount(codec, mesh, payload)),
-                 static_cast<uint32_t>(mesh.triangles.size()), lo, hi, payload);
-}
-
-Status ContainerWriter::addTile(uint32_t tile_id, const CodecInfo& codec, uint32_t vertices, uint32_t faces,
-                                const Vec3u& lo, const Vec3u& hi, std::span<const uint8_t> payload) {
   if (entries_.size() >= kMaxTiles) return makeError(ErrorCode::kLimitExceeded, "too many tiles");
+  if (!codec.floor.admits(decoded.vertices, decoded.faces, payload.size()))
+    return makeError(ErrorCode::kInternal, "tile " + std::to_string(tile_id) + ": " + std::string(codec.name) +
+                                               " wrote " + std::to_string(payload.size()) + " bytes for " +
+                                               std::to_string(decoded.vertices) + " vertices and " +
+                                               std::to_string(decoded.faces) + " faces, below its payload floor");
   TileEntry e;
   e.tile_id = tile_id;
   e.codec = codec.id;
   e.codec_version = codec.version;
   e.offset = offset_;
-  e.vertices = vertices;
-  e.faces = faces;
-  e.lo = lo;
-  e.hi = hi;
+  e.vertices = decoded.vertices;
+  e.faces = decoded.faces;
+  e.lo = decoded.lo;
+  e.hi = decoded.hi;
   const auto head = chunkHeader(e, payload);
   e.chunk_bytes = head.size() + payload.size();
   SP_RETURN_IF_ERROR(sink_.append(head));
@@ -286,6 +275,15 @@ Result<std::vector<TileEntry>> parseIndex(std::span<const uint8_t> bytes, const 
         e.chunk_bytes > footer.index_offset - e.offset)
       return r.error(ErrorCode::kMalformed, "tile " + std::to_string(e.tile_id) + " has an invalid location");
     next_offset = e.offset + e.chunk_bytes;
+    // The counts bound the decoder, so they must be what the payload's size can hold (unknown codecs fail later).
+    if (const CodecInfo* codec = findCodec(e.codec);
+        codec && !codec->floor.admits(e.vertices, e.faces, e.chunk_bytes - kChunkHeaderSize))
+      return r.error(ErrorCode::kMalformed, "tile " + std::to_string(e.tile_id) + " claims " +
+                                                std::to_string(e.vertices) + " vertices and " +
+                                                std::to_string(e.faces) + " faces in " +
+                                                std::to_string(e.chunk_bytes - kChunkHeaderSize) +
+                                                " payload bytes, more than codec " + std::string(codec->name) +
+                                                " can code in them");
     vertices += e.vertices;
     faces += e.faces;
     for (uint32_t j = 0; j < i; ++j)
@@ -328,26 +326,61 @@ Result<std::span<const uint8_t>> parseTileChunk(std::span<const uint8_t> chunk, 
   return payload;
 }
 
-Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const TileEntry& e,
-                                        std::span<const uint8_t> payload, const std::string& what,
-                                        std::optional<uint32_t> level) {
-  const std::string where = what + ": tile " + std::to_string(e.tile_id);
+DecodeLimits limitsOf(const TileEntry& e) { return DecodeLimits{e.vertices, e.faces}; }
+
+namespace {
+
+Result<const CodecInfo*> codecOf(const TileEntry& e, const std::string& where) {
   const CodecInfo* codec = findCodec(e.codec);
   if (!codec)
     return makeError(ErrorCode::kUnknownCodec, where + ": codec id " + std::to_string(static_cast<int>(e.codec)) +
                                                    " is not known to this build");
-  TileContext ctx{header.grid.bits, header.layout};
-  const bool partial = level && *level < uint32_t(header.grid.bits);
-  if (partial && !codec->decode_level)
-    return makeError(ErrorCode::kInvalidArgument, where + ": codec " + std::string(codec->name) +
-                                                      " is single-rate; it has no coarser levels");
-  auto mesh = partial ? codec->decode_level(ctx, e.codec_version, payload, *level)
-                      : codec->decode(ctx, e.codec_version, payload);
-  if (!mesh.isOk()) return mesh.status().withContext(where);
-  if (partial) return mesh;
-  if (mesh->positions.size() != e.vertices || mesh->triangles.size() != e.faces)
-    return makeError(ErrorCode::kMalformed, where + ": decoded counts differ from the index");
-  return mesh;
+  return codec;
+}
+
+}  // namespace
+
+Result<std::vector<CodecLevel>> tilePayloadLevels(const ContainerHeader& header, const TileEntry& e,
+                                                  std::span<const uint8_t> payload, const std::string& what) {
+  const std::string where = what + ": tile " + std::to_string(e.tile_id);
+  SP_ASSIGN_OR_RETURN(const CodecInfo* codec, codecOf(e, where));
+  if (!codec->levels) return std::vector<CodecLevel>{};
+  auto levels = codec->levels(TileContext{header.grid.bits, header.layout}, e.codec_version, payload, limitsOf(e));
+  if (!levels.isOk()) return levels.status().withContext(where);
+  return levels;
+}
+
+Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const TileEntry& e,
+                                        std::span<const uint8_t> payload, const std::string& what,
+                                        std::optional<uint32_t> level, bool* complete) {
+  const std::string where = what + ": tile " + std::to_string(e.tile_id);
+  SP_ASSIGN_OR_RETURN(const CodecInfo* codec, codecOf(e, where));
+  const TileContext ctx{header.grid.bits, header.layout};
+  const DecodeLimits limits = limitsOf(e);
+  bool partial = false;
+  if (level) {
+    if (!codec->decode_level)
+      return makeError(ErrorCode::kInvalidArgument, where + ": codec " + std::string(codec->name) +
+                                                        " is single-rate; it has no levels to choose from");
+    SP_ASSIGN_OR_RETURN(auto levels, tilePayloadLevels(header, e, payload, what));
+    partial = !levels.empty() && *level < levels.back().level;
+  }
+  try {
+    auto mesh = partial ? codec->decode_level(ctx, e.codec_version, payload, *level, limits)
+                        : codec->decode(ctx, e.codec_version, payload, limits);
+    if (!mesh.isOk()) return mesh.status().withContext(where);
+    if (complete) *complete = !partial;
+    if (partial) return mesh;
+    if (mesh->positions.size() != e.vertices || mesh->triangles.size() != e.faces)
+      return makeError(ErrorCode::kMalformed, where + ": decoded " + std::to_string(mesh->positions.size()) +
+                                                  " vertices and " + std::to_string(mesh->triangles.size()) +
+                                                  " faces, the index says " + std::to_string(e.vertices) + " and " +
+                                                  std::to_string(e.faces));
+    return mesh;
+  } catch (const std::bad_alloc&) {
+    return makeError(ErrorCode::kMalformed, where + ": out of memory while decoding (" +
+                                                std::to_string(payload.size()) + " payload bytes)");
+  }
 }
 
 Result<std::vector<uint8_t>> encodeContainer(const Grid& grid, const AttributeLayout& layout,
@@ -356,12 +389,10 @@ Result<std::vector<uint8_t>> encodeContainer(const Grid& grid, const AttributeLa
   VectorSink sink(out);
   ContainerWriter writer(sink, grid, layout);
   SP_RETURN_IF_ERROR(writer.begin());
-  TileContext ctx{grid.bits, layout};
-  std::vector<uint8_t> payload;
+  const TileContext ctx{grid.bits, layout};
   for (size_t i = 0; i < tiles.size(); ++i) {
-    payload.clear();
-    SP_RETURN_IF_ERROR(codec.encode(ctx, tiles[i], payload));
-    SP_RETURN_IF_ERROR(writer.addTile(static_cast<uint32_t>(i), codec, tiles[i], payload));
+    SP_ASSIGN_OR_RETURN(EncodedTile tile, encodeMesh(codec, ctx, tiles[i]));
+    SP_RETURN_IF_ERROR(writer.addTile(static_cast<uint32_t>(i), codec, tile.decoded, tile.payload));
   }
   SP_RETURN_IF_ERROR(writer.finish());
   return out;

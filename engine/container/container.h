@@ -67,11 +67,10 @@ class ContainerWriter {
  public:
   ContainerWriter(ByteSink& sink, const Grid& grid, const AttributeLayout& layout);
   Status begin();
-  Status addTile(uint32_t tile_id, const CodecInfo& codec, const QuantizedMesh& mesh,
+  // `decoded` is what the codec's decoder yields from `payload` (EncodedTile::decoded): the index records it.
+  // Fails with kInternal if the counts are below the codec's payload floor (the reader would refuse the file).
+  Status addTile(uint32_t tile_id, const CodecInfo& codec, const TileSummary& decoded,
                  std::span<const uint8_t> payload);
-  // The same from a summary of the tile (counts and quantized bounds), when the mesh is no longer at hand.
-  Status addTile(uint32_t tile_id, const CodecInfo& codec, uint32_t vertices, uint32_t faces, const Vec3u& lo,
-                 const Vec3u& hi, std::span<const uint8_t> payload);
   Status finish();
   uint64_t bytesWritten() const { return offset_; }
   const ContainerHeader& header() const { return header_; }
@@ -85,9 +84,6 @@ class ContainerWriter {
 
 std::vector<uint8_t> serializeHeader(const ContainerHeader& header);
 
-// Quantized bounds of a mesh's vertices (lo = UINT32_MAX, hi = 0 when it has none).
-void meshBounds(const QuantizedMesh& mesh, Vec3u& lo, Vec3u& hi);
-
 // Parsers. `what` names the file in error messages. Offsets in messages are absolute file offsets.
 Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::string& what);
 Result<Footer> parseFooter(std::span<const uint8_t> last_bytes, uint64_t file_size, const std::string& what);
@@ -98,11 +94,20 @@ Result<std::vector<TileEntry>> parseIndex(std::span<const uint8_t> bytes, const 
 Result<std::span<const uint8_t>> parseTileChunk(std::span<const uint8_t> chunk, const TileEntry& entry,
                                                 const std::string& what);
 
-// Decodes a verified payload with the entry's codec and checks the counts against the index. With a `level`
-// (progressive codecs only; kInvalidArgument otherwise) the tile's mesh at that level: see CodecLevel.
+// The index entry's counts as hard limits for the tile's decoder.
+DecodeLimits limitsOf(const TileEntry& entry);
+
+// Decodes a verified payload with the entry's codec, within the limits of the entry's counts (a payload that
+// claims more is kMalformed before anything is allocated), and checks that the complete tile has exactly the
+// index's counts. With a `level` (progressive codecs only; kInvalidArgument otherwise) the tile's mesh at that
+// level (see CodecLevel); `complete` says whether that was the tile's last level. Running out of memory while
+// decoding is a data error (kMalformed): only a hostile payload can ask for more than its index allows.
 Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const TileEntry& entry,
                                         std::span<const uint8_t> payload, const std::string& what,
-                                        std::optional<uint32_t> level = std::nullopt);
+                                        std::optional<uint32_t> level = std::nullopt, bool* complete = nullptr);
+// The levels of a progressive tile's payload (empty for single-rate codecs).
+Result<std::vector<CodecLevel>> tilePayloadLevels(const ContainerHeader& header, const TileEntry& entry,
+                                                  std::span<const uint8_t> payload, const std::string& what);
 
 // Whole-container helpers for in-memory buffers (tests, and small files).
 Result<std::vector<uint8_t>> encodeContainer(const Grid& grid, const AttributeLayout& layout,
