@@ -39,6 +39,7 @@
 #include "jobs/commands.h"
 #include "jobs/config.h"
 #include "jobs/file_io.h"
+#include "jobs/process.h"
 #include "jobs/scan_store.h"
 #include "spatial/surface_index.h"
 #include "spatial/tiling.h"
@@ -58,24 +59,6 @@ class Stopwatch {
  private:
   std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
 };
-
-// This process's peak resident set. Linux's VmHWM belongs to the running program image alone; getrusage's
-// ru_maxrss also keeps, across exec, the resident set of the process that spawned it (measured: a test binary of
-// 120 MB launching scanpress), so it is only the fallback.
-uint64_t peakRss() {
-  if (std::FILE* f = std::fopen("/proc/self/status", "r")) {
-    char line[256];
-    uint64_t kb = 0;
-    bool found = false;
-    while (!found && std::fgets(line, sizeof line, f))
-      found = std::sscanf(line, "VmHWM: %" SCNu64 " kB", &kb) == 1;
-    std::fclose(f);
-    if (found) return kb * 1024;
-  }
-  struct rusage ru {};
-  ::getrusage(RUSAGE_SELF, &ru);
-  return static_cast<uint64_t>(ru.ru_maxrss) * 1024;
-}
 
 // Pass 1: bounds, counts, attributes; keeps the mesh while it fits in `keep_limit` bytes.
 class SurveySink : public MeshSink {

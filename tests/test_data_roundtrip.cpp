@@ -2,6 +2,7 @@
 // multiset of triangles over quantized positions with orientation kept; attributes come back as quantized.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 
 #include "engine/container/container.h"
@@ -119,6 +120,49 @@ TEST_P(DataRoundTrip, KdtreeIsLosslessAfterQuantization) {
 
 TEST_P(DataRoundTrip, OctreeIsLosslessAfterQuantization) {
   expectLosslessAfterQuantization(GetParam(), CodecId::kOctree, {12, 16, 24});
+}
+
+// Every level of both progressive codecs decodes within the limits the index sets (a coarse octree level shows the
+// cliques of its vertex graph, bounded by the index's counts: see octree.cpp), and says what it means.
+TEST_P(DataRoundTrip, EveryLevelDecodesWithinTheIndexLimits) {
+  const Scan& scan = GetParam();
+  const std::string path = testing::sharedDataDir() + "/" + scan.file;
+  if (!std::filesystem::exists(path)) GTEST_SKIP() << "shared data not found: " << path << " (set SCANPRESS_DATA)";
+#if defined(__SANITIZE_ADDRESS__)
+  if (scan.triangles > 60000)
+    GTEST_SKIP() << "large scan skipped in the unoptimized sanitizer build; the Release suite decodes it";
+#endif
+  auto mesh = readMeshFile(path);
+  ASSERT_TRUE(mesh.isOk()) << mesh.status().toString();
+  const AttributeLayout layout = layoutOf(*mesh);
+  auto grid = makeGrid(boundingBox(*mesh), 12);
+  ASSERT_TRUE(grid.isOk());
+  auto q = quantizeMesh(*mesh, *grid, layout, nullptr);
+  ASSERT_TRUE(q.isOk());
+  for (CodecId id : {CodecId::kKdtree, CodecId::kOctree}) {
+    SCOPED_TRACE(findCodec(id)->name);
+    const QuantizedMesh tiles[] = {*q};
+    auto bytes = encodeContainer(*grid, layout, *findCodec(id), tiles);
+    ASSERT_TRUE(bytes.isOk());
+    auto pc = parseContainer(*bytes, scan.file);
+    ASSERT_TRUE(pc.isOk());
+    const TileEntry& e = pc->tiles.at(0);
+    auto payload = parseTileChunk(std::span(*bytes).subspan(e.offset, e.chunk_bytes), e, scan.file);
+    ASSERT_TRUE(payload.isOk());
+    auto levels = tilePayloadLevels(pc->header, e, *payload, scan.file);
+    ASSERT_TRUE(levels.isOk());
+    double most = 0;
+    for (const CodecLevel& lv : *levels) {
+      bool complete = false;
+      auto m = decodeTilePayload(pc->header, e, *payload, scan.file, lv.level, &complete);
+      ASSERT_TRUE(m.isOk()) << "level " << lv.level << ": " << m.status().toString();
+      EXPECT_EQ(complete, lv.complete);
+      EXPECT_LE(m->positions.size(), e.vertices);
+      most = std::max(most, double(m->triangles.size()) / double(e.vertices + e.faces));
+    }
+    RecordProperty(std::string(findCodec(id)->name) + "_most_triangles_per_element", std::to_string(most));
+    EXPECT_LT(most, 1.0);  // far inside the decoder's bound of 4
+  }
 }
 
 // Through files and the commands: encode, decode to PLY, read back, requantize on the container's grid.

@@ -82,9 +82,10 @@ inline bool sameNormalDirections(const std::vector<OctNormal>& a, const std::vec
   return true;
 }
 
-// Runs the scanpress binary with `args` (shell words), capturing stdout and stderr; returns its exit code.
-inline int runScanpress(const std::string& args, std::string* out = nullptr) {
-  FILE* p = ::popen((std::string("'") + SCANPRESS_BIN + "' " + args + " 2>&1").c_str(), "r");
+// Runs the scanpress binary with `args` (shell words), capturing stdout and stderr; returns its exit code. `env`:
+// shell assignments (NAME='value' ...) for the command.
+inline int runScanpress(const std::string& args, std::string* out = nullptr, const std::string& env = "") {
+  FILE* p = ::popen((env + " '" + SCANPRESS_BIN + "' " + args + " 2>&1").c_str(), "r");
   std::string text;
   char buf[4096];
   size_t n;

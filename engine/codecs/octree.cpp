@@ -59,7 +59,8 @@ using i64 = int64_t;
 constexpr u32 kNone = UINT32_MAX;  // no further split
 constexpr int kLevelClasses = 12;
 // A coarse level shows every three-clique of its vertex graph, which the index's counts bound only loosely: at most
-// this many per vertex and face of the tile (FORMAT.md). The scans of ../shared/data stay below 1.1 at every level.
+// this many per vertex and face of the tile (FORMAT.md). The scans of ../shared/data stay at or below 0.67 (the
+// complete level's share) at every level: tests/test_data_roundtrip.cpp.
 constexpr u64 kCoarseTrianglesPerElement = 4;
 u64 coarseTriangleLimit(const DecodeLimits& limits) {
   return kCoarseTrianglesPerElement * (u64(limits.vertices) + limits.faces) + 64;

@@ -20,11 +20,12 @@
 #include "jobs/file_io.h"
 #include "jobs/measure.h"
 #include "jobs/mesh_io/mesh_reader.h"
-#include "spatial/surface_index.h"
+#include "jobs/process.h"
 #include "jobs/progress.h"
 #include "jobs/render.h"
 #include "jobs/report.h"
 #include "jobs/synth.h"
+#include "spatial/surface_index.h"
 
 namespace scanpress {
 namespace {
@@ -552,9 +553,20 @@ int run(int argc, char** argv) {
 }  // namespace
 }  // namespace scanpress
 
+// With SCANPRESS_PEAK_RSS_FILE set, the process writes its peak resident set (bytes) to that file on the way out:
+// for tests that bound a command's memory (a parent's wait4 also counts the parent's own resident set).
+static int finish(int code) {
+  if (const char* path = std::getenv("SCANPRESS_PEAK_RSS_FILE"))
+    if (std::FILE* f = std::fopen(path, "w")) {
+      std::fprintf(f, "%llu\n", static_cast<unsigned long long>(scanpress::peakRss()));
+      std::fclose(f);
+    }
+  return code;
+}
+
 int main(int argc, char** argv) {
   try {
-    return scanpress::run(argc, argv);
+    return finish(scanpress::run(argc, argv));
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "scanpress: error: out of memory\n");
     return 3;
