@@ -167,12 +167,6 @@ bool validPattern(const std::string& p) {
 
 }  // namespace
 
-uint64_t effectiveTileTarget(const EncodeSettings& s) {
-  uint64_t target = std::max<uint64_t>(1, s.tile_triangles);
-  if (s.memory_budget > 0) target = std::min(target, std::max<uint64_t>(4096, s.memory_budget / 8 / kTileBytesPerTriangle));
-  return target;
-}
-
 bool parseByteSize(const std::string& text, uint64_t& bytes) {
   if (text.empty()) return false;
   size_t i = 0;

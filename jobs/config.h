@@ -32,13 +32,6 @@ Result<JobSettings> loadJobConfig(const std::string& path);
 // Every key the parser knows, as JSON pointers (for the reference test).
 std::vector<std::string> knownConfigKeys();
 
-// Peak memory of a tile task per triangle (measured, generously rounded up): sizes tiles and tiles in flight.
-constexpr uint64_t kTileBytesPerTriangle = 160;
-
-// The target triangles per tile that an encode with these settings uses: the configured target, lowered when a
-// memory budget could not hold the tiles in flight. Independent of the thread count, so the output is too.
-uint64_t effectiveTileTarget(const EncodeSettings& s);
-
 // The fingerprint stored in an encode report when it describes a complete output; empty when the report is
 // missing, unreadable, incomplete or has none (resume then redoes the file).
 std::string completeReportFingerprint(const std::string& report_path);

@@ -1,50 +1,58 @@
-// The encode pipeline for one scan: bounded-memory passes over the input, tiling, and a oneTBB flow graph that
-// runs the per-tile pipeline in parallel and writes tiles in order.
-//
-//   pass 1  stream the input: bounding box, counts, which attributes exist (and the mesh itself, if it fits)
-//   grid    the scan's one global quantization grid
-//   pass 2  stream again (or replay the buffered mesh): quantize vertices into the vertex store, drop triangles
-//           that quantization makes degenerate, count each vertex's valence, histogram triangle centroids
-//   tiling  octree tiles from the histogram (spatial/tiling), then a counting sort of triangles into tile bins
-//   graph   source -> limiter -> tile task (parallel) -> sequencer (tile order) -> serial container writer
-//
-// Memory: the store, the spill and the bins go to scratch files when they would not fit in half of the budget
-// (2 GiB when none is set: beyond that, scratch files are faster too), their buffers take about a quarter each,
-// and with a budget the limiter keeps the tiles in flight (and the tile size) within the rest. The output is byte-identical at any thread count:
-// each tile's bytes depend only on its content, and the sequencer restores tile order.
-#include <sys/resource.h>
+// The encode pipeline for one scan, in named steps: see jobs/pipeline.h.
+#include "jobs/pipeline.h"
 
 #include <oneapi/tbb/flow_graph.h>
-#include <oneapi/tbb/global_control.h>
 #include <oneapi/tbb/info.h>
 #include <oneapi/tbb/task_arena.h>
 
 #include <algorithm>
-#include <bit>
-#include <cinttypes>
-#include <cstdio>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <exception>
 #include <new>
 #include <optional>
 
-#include "engine/codecs/codec.h"
 #include "engine/container/container.h"
 #include "engine/geometry.h"
 #include "engine/metro.h"
 #include "engine/octahedral.h"
 #include "engine/tile.h"
-#include "jobs/commands.h"
-#include "jobs/config.h"
 #include "jobs/file_io.h"
 #include "jobs/process.h"
 #include "jobs/scan_store.h"
 #include "spatial/surface_index.h"
+#include "spatial/tile_builder.h"
 #include "spatial/tiling.h"
 
 namespace scanpress {
+
+// Memory plan constants (measured; bench/RESULTS.md has the figures).
+namespace {
+
+// The survey keeps the mesh for the ingest pass only while it is this small: a large mesh held in doubles costs
+// more in memory traffic and page faults than parsing the file again.
+constexpr uint64_t kKeepLimit = 256ull << 20;
+// Without a budget, tile data up to half of this stays in memory; beyond that, scratch files are faster as well as
+// smaller. Only where the data lives changes: the tiles, hence the bytes, depend on an explicit budget only.
+constexpr uint64_t kAutoStorageBudget = 2ull << 30;
+// Smallest tile target a memory budget can lower the configured one to.
+constexpr uint64_t kMinBudgetTileTarget = 4096;
+
+#ifdef NDEBUG
+constexpr bool kDebugBuild = false;
+#else
+constexpr bool kDebugBuild = true;
+#endif
+
+}  // namespace
+
+uint64_t effectiveTileTarget(const EncodeSettings& s) {
+  uint64_t target = std::max<uint64_t>(1, s.tile_triangles);
+  if (s.memory_budget > 0)
+    target = std::min(target, std::max<uint64_t>(kMinBudgetTileTarget, s.memory_budget / 8 / kTileBytesPerTriangle));
+  return target;
+}
+
 namespace {
 
 class Stopwatch {
@@ -200,62 +208,6 @@ struct TileResult {
   ErrorAccumulator forward, backward;
 };
 
-// Builds the tile's local mesh from the bins and the store: local vertex ids in order of first use (an
-// open-addressing hash from global to local id), records read in global-id order (runs of nearby ids become one
-// read when the store is on disk), border flags from the valence inside the tile against the global valence.
-Status buildTileMesh(uint32_t tile, const TileBins& bins, const VertexStore& store, const AttributeLayout& layout,
-                     TileMesh& out, std::vector<Vec3d>* originals) {
-  std::vector<Triangle> tris;
-  SP_RETURN_IF_ERROR(bins.read(tile, tris));
-  size_t cap = 16;
-  while (cap < 3 * tris.size()) cap <<= 1;  // load factor <= 1/2 even if every corner is a distinct vertex
-  const int shift = 64 - std::countr_zero(cap);
-  std::vector<uint32_t> keys(cap, UINT32_MAX), vals(cap);
-  std::vector<uint32_t>& ids = out.local_to_global;
-  ids.clear();
-  QuantizedMesh& m = out.mesh;
-  m.triangles.resize(tris.size());
-  std::vector<uint32_t> local_valence;
-  for (size_t t = 0; t < tris.size(); ++t)
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t g = tris[t][k];
-      size_t h = static_cast<size_t>((uint64_t(g) * 0x9E3779B97F4A7C15ull) >> shift);
-      while (keys[h] != UINT32_MAX && keys[h] != g) h = (h + 1) & (cap - 1);
-      if (keys[h] == UINT32_MAX) {
-        keys[h] = g;
-        vals[h] = static_cast<uint32_t>(ids.size());
-        ids.push_back(g);
-        local_valence.push_back(0);
-      }
-      m.triangles[t][k] = vals[h];
-      ++local_valence[vals[h]];
-    }
-  // Read the records in global order, then scatter them to their local slots.
-  std::vector<std::pair<uint32_t, uint32_t>> order(ids.size());
-  for (uint32_t i = 0; i < ids.size(); ++i) order[i] = {ids[i], i};
-  std::sort(order.begin(), order.end());
-  std::vector<uint32_t> sorted(ids.size());
-  for (size_t i = 0; i < order.size(); ++i) sorted[i] = order[i].first;
-  std::vector<VertexRecord> records;
-  SP_RETURN_IF_ERROR(store.read(sorted, records));
-  out.tile_id = tile;
-  m.positions.resize(ids.size());
-  if (layout.hasNormals()) m.normals.resize(ids.size());
-  if (layout.hasColors()) m.colors.resize(ids.size());
-  out.border.resize(ids.size());
-  if (originals) originals->resize(ids.size());
-  for (size_t i = 0; i < order.size(); ++i) {
-    const uint32_t local = order[i].second;
-    const VertexRecord& r = records[i];
-    if (originals) (*originals)[local] = {r.original[0], r.original[1], r.original[2]};
-    m.positions[local] = r.q;
-    if (layout.hasNormals()) m.normals[local] = r.normal;
-    if (layout.hasColors()) m.colors[local] = r.color;
-    out.border[local] = local_valence[local] < r.valence ? 1 : 0;
-  }
-  return Status::ok();
-}
-
 Status statusFromException() {
   try {
     throw;
@@ -284,158 +236,220 @@ Status measureTile(const EncodeSettings& s, const CodecInfo& codec, const TileCo
                          2 * uint64_t(tm.tile_id), device, r.forward, r.backward);
 }
 
-}  // namespace
 
-Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progress,
-                                std::shared_ptr<EmbreeDevice> device) {
-  const CodecInfo* codec = findCodec(s.codec);
-  if (!codec) return makeError(ErrorCode::kInvalidArgument, "unknown codec '" + s.codec + "'");
-  if (s.normal_bits < 4 || s.normal_bits > 16)
-    return makeError(ErrorCode::kInvalidArgument, "normal bits must be in [4, 16]");
-  EncodeResult result;
-  result.codec = codec->name;
-  result.threads = s.threads > 0 ? s.threads : tbb::info::default_concurrency();
-  const uint64_t budget = s.memory_budget;
-  Stopwatch clock;
-
-  // ---- pass 1
-  if (progress) progress->stage("reading");
-  // Pass 1 keeps the mesh for pass 2 only while it is small: a large mesh held in doubles costs more in memory
-  // traffic and page faults than parsing the file again (20M triangles: 5.7 s re-reading vs 8.1 s kept).
-  constexpr uint64_t kKeepLimit = 256ull << 20;
-  SurveySink survey(std::min(kKeepLimit, budget == 0 ? UINT64_MAX : budget / 3));
-  SP_ASSIGN_OR_RETURN(result.read, readMesh(s.input, survey));
-  if (s.keep_normals && survey.has_normals) result.layout.normal_bits = static_cast<uint8_t>(s.normal_bits);
-  if (s.keep_colors && survey.colorChannels()) result.layout.color_channels = survey.colorChannels();
-  auto grid = makeGrid(survey.box, s.bits);
-  if (!grid.isOk()) return grid.status().withContext(s.input);
-  result.grid = *grid;
-  result.seconds.read = clock.lap();
-
-  // ---- memory plan
-  const uint64_t n_vertices = survey.vertex_count, n_triangles = survey.triangle_count;
-  const uint64_t in_memory_bytes = n_vertices * sizeof(VertexRecord) + n_triangles * (sizeof(SpilledTriangle) + sizeof(Triangle));
-  // Without a budget, tile data up to kAutoStorageBudget / 2 stays in memory; beyond that, scratch files are
-  // faster as well as smaller (50M-triangle synth: 2.83 vs 2.28 Mtri/s, 262 MB vs 2.74 GB). Only where the data
-  // lives changes: the tiles, hence the bytes, depend on an explicit budget only.
-  constexpr uint64_t kAutoStorageBudget = 2ull << 30;
-  const uint64_t storage_budget = budget > 0 ? budget : kAutoStorageBudget;
-  const bool in_memory = in_memory_bytes <= storage_budget / 2;
-  result.out_of_core = !in_memory;
-  const uint64_t target = effectiveTileTarget(s);  // independent of the thread count: so are the bytes
-  std::optional<ScratchDir> scratch;
-  if (!in_memory) {
-    SP_ASSIGN_OR_RETURN(ScratchDir dir, ScratchDir::create(s.scratch_dir));
-    scratch.emplace(std::move(dir));
+// One scan's encode: the steps of jobs/pipeline.h as methods, sharing the scan's state.
+class ScanEncoder {
+ public:
+  ScanEncoder(const EncodeSettings& s, const CodecInfo& codec, ProgressListener* progress,
+              std::shared_ptr<EmbreeDevice> device, const PipelineHooks* hooks)
+      : s_(s), codec_(codec), progress_(progress), device_(std::move(device)), hooks_(hooks),
+        survey_(std::min(kKeepLimit, s.memory_budget == 0 ? UINT64_MAX : s.memory_budget / 3)) {
+    result_.codec = codec.name;
+    for (const StageSpec& st : s.stages) result_.stages.emplace_back(findStage(st.kind)->name);
+    result_.threads = s.threads > 0 ? s.threads : tbb::info::default_concurrency();
   }
-  auto scratchFile = [&](const char* name) { return scratch ? scratch->file(name) : std::string(); };
 
-  // ---- pass 2
-  if (progress) progress->stage("quantizing");
-  VertexStore store(scratchFile("vertices.bin"), in_memory ? UINT64_MAX / 2 : storage_budget / 4);
-  std::optional<TileHistogram> histogram(std::in_place, result.grid.bits, n_triangles, target);
-  TriangleSpill spill(scratchFile("triangles.bin"), in_memory, n_triangles);
-  IngestSink ingest(result.grid, result.layout, store, *histogram, spill);
-  if (survey.kept()) {
-    SP_RETURN_IF_ERROR(replay(survey.keptMesh(), ingest, ReadOptions().chunk));
-    survey.releaseMesh();
-  } else {
-    auto again = readMesh(s.input, ingest);
-    if (!again.isOk()) return again.status();
-    if (again->vertices != n_vertices || again->triangles != n_triangles)
-      return makeError(ErrorCode::kIo, s.input + ": file changed between the two passes");
-  }
-  SP_RETURN_IF_ERROR(spill.finish());
-  result.quantize = ingest.stats;
-  result.quantize.unreferenced_vertices = n_vertices - ingest.referenced;
-  result.vertices = ingest.referenced;
-  result.faces = spill.size();
-  result.seconds.quantize = clock.lap();
-
-  // ---- tiling and binning
-  if (progress) progress->stage("tiling");
-  std::vector<SpilledTriangle> chunk(1u << 16);
-  auto forEachSpilled = [&](auto&& fn) -> Status {
-    for (uint64_t first = 0; first < spill.size(); first += chunk.size()) {
-      const size_t n = static_cast<size_t>(std::min<uint64_t>(chunk.size(), spill.size() - first));
-      SP_RETURN_IF_ERROR(spill.read(first, std::span(chunk).first(n)));
-      for (size_t i = 0; i < n; ++i) SP_RETURN_IF_ERROR(fn(chunk[i]));
-    }
+  // Pass 1 over the input: bounds, counts, attributes; the grid.
+  Status survey() {
+    stage("reading");
+    SP_ASSIGN_OR_RETURN(result_.read, readMesh(s_.input, survey_));
+    if (s_.keep_normals && survey_.has_normals) result_.layout.normal_bits = static_cast<uint8_t>(s_.normal_bits);
+    if (s_.keep_colors && survey_.colorChannels()) result_.layout.color_channels = survey_.colorChannels();
+    auto grid = makeGrid(survey_.box, s_.bits);
+    if (!grid.isOk()) return grid.status().withContext(s_.input);
+    result_.grid = *grid;
+    result_.diagonal = survey_.box.diagonal();
+    result_.seconds.read = clock_.lap();
     return Status::ok();
-  };
-  // Cells denser than the target are counted again at finer levels (a few rounds at most).
-  while (histogram->beginRefinement())
-    SP_RETURN_IF_ERROR(forEachSpilled([&](const SpilledTriangle& t) {
-      histogram->addRefined(t.centroid);
-      return Status::ok();
-    }));
-  const TileIndex index = TileIndex::build(*histogram);
-  histogram.reset();
-  const auto tiles = index.tiles();
-  std::vector<uint64_t> counts(tiles.size());
-  for (size_t t = 0; t < tiles.size(); ++t) counts[t] = tiles[t].triangles;
-  TileBins bins(scratchFile("bins.bin"), in_memory, counts, storage_budget / 4);
-  SP_RETURN_IF_ERROR(forEachSpilled([&](const SpilledTriangle& t) {
-    const uint32_t tile = index.tileOf(t.centroid);
-    if (tile == UINT32_MAX) return makeError(ErrorCode::kInternal, "triangle centroid outside every tile");
-    return bins.add(tile, t.t);
-  }));
-  chunk = {};
-  SP_RETURN_IF_ERROR(bins.finish());
-  spill.release();
-  SP_RETURN_IF_ERROR(store.finalize());
-  result.seconds.tile = clock.lap();
-
-  // ---- the flow graph
-  if (progress) progress->stage("encoding");
-  SP_ASSIGN_OR_RETURN(auto file, AtomicFile::create(s.output));
-  ContainerWriter writer(*file, result.grid, result.layout);
-  SP_RETURN_IF_ERROR(writer.begin());
-  const TileContext ctx{result.grid.bits, result.layout};
-  result.measured = s.measure.enabled;
-  result.diagonal = survey.box.diagonal();
-  const double density = samplingDensity(s.measure, result.faces, ingest.area);
-  if (result.measured && !device) {
-    SP_ASSIGN_OR_RETURN(device, EmbreeDevice::create());
   }
-  const uint32_t tile_count = static_cast<uint32_t>(tiles.size());
-  size_t in_flight = 2 * static_cast<size_t>(result.threads);
-  if (budget > 0)
-    in_flight = std::clamp<size_t>(budget / 4 / (target * kTileBytesPerTriangle), 1, in_flight);
-  Status write_status;
-  uint32_t written = 0;
-  uint64_t triangles_done = 0;
-  result.tiles.resize(tile_count);
 
-  auto runTile = [&](const TileJob& job) -> TileResult {
+  // Where tile data lives (memory or scratch files), then pass 2: quantization into the store.
+  Status ingest() {
+    const uint64_t n_vertices = survey_.vertex_count, n_triangles = survey_.triangle_count;
+    const uint64_t in_memory_bytes =
+        n_vertices * sizeof(VertexRecord) + n_triangles * (sizeof(SpilledTriangle) + sizeof(Triangle));
+    storage_budget_ = s_.memory_budget > 0 ? s_.memory_budget : kAutoStorageBudget;
+    in_memory_ = in_memory_bytes <= storage_budget_ / 2;
+    result_.out_of_core = !in_memory_;
+    target_ = effectiveTileTarget(s_);  // independent of the thread count: so are the bytes
+    if (!in_memory_) {
+      SP_ASSIGN_OR_RETURN(ScratchDir dir, ScratchDir::create(s_.scratch_dir));
+      scratch_.emplace(std::move(dir));
+    }
+    stage("quantizing");
+    store_.emplace(scratchFile("vertices.bin"), in_memory_ ? UINT64_MAX / 2 : storage_budget_ / 4);
+    histogram_.emplace(result_.grid.bits, n_triangles, target_);
+    spill_.emplace(scratchFile("triangles.bin"), in_memory_, n_triangles);
+    IngestSink ingest(result_.grid, result_.layout, *store_, *histogram_, *spill_);
+    if (survey_.kept()) {
+      SP_RETURN_IF_ERROR(replay(survey_.keptMesh(), ingest, ReadOptions().chunk));
+      survey_.releaseMesh();
+    } else {
+      auto again = readMesh(s_.input, ingest);
+      if (!again.isOk()) return again.status();
+      if (again->vertices != n_vertices || again->triangles != n_triangles)
+        return makeError(ErrorCode::kIo, s_.input + ": file changed between the two passes");
+    }
+    SP_RETURN_IF_ERROR(spill_->finish());
+    result_.quantize = ingest.stats;
+    result_.quantize.unreferenced_vertices = n_vertices - ingest.referenced;
+    result_.vertices = ingest.referenced;
+    result_.faces = spill_->size();
+    area_ = ingest.area;
+    result_.seconds.quantize = clock_.lap();
+    return Status::ok();
+  }
+
+  // Octree tiles from the histogram, then the triangles binned by tile.
+  Status tile() {
+    stage("tiling");
+    std::vector<SpilledTriangle> chunk(1u << 16);
+    auto forEachSpilled = [&](auto&& fn) -> Status {
+      for (uint64_t first = 0; first < spill_->size(); first += chunk.size()) {
+        const size_t n = static_cast<size_t>(std::min<uint64_t>(chunk.size(), spill_->size() - first));
+        SP_RETURN_IF_ERROR(spill_->read(first, std::span(chunk).first(n)));
+        for (size_t i = 0; i < n; ++i) SP_RETURN_IF_ERROR(fn(chunk[i]));
+      }
+      return Status::ok();
+    };
+    // Cells denser than the target are counted again at finer levels (a few rounds at most).
+    while (histogram_->beginRefinement())
+      SP_RETURN_IF_ERROR(forEachSpilled([&](const SpilledTriangle& t) {
+        histogram_->addRefined(t.centroid);
+        return Status::ok();
+      }));
+    const TileIndex index = TileIndex::build(*histogram_);
+    histogram_.reset();
+    const auto tiles = index.tiles();
+    std::vector<uint64_t> counts(tiles.size());
+    for (size_t t = 0; t < tiles.size(); ++t) counts[t] = tiles[t].triangles;
+    bins_.emplace(scratchFile("bins.bin"), in_memory_, counts, storage_budget_ / 4);
+    SP_RETURN_IF_ERROR(forEachSpilled([&](const SpilledTriangle& t) -> Status {
+      SP_ASSIGN_OR_RETURN(uint32_t tile, tileOfTriangle(index, t));
+      return bins_->add(tile, t.t);
+    }));
+    SP_RETURN_IF_ERROR(bins_->finish());
+    spill_->release();
+    SP_RETURN_IF_ERROR(store_->finalize());
+    tile_count_ = static_cast<uint32_t>(tiles.size());
+    result_.seconds.tile = clock_.lap();
+    return Status::ok();
+  }
+
+  // The flow graph: tiles built, staged, coded (and measured) in parallel, written in order.
+  Status encodeTiles() {
+    stage("encoding");
+    SP_ASSIGN_OR_RETURN(file_, AtomicFile::create(s_.output));
+    writer_.emplace(*file_, result_.grid, result_.layout);
+    SP_RETURN_IF_ERROR(writer_->begin());
+    result_.measured = s_.measure.enabled;
+    density_ = samplingDensity(s_.measure, result_.faces, area_);
+    if (result_.measured && !device_) {
+      SP_ASSIGN_OR_RETURN(device_, EmbreeDevice::create());
+    }
+    size_t in_flight = 2 * static_cast<size_t>(result_.threads);
+    if (s_.memory_budget > 0)
+      in_flight = std::clamp<size_t>(s_.memory_budget / 4 / (target_ * kTileBytesPerTriangle), 1, in_flight);
+    result_.tiles.resize(tile_count_);
+
+    tbb::task_arena arena(result_.threads);
+    arena.execute([&] {
+      namespace flow = tbb::flow;
+      flow::graph g;
+      uint32_t next = 0;
+      flow::input_node<TileJob> source(g, [&](tbb::flow_control& fc) -> TileJob {
+        if (next >= tile_count_) {
+          fc.stop();
+          return TileJob{};
+        }
+        return TileJob{next++};
+      });
+      flow::limiter_node<TileJob> limiter(g, in_flight);
+      flow::function_node<TileJob, TileResult> work(g, flow::unlimited,
+                                                    [&](const TileJob& job) { return runTile(job.tile); });
+      flow::sequencer_node<TileResult> order(g, [](const TileResult& r) { return static_cast<size_t>(r.tile); });
+      flow::function_node<TileResult, flow::continue_msg> sink(g, flow::serial, [&](const TileResult& r) {
+        writeTile(r);
+        return flow::continue_msg();
+      });
+      flow::make_edge(source, limiter);
+      flow::make_edge(limiter, work);
+      flow::make_edge(work, order);
+      flow::make_edge(order, sink);
+      flow::make_edge(sink, limiter.decrementer());
+      source.activate();
+      g.wait_for_all();
+    });
+    SP_RETURN_IF_ERROR(write_status_);
+    result_.seconds.encode = clock_.lap();
+    return Status::ok();
+  }
+
+  // Index, footer, sync, rename.
+  Status finish() {
+    SP_RETURN_IF_ERROR(writer_->finish());
+    SP_RETURN_IF_ERROR(file_->commit());
+    result_.bytes = writer_->bytesWritten();
+    result_.seconds.write = clock_.lap();
+    result_.peak_rss = peakRss();
+    return Status::ok();
+  }
+
+  EncodeResult& result() { return result_; }
+
+ private:
+  void stage(const char* name) {
+    if (progress_) progress_->stage(name);
+  }
+  std::string scratchFile(const char* name) const { return scratch_ ? scratch_->file(name) : std::string(); }
+
+  // The stages in order, each checked against the border contract; then the codec; then the measurement.
+  Status encodeTile(const TileMesh& tm, const std::vector<Vec3d>& originals, TileResult& r) {
+    const TileContext ctx{result_.grid.bits, result_.layout};
+    if (hooks_ && hooks_->fail_tile) SP_RETURN_IF_ERROR(hooks_->fail_tile(tm.tile_id));
+    const bool thorough = kDebugBuild || hooks_ != nullptr;
+    // The tile as the next stage sees it: the built tile, then each stage's output.
+    std::optional<StagedTile> staged;
+    auto view = [&] { return staged ? staged->view() : TileView{tm.mesh, tm.border}; };
+    for (const StageSpec& spec : s_.stages) {
+      SP_ASSIGN_OR_RETURN(StagedTile next, runStage(ctx, view(), spec, thorough));
+      staged = std::move(next);
+    }
+    if (hooks_ && hooks_->extra_stage) {
+      SP_ASSIGN_OR_RETURN(StagedTile next, hooks_->extra_stage(ctx, view(), tm.tile_id));
+      SP_RETURN_IF_ERROR(checkBorderContract(ctx, view(), next.view(), true).withContext("test stage"));
+      staged = std::move(next);
+    }
+    SP_ASSIGN_OR_RETURN(r.encoded, codec_.encode(ctx, view(), s_.codec_options));
+    if (result_.measured)  // decode in memory, measure against the original triangles, discard
+      SP_RETURN_IF_ERROR(measureTile(s_, codec_, ctx, result_.grid, density_, device_, tm, originals, r));
+    return Status::ok();
+  }
+
+  TileResult runTile(uint32_t tile) {
     TileResult r;
-    r.tile = job.tile;
+    r.tile = tile;
     try {
       TileMesh tm;
       std::vector<Vec3d> originals;
-      r.status = buildTileMesh(job.tile, bins, store, result.layout, tm, result.measured ? &originals : nullptr);
-      // Per-tile stages run here in order (simplify, remesh: border vertices stay fixed, see engine/tile.h);
-      // the codec is the last stage.
-      if (r.status.isOk() && std::find(s.fail_tiles.begin(), s.fail_tiles.end(), job.tile) != s.fail_tiles.end())
-        r.status = makeError(ErrorCode::kInternal, "injected failure (test)");
-      if (r.status.isOk()) {
-        auto encoded = codec->encode(ctx, TileView{tm.mesh, tm.border}, CodecOptions{});
-        if (encoded.isOk()) r.encoded = std::move(encoded).value();
-        else r.status = encoded.status();
-      }
-      if (r.status.isOk() && result.measured)  // decode in memory, measure, discard
-        r.status = measureTile(s, *codec, ctx, result.grid, density, device, tm, originals, r);
-      r.border = static_cast<uint32_t>(std::count(tm.border.begin(), tm.border.end(), 1));
+      std::vector<Triangle> triangles;
+      r.status = bins_->read(tile, triangles);
+      if (r.status.isOk())
+        r.status = buildTileMesh(tile, triangles, *store_, result_.layout, tm,
+                                 result_.measured ? &originals : nullptr);
       r.input_vertices = static_cast<uint32_t>(tm.mesh.positions.size());
       r.input_faces = static_cast<uint32_t>(tm.mesh.triangles.size());
+      r.border = static_cast<uint32_t>(std::count(tm.border.begin(), tm.border.end(), 1));
+      if (r.status.isOk()) r.status = encodeTile(tm, originals, r);
     } catch (...) {
       r.status = statusFromException();
-      r.encoded = EncodedTile{};
     }
+    if (!r.status.isOk()) r.encoded = EncodedTile{};
     return r;
-  };
-  auto writeTile = [&](const TileResult& r) {
-    TileReport& rep = result.tiles[r.tile];
+  }
+
+  void writeTile(const TileResult& r) {
+    TileReport& rep = result_.tiles[r.tile];
     rep.id = r.tile;
     rep.vertices = r.status.isOk() ? r.encoded.decoded.vertices : r.input_vertices;
     rep.faces = r.status.isOk() ? r.encoded.decoded.faces : r.input_faces;
@@ -443,56 +457,66 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
     rep.status = r.status;
     rep.forward = statsOf(r.forward);
     rep.backward = statsOf(r.backward);
-    result.forward.merge(r.forward);
-    result.backward.merge(r.backward);
+    result_.forward.merge(r.forward);
+    result_.backward.merge(r.backward);
     if (!r.status.isOk()) {
-      ++result.failed_tiles;
-    } else if (write_status.isOk()) {
-      write_status = writer.addTile(r.tile, *codec, r.encoded.decoded, r.encoded.payload);
+      ++result_.failed_tiles;
+    } else if (write_status_.isOk()) {
+      write_status_ = writer_->addTile(r.tile, codec_, r.encoded.decoded, r.encoded.payload);
       rep.bytes = kChunkHeaderSize + r.encoded.payload.size();
-      result.tile_vertices += r.encoded.decoded.vertices;
+      result_.tile_vertices += r.encoded.decoded.vertices;
     }
-    ++written;
-    triangles_done += r.input_faces;
-    if (progress) progress->tiles(written, tile_count, triangles_done);
-  };
+    ++written_;
+    triangles_done_ += r.input_faces;
+    if (progress_) progress_->tiles(written_, tile_count_, triangles_done_);
+  }
 
-  tbb::task_arena arena(result.threads);
-  arena.execute([&] {
-    namespace flow = tbb::flow;
-    flow::graph g;
-    uint32_t next = 0;
-    flow::input_node<TileJob> source(g, [&](tbb::flow_control& fc) -> TileJob {
-      if (next >= tile_count) {
-        fc.stop();
-        return TileJob{};
-      }
-      return TileJob{next++};
-    });
-    flow::limiter_node<TileJob> limiter(g, in_flight);
-    flow::function_node<TileJob, TileResult> work(g, flow::unlimited, runTile);
-    flow::sequencer_node<TileResult> order(g, [](const TileResult& r) { return static_cast<size_t>(r.tile); });
-    flow::function_node<TileResult, flow::continue_msg> sink(g, flow::serial, [&](const TileResult& r) {
-      writeTile(r);
-      return flow::continue_msg();
-    });
-    flow::make_edge(source, limiter);
-    flow::make_edge(limiter, work);
-    flow::make_edge(work, order);
-    flow::make_edge(order, sink);
-    flow::make_edge(sink, limiter.decrementer());
-    source.activate();
-    g.wait_for_all();
-  });
-  SP_RETURN_IF_ERROR(write_status);
-  result.seconds.encode = clock.lap();
+  const EncodeSettings& s_;
+  const CodecInfo& codec_;
+  ProgressListener* progress_;
+  std::shared_ptr<EmbreeDevice> device_;
+  const PipelineHooks* hooks_;
+  EncodeResult result_;
+  Stopwatch clock_;
+  SurveySink survey_;
+  // Tile data: in memory or in scratch files.
+  uint64_t storage_budget_ = 0;
+  bool in_memory_ = true;
+  uint64_t target_ = 0;
+  std::optional<ScratchDir> scratch_;
+  std::optional<VertexStore> store_;
+  std::optional<TileHistogram> histogram_;
+  std::optional<TriangleSpill> spill_;
+  std::optional<TileBins> bins_;
+  double area_ = 0;  // of the kept triangles, original positions
+  uint32_t tile_count_ = 0;
+  // Encoding and writing.
+  double density_ = 0;
+  std::unique_ptr<AtomicFile> file_;
+  std::optional<ContainerWriter> writer_;
+  Status write_status_;
+  uint32_t written_ = 0;
+  uint64_t triangles_done_ = 0;
+};
 
-  SP_RETURN_IF_ERROR(writer.finish());
-  SP_RETURN_IF_ERROR(file->commit());
-  result.bytes = writer.bytesWritten();
-  result.seconds.write = clock.lap();
-  result.peak_rss = peakRss();
-  return result;
+}  // namespace
+
+Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progress,
+                                std::shared_ptr<EmbreeDevice> device, const PipelineHooks* hooks) {
+  const CodecInfo* codec = findCodec(s.codec);
+  if (!codec)
+    return makeError(ErrorCode::kInvalidArgument, "unknown codec '" + s.codec + "' (available: " + codecNames() + ")");
+  if (s.normal_bits < 4 || s.normal_bits > 16)
+    return makeError(ErrorCode::kInvalidArgument, "normal bits must be in [4, 16]");
+  for (const StageSpec& st : s.stages)
+    if (!findStage(st.kind)) return makeError(ErrorCode::kInvalidArgument, "unknown stage");
+  ScanEncoder encoder(s, *codec, progress, std::move(device), hooks);
+  SP_RETURN_IF_ERROR(encoder.survey());
+  SP_RETURN_IF_ERROR(encoder.ingest());
+  SP_RETURN_IF_ERROR(encoder.tile());
+  SP_RETURN_IF_ERROR(encoder.encodeTiles());
+  SP_RETURN_IF_ERROR(encoder.finish());
+  return std::move(encoder.result());
 }
 
 }  // namespace scanpress

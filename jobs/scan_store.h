@@ -13,6 +13,7 @@
 
 #include "engine/mesh.h"
 #include "engine/status.h"
+#include "spatial/tile_builder.h"
 
 namespace scanpress {
 
@@ -48,16 +49,7 @@ class ScratchFile {
   std::string path_;
 };
 
-struct VertexRecord {
-  Vec3u q{0, 0, 0};
-  uint32_t valence = 0;  // triangles (kept after quantization) that use the vertex
-  OctNormal normal{0, 0};
-  Rgba8 color{255, 255, 255, 255};
-  Vec3f original{0, 0, 0};  // input position relative to the grid origin (for measuring the error)
-};
-static_assert(sizeof(VertexRecord) == 36);
-
-class VertexStore {
+class VertexStore : public VertexSource {
  public:
   VertexStore(std::string path, uint64_t cache_bytes);
   Status append(const VertexRecord& r);
@@ -67,7 +59,7 @@ class VertexStore {
   // Ends filling: writes dirty blocks if anything was ever spilled, then frees the cache.
   Status finalize();
   // Records for sorted, unique ids (thread-safe after finalize).
-  Status read(std::span<const uint32_t> sorted_ids, std::vector<VertexRecord>& out) const;
+  Status read(std::span<const uint32_t> sorted_ids, std::vector<VertexRecord>& out) const override;
   uint64_t size() const { return size_; }
   bool spilled() const { return file_.isOpen(); }
 
@@ -104,12 +96,7 @@ class VertexStore {
   size_t last_slot_ = 0;
 };
 
-// Triangles with their centroid, in input order, between the ingest pass and binning.
-struct SpilledTriangle {
-  Triangle t;
-  Vec3u centroid;
-};
-
+// Triangles with their centroid (spatial/tile_builder.h), in input order, between the ingest pass and binning.
 class TriangleSpill {
  public:
   // `expected` (the count from the first pass) sizes the in-memory array once instead of growing it.

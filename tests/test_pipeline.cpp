@@ -7,8 +7,10 @@
 
 #include <filesystem>
 #include <map>
+#include <mutex>
 #include <random>
 #include <set>
+#include <tuple>
 
 #include <nlohmann/json.hpp>
 
@@ -176,8 +178,11 @@ TEST(Pipeline, FailedTileIsReportedAndTheOthersAreKept) {
   s.input = path;
   s.output = dir.file("f.spz");
   s.tile_triangles = 16384;
-  s.fail_tiles = {3};
-  auto r = encodeFile(s);
+  PipelineHooks hooks;
+  hooks.fail_tile = [](uint32_t tile) {
+    return tile == 3 ? makeError(ErrorCode::kInternal, "injected failure (test)") : Status::ok();
+  };
+  auto r = encodeFile(s, nullptr, nullptr, &hooks);
   ASSERT_TRUE(r.isOk()) << r.status().toString();
   EXPECT_EQ(r->failed_tiles, 1u);
   EXPECT_EQ(r->tiles[3].status.code(), ErrorCode::kInternal);
@@ -189,6 +194,154 @@ TEST(Pipeline, FailedTileIsReportedAndTheOthersAreKept) {
   auto decoded = decodeContainer(s.output, std::nullopt);
   ASSERT_TRUE(decoded.isOk());
   EXPECT_EQ(decoded->triangles.size(), 268686u - r->tiles[3].faces);
+}
+
+// The tile stages: lock flags reach a stage and are the border flags (a vertex used by triangles of two tiles);
+// a stage that moves every unlocked vertex still decodes crack-free; a stage that moves a locked vertex, or drops a
+// border edge, is a tile error, never a cracked mesh.
+// A scan for many tiles: igea when the shared data is there, else a synth scan.
+std::string stageInput(testing::TempDir& dir) {
+  const std::string igea = dataFile("igea.ply.zst");
+  if (fs::exists(igea)) return igea;
+  SynthSettings synth;
+  synth.output = dir.file("s.ply");
+  synth.triangles = 200000;
+  EXPECT_TRUE(synthesize(synth).isOk());
+  return synth.output;
+}
+
+EncodeSettings stageSettings(const std::string& input, const std::string& output, const char* codec) {
+  EncodeSettings s;
+  s.input = input;
+  s.output = output;
+  s.codec = codec;
+  s.bits = 14;
+  s.tile_triangles = 8192;
+  s.threads = 2;
+  return s;
+}
+
+TEST(Pipeline, LockFlagsReachStagesAndAreTheBorder) {
+  testing::TempDir dir;
+  const std::string input = stageInput(dir);
+  std::mutex mu;
+  std::map<uint32_t, std::vector<std::pair<Vec3u, uint8_t>>> seen;  // tile -> (position, locked)
+  PipelineHooks hooks;
+  hooks.extra_stage = [&](const TileContext&, const TileView& t, uint32_t tile) -> Result<StagedTile> {
+    std::vector<std::pair<Vec3u, uint8_t>> v;
+    EXPECT_EQ(t.locked.size(), t.mesh.positions.size());
+    for (size_t i = 0; i < t.mesh.positions.size(); ++i) v.push_back({t.mesh.positions[i], t.locked[i]});
+    std::lock_guard lock(mu);
+    seen[tile] = std::move(v);
+    return StagedTile{t.mesh, std::vector<uint8_t>(t.locked.begin(), t.locked.end())};
+  };
+  auto r = encodeFile(stageSettings(input, dir.file("l.spz"), "kdtree"), nullptr, nullptr, &hooks);
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  ASSERT_GE(seen.size(), 20u);
+  // Brute force: a position is on the border when two tiles hold it.
+  std::map<Vec3u, int> tiles_at;
+  for (const auto& [tile, v] : seen) {
+    std::set<Vec3u> mine;
+    for (const auto& [p, locked] : v) mine.insert(p);
+    for (const Vec3u& p : mine) ++tiles_at[p];
+  }
+  size_t locked_count = 0;
+  for (const auto& [tile, v] : seen)
+    for (const auto& [p, locked] : v) {
+      EXPECT_EQ(locked != 0, tiles_at[p] > 1) << "tile " << tile;
+      locked_count += locked;
+    }
+  EXPECT_GT(locked_count, 1000u);
+}
+
+// Moves every unlocked vertex by one grid cell along x where that keeps its triangles valid; locked ones stay.
+Result<StagedTile> moveUnlocked(const TileContext& ctx, const TileView& t, uint32_t) {
+  StagedTile out{t.mesh, std::vector<uint8_t>(t.locked.begin(), t.locked.end())};
+  const uint32_t max = (1u << ctx.bits) - 1;
+  for (size_t v = 0; v < out.mesh.positions.size(); ++v)
+    if (!out.locked[v]) {
+      auto& p = out.mesh.positions[v];
+      p[0] = p[0] < max ? p[0] + 1 : p[0] - 1;
+    }
+  // Undo moves that made a triangle degenerate (two corners in one cell).
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (const auto& tri : out.mesh.triangles) {
+      const auto& q = out.mesh.positions;
+      if (q[tri[0]] != q[tri[1]] && q[tri[1]] != q[tri[2]] && q[tri[0]] != q[tri[2]]) continue;
+      for (uint32_t v : tri)
+        if (out.mesh.positions[v] != t.mesh.positions[v]) out.mesh.positions[v] = t.mesh.positions[v], changed = true;
+    }
+  }
+  return out;
+}
+
+TEST(Pipeline, StageMovingEveryUnlockedVertexDecodesCrackFree) {
+  testing::TempDir dir;
+  const std::string input = stageInput(dir);
+  for (const char* codec : {"kdtree", "octree", "store"}) {
+    SCOPED_TRACE(codec);
+    PipelineHooks hooks;
+    hooks.extra_stage = moveUnlocked;
+    const EncodeSettings s = stageSettings(input, dir.file(std::string(codec) + ".spz"), codec);
+    auto r = encodeFile(s, nullptr, nullptr, &hooks);
+    ASSERT_TRUE(r.isOk()) << r.status().toString();
+    EXPECT_GE(r->tiles.size(), 20u);
+    EXPECT_EQ(r->failed_tiles, 0u);
+    ContainerHeader header;
+    auto m = decodeContainer(s.output, std::nullopt, &header);
+    ASSERT_TRUE(m.isOk()) << m.status().toString();
+    // Crack-free: the input is closed (or its boundary is the input's), and every seam welded: no position twice,
+    // and the boundary edges are exactly the input's (none for igea).
+    auto original = readMeshFile(input);
+    ASSERT_TRUE(original.isOk());
+    const QuantizedMesh expected = *quantizeMesh(*original, header.grid, header.layout, nullptr);
+    std::set<Vec3u> positions(m->positions.begin(), m->positions.end());
+    EXPECT_EQ(positions.size(), m->positions.size()) << "duplicate positions on seams";
+    EXPECT_EQ(boundaryEdges(*m).size(), boundaryEdges(expected).size());
+    EXPECT_EQ(m->triangles.size(), expected.triangles.size());
+    // And the vertices did move: the stage ran.
+    EXPECT_FALSE(testing::triangleMultiset(*m) == testing::triangleMultiset(expected));
+  }
+}
+
+TEST(Pipeline, StageBreakingTheBorderContractIsATileError) {
+  testing::TempDir dir;
+  const std::string input = stageInput(dir);
+  // Moves the first locked vertex of tile 2.
+  PipelineHooks moves_locked;
+  moves_locked.extra_stage = [](const TileContext&, const TileView& t, uint32_t tile) -> Result<StagedTile> {
+    StagedTile out{t.mesh, std::vector<uint8_t>(t.locked.begin(), t.locked.end())};
+    for (size_t v = 0; tile == 2 && v < out.locked.size(); ++v)
+      if (out.locked[v]) {
+        out.mesh.positions[v][2] ^= 1;
+        break;
+      }
+    return out;
+  };
+  // Drops the triangles of tile 5 that hold a border edge.
+  PipelineHooks drops_border = moves_locked;
+  drops_border.extra_stage = [](const TileContext&, const TileView& t, uint32_t tile) -> Result<StagedTile> {
+    StagedTile out{t.mesh, std::vector<uint8_t>(t.locked.begin(), t.locked.end())};
+    if (tile != 5) return out;
+    std::erase_if(out.mesh.triangles, [&](const Triangle& tri) {
+      int locked = 0;
+      for (uint32_t v : tri) locked += t.locked[v];
+      return locked >= 2;
+    });
+    return out;
+  };
+  for (auto [hooks, bad_tile, what] : {std::tuple{&moves_locked, 2u, "locked vertex"},
+                                       std::tuple{&drops_border, 5u, "border edge"}}) {
+    SCOPED_TRACE(what);
+    auto r = encodeFile(stageSettings(input, dir.file("bad.spz"), "kdtree"), nullptr, nullptr, hooks);
+    ASSERT_TRUE(r.isOk()) << r.status().toString();
+    EXPECT_EQ(r->failed_tiles, 1u);
+    const Status& st = r->tiles[bad_tile].status;
+    EXPECT_EQ(st.code(), ErrorCode::kInternal);
+    EXPECT_NE(st.toString().find("border contract"), std::string::npos) << st.toString();
+    EXPECT_NE(st.toString().find(what), std::string::npos) << st.toString();
+  }
 }
 
 TEST(Pipeline, ScratchFilesAreRemovedWhenAnEncodeFails) {

@@ -1,0 +1,122 @@
+// The encode pipeline for one scan, in named steps (jobs/pipeline.cpp):
+//
+//   survey  stream the input once: bounding box, counts, which attributes exist (and the mesh itself, if small)
+//   ingest  the scan's one global grid; stream again (or replay the kept mesh): quantize vertices into the vertex
+//           store, drop triangles that quantization makes degenerate, count each vertex's valence, histogram
+//           triangle centroids
+//   tile    octree tiles from the histogram (spatial/tiling.h), then a counting sort of triangles into tile bins
+//   encode  a oneTBB flow graph: source -> limiter -> tile task (parallel: build the tile with its lock flags,
+//           the stages, the codec, the measurement) -> sequencer (tile order) -> serial container writer
+//   finish  index, footer, sync, rename
+//
+// Memory: the store, the spill and the bins go to scratch files when they would not fit in half of the budget
+// (2 GiB when none is set: beyond that, scratch files are faster too); their buffers take about a quarter each,
+// and with a budget the limiter keeps the tiles in flight (and the tile size) within the rest. The output is
+// byte-identical at any thread count: each tile's bytes depend only on its content, and the sequencer restores
+// tile order.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "engine/codecs/codec.h"
+#include "engine/quantize.h"
+#include "engine/stages/stage.h"
+#include "jobs/measure.h"
+#include "jobs/mesh_io/mesh_reader.h"
+
+namespace scanpress {
+
+// Everything that decides what an encode produces and how it runs. The CLI's `encode` options and the job files'
+// keys both map onto this struct (jobs/config.cpp).
+struct EncodeSettings {
+  std::string input;
+  std::string output;
+  std::string codec = "store";
+  int bits = kDefaultGridBits;
+  int normal_bits = kDefaultNormalBits;
+  bool keep_normals = true;
+  bool keep_colors = true;
+  uint64_t tile_triangles = 131072;  // target triangles per tile (tiles adapt to density around it)
+  int threads = 0;                   // 0: all cores
+  uint64_t memory_budget = 0;        // bytes; 0: no limit (the scan is processed in memory)
+  std::string scratch_dir;           // parent of the temporary tile bins; empty: the system temp directory
+  MeasureSettings measure;           // error of the decoded result, per tile and overall
+  std::vector<StageSpec> stages;     // geometry stages every tile runs before the codec, in order
+  CodecOptions codec_options;        // the codec's typed options
+};
+
+struct StageSeconds {
+  double read = 0;      // first pass over the input: bounds, counts (and the mesh itself when it fits)
+  double quantize = 0;  // second pass: quantization, degenerate triangles, tile histogram
+  double tile = 0;      // tiling and binning
+  double encode = 0;    // the parallel per-tile pipeline, including the ordered write
+  double write = 0;     // index, footer, sync and rename
+};
+
+// A tile of an encode: the counts its decoder yields (for a failed tile, the counts it had as built).
+struct TileReport {
+  uint32_t id = 0;
+  uint32_t vertices = 0;
+  uint32_t faces = 0;
+  uint32_t border_vertices = 0;
+  uint64_t bytes = 0;
+  Status status;
+  ErrorStats forward, backward;  // when measured
+};
+
+struct EncodeResult {
+  ReadStats read;
+  Grid grid;
+  AttributeLayout layout;
+  QuantizeStats quantize;
+  uint64_t vertices = 0;       // distinct vertices encoded (after dropping)
+  uint64_t faces = 0;          // triangles encoded
+  uint64_t tile_vertices = 0;  // vertices summed over tiles (border vertices count once per tile)
+  uint64_t bytes = 0;          // container size
+  std::vector<TileReport> tiles;
+  uint32_t failed_tiles = 0;
+  bool out_of_core = false;  // tile data went through scratch files
+  int threads = 0;
+  uint64_t peak_rss = 0;  // bytes, this process so far
+  bool measured = false;
+  double diagonal = 0;  // of the input's bounding box
+  ErrorAccumulator forward, backward;  // over all tiles: original -> decoded, decoded -> original
+  StageSeconds seconds;
+  std::string codec;
+  std::vector<std::string> stages;  // names, in the order they ran
+  double bitsPerVertex() const { return vertices ? 8.0 * bytes / vertices : 0.0; }
+};
+
+// Observer of a running encode (progress display). Called from the pipeline's serial writer only.
+class ProgressListener {
+ public:
+  virtual ~ProgressListener() = default;
+  virtual void stage(const char* /*name*/) {}
+  virtual void tiles(uint32_t /*done*/, uint32_t /*total*/, uint64_t /*triangles_done*/) {}
+};
+
+// Test hooks (tests only; not reachable from the CLI or job files).
+struct PipelineHooks {
+  // One more stage after the configured ones, checked against the border contract like them.
+  std::function<Result<StagedTile>(const TileContext& ctx, const TileView& tile, uint32_t tile_id)> extra_stage;
+  // Fault injection: a tile for which this returns an error fails with it.
+  std::function<Status(uint32_t tile_id)> fail_tile;
+};
+
+// Encodes one scan: survey, ingest, tile, encode tiles, finish (jobs/pipeline.cpp). The container is written
+// even when some tiles fail (they are listed in the result); it is not written at all on a read or write error.
+// Measuring uses `device` (one per job); one is created when none is given.
+Result<EncodeResult> encodeFile(const EncodeSettings& settings, ProgressListener* progress = nullptr,
+                                std::shared_ptr<EmbreeDevice> device = nullptr, const PipelineHooks* hooks = nullptr);
+
+// Peak memory of a tile task per triangle (measured, generously rounded up): sizes tiles and tiles in flight.
+constexpr uint64_t kTileBytesPerTriangle = 160;
+
+// The target triangles per tile that an encode with these settings uses: the configured target, lowered when a
+// memory budget could not hold the tiles in flight. Independent of the thread count, so the output is too.
+uint64_t effectiveTileTarget(const EncodeSettings& s);
+
+}  // namespace scanpress
