@@ -34,7 +34,7 @@ class EmbreeDevice {
   void* handle() const { return device_; }  // RTCDevice
   // The last error Embree reported on this device ("" if none).
   std::string lastError() const;
-  struct ErrorSlot;  // defined in the .cpp (Embree's error callback writes it)
+  struct ErrorSlot;  // defined in surface_embree.cpp (Embree's error callback writes it)
 
  private:
   EmbreeDevice() = default;
@@ -76,7 +76,7 @@ class SurfaceIndex {
   Hit intersect(const Vec3d& origin, const Vec3d& direction) const;
 
   size_t triangleCount() const;
-  struct Impl;  // defined in the .cpp (Embree's point-query callback reads it)
+  struct Impl;  // defined in surface_index_internal.h (shared by the surface_*.cpp parts)
 
  private:
   SurfaceIndex() = default;
