@@ -69,7 +69,6 @@ class VertexStore {
   // Records for sorted, unique ids (thread-safe after finalize).
   Status read(std::span<const uint32_t> sorted_ids, std::vector<VertexRecord>& out) const;
   uint64_t size() const { return size_; }
-  bool spilled() const { return file_.isOpen(); }
 
  private:
   static constexpr int kBlockShift = 14;

@@ -60,7 +60,6 @@ TileHistogram& TileHistogram::operator=(TileHistogram&&) noexcept = default;
 
 void TileHistogram::add(const Vec3u& c) {
   Impl::bump(impl_->levels.front(), cellOf(c, shift_));
-  ++total_;
 }
 
 bool TileHistogram::beginRefinement() {
