@@ -15,8 +15,7 @@ namespace scanpress::surface {
 namespace {
 
 // Triangles that may share a cluster: at most kClusterSize, within a box of half-diagonal kClusterRadii mean
-// radii. Two blocks of kLanes; 4 radii keeps big triangles apart and was as fast as 3 coming back from igea's
-// 10% simplification, 3% faster going out (8 A/B rounds; 3.5 and 6 within noise).
+// radii, which keeps big triangles apart (the value: bench/RESULTS.md).
 constexpr double kClusterRadii = 4.0;
 
 // The plane record of a triangle (corners relative to the origin): unit normal and offset, then each edge's
@@ -87,8 +86,7 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m) {
   }
   // Clusters by median splits along the longest axis of the centers' box, at multiples of kClusterSize (so that
   // nearly every cluster is full), until a part has at most kClusterSize triangles within a box of half-diagonal
-  // kClusterRadii mean radii (or a single triangle). The clusters come out in the splits' (spatial) order. On
-  // igea, 7.98 triangles per cluster within 2.5 radii; Morton order cut greedily gave 6.1 within 2.45.
+  // kClusterRadii mean radii (or a single triangle). The clusters come out in the splits' (spatial) order.
   const double limit = kClusterRadii * m.mean_radius;
   std::vector<std::pair<uint32_t, uint32_t>> parts;  // item ranges, one per cluster (its box into set->boxes)
   std::vector<std::pair<uint32_t, uint32_t>> todo{{0u, uint32_t(items.size())}};

@@ -71,15 +71,11 @@ namespace {
 // Points are ordered by the Morton key of their cell (kCellRadii mean triangle radii); runs are maximal stretches
 // of that order whose box has a half-diagonal of at most kRunRadii. The gather reaches beyond the run's points by
 // at least kReachMin radii, or by 1.25 times the largest distance in the last run done (the gathers are one run
-// ahead: that is the run before the previous), at most kReachMax. With the median-split clusters, runs of 1.5
-// radii beat 2 by median in four sweeps of 5-10 rounds (by 5-20%) on igea against its 10% simplification and were
-// as fast the other way; 1, 1.25, 2.5 and 3 were not faster, nor was a cap of 8 or 12 points per run.
+// ahead: that is the run before the previous), at most kReachMax. The values: bench/RESULTS.md.
 constexpr double kCellRadii = 1.0, kRunRadii = 1.5, kReachMin = 0.1, kReachMax = 2.0;
 // A run of at most kDirectPoints points bounds its clusters' blocks where they are (its gather prefetches their
 // corners too); a larger run first copies out the triangles that may lie within its reach, so that each of its
-// points bounds fewer. Against copying out for every run (7 A/B rounds, median): 8 points was 11% faster coming
-// back from igea's 10% simplification (3.5 points per run) and as fast going out (13.7 points per run); 4, 6 and 11
-// were not better; bounding in place for every run was 17% slower going out.
+// points bounds fewer.
 constexpr size_t kDirectPoints = 8;
 
 }  // namespace
@@ -207,8 +203,8 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
       }
       const double best = std::sqrt(o.distance);
       if (o.triangle != UINT32_MAX && !(best + vlen(vsub(p, c)) <= reach)) {
-        // Not certified: every triangle nearer than the best so far is in a cluster within that distance of p.
-        // (A query of the triangle scene, which closestMany leaves cold, cost ~5,700 cycles here.)
+        // Not certified: every triangle nearer than the best so far is in a cluster within that distance of p
+        // (a gather of the cluster scene: the triangle scene is cold here).
         gather(p, best, own, false);
         for (uint32_t k : own.clusters)
           for (size_t b = set->first[k]; b < set->first[k + 1]; ++b) {

@@ -24,7 +24,7 @@ uint64_t spreadBits(uint64_t v) {
 }  // namespace
 
 // A stable radix sort of the words on the bytes where they differ: a batch of nearby points shares most of its
-// keys' bits. (Pairs of key and index sorted after a partition of the points not finite took twice as long.)
+// keys' bits.
 void mortonOrder(std::span<const Vec3d> points, double inv_cell, int index_bits, std::vector<uint64_t>& order,
                  std::vector<uint64_t>& scratch) {
   const size_t n = points.size();
