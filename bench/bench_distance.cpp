@@ -124,8 +124,8 @@ void BM_CgalClosest(benchmark::State& state, bool to_reduced) {
 }
 
 // Five repetitions each, reported as mean, median, stddev and cv, the repetitions of all six run in random order
-// (main below): a single run varies by 10-20% on a shared machine, and the ratio to CGAL is read from two medians
-// taken over the same stretch of time.
+// (main below): single runs vary on a shared machine, and the ratio to CGAL is read from two medians taken over
+// the same stretch of time.
 #define SCANPRESS_DISTANCE_BENCH(...) \
   BENCHMARK_CAPTURE(__VA_ARGS__)->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true)
 SCANPRESS_DISTANCE_BENCH(BM_ScanpressClosest, igea_to_10pct, true, true);

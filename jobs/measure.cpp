@@ -18,12 +18,10 @@ double samplingDensity(const MeasureSettings& s, uint64_t triangles, double area
 ErrorAccumulator distancesTo(const SurfaceIndex& surface, std::span<const Vec3d> samples) {
   std::vector<double> d(samples.size());
   // Several samples per triangle of the surface (a simplified or remeshed result): blocks of nearby samples share
-  // Embree gathers (closestMany; 2.4-2.6x on igea -> its 10% simplification, 7.4 samples per triangle). About one
-  // or two per triangle (lossless codecs, the way back): one query per sample, each starting from the previous
-  // answer (samples come in surface order), without closestMany's ~160 bytes per triangle. Measured at ~2.5 (igea
-  // against its 12-bit octree decode, one core, 3 runs, same JSON): closestMany both ways took 1.01-1.14 s against
-  // 1.35-1.46 s, for a peak of 213 MB against 138 MB. 20-30% faster is not worth 1.55x the memory per tile: measure
-  // already peaks above the codecs (igea: octree encode 96 MB), and tiles are measured in parallel.
+  // Embree gathers (closestMany). About one or two per triangle (lossless codecs, the way back): one query per
+  // sample, each starting from the previous answer (samples come in surface order), without closestMany's ~160
+  // bytes per triangle: there its speed-up does not pay for its memory, since measure already peaks above the
+  // codecs and tiles are measured in parallel. The threshold's measurement: bench/RESULTS.md.
   constexpr double kBatchSamplesPerTriangle = 4;
   const bool batch = double(samples.size()) >= kBatchSamplesPerTriangle * double(surface.triangleCount());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, samples.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {

@@ -61,7 +61,6 @@ class VertexStore : public VertexSource {
   // Records for sorted, unique ids (thread-safe after finalize).
   Status read(std::span<const uint32_t> sorted_ids, std::vector<VertexRecord>& out) const override;
   uint64_t size() const { return size_; }
-  bool spilled() const { return file_.isOpen(); }
 
  private:
   static constexpr int kBlockShift = 14;

@@ -13,7 +13,7 @@
 // corners in double (72: an exact test reads one place instead of four) and its id (4), in clusters of up to 8
 // nearby triangles stored in blocks of 4 (a cluster's unused lanes cost the same), per cluster an offset (4), and
 // a second, small Embree scene over the clusters (built from the clusters' boxes, 32 bytes each, freed after):
-// about 160 bytes per triangle in all (igea: 1.0 slot per triangle, 7.98 triangles per cluster).
+// about 160 bytes per triangle in all.
 //
 // Thread safety: closest(), closestMany() and intersect() may be called from many threads at once.
 #pragma once
@@ -34,7 +34,7 @@ class EmbreeDevice {
   void* handle() const { return device_; }  // RTCDevice
   // The last error Embree reported on this device ("" if none).
   std::string lastError() const;
-  struct ErrorSlot;  // defined in the .cpp (Embree's error callback writes it)
+  struct ErrorSlot;  // defined in surface_embree.cpp (Embree's error callback writes it)
 
  private:
   EmbreeDevice() = default;
@@ -63,8 +63,7 @@ class SurfaceIndex {
   // runs; a run shares one Embree query on the cluster scene that gathers every cluster that can hold the nearest
   // triangle of any of its points, and each point then takes the minimum over those clusters' triangles,
   // certified exact against the gather's radius (else it gathers the clusters within its best distance itself).
-  // Faster than closest() one by one by 2.4-2.6x with 7.4 points per triangle (igea's samples against its 10%
-  // simplification) and 1.8-2.1x with 0.75 (the reverse); it costs the cluster records above.
+  // Faster than closest() one by one (bench/RESULTS.md); it costs the cluster records above.
   void closestMany(std::span<const Vec3d> points, std::span<Closest> out) const;
 
   struct Hit {
@@ -76,7 +75,7 @@ class SurfaceIndex {
   Hit intersect(const Vec3d& origin, const Vec3d& direction) const;
 
   size_t triangleCount() const;
-  struct Impl;  // defined in the .cpp (Embree's point-query callback reads it)
+  struct Impl;  // defined in surface_index_internal.h (shared by the surface_*.cpp parts)
 
  private:
   SurfaceIndex() = default;

@@ -46,7 +46,7 @@ TileHistogram::TileHistogram(int grid_bits, uint64_t total_triangles, uint64_t t
     : impl_(std::make_unique<Impl>()), grid_bits_(grid_bits), target_(std::max<uint64_t>(target, 1)) {
   // A surface through R^3 cells touches on the order of R^2 of them (about pi R^2 for a closed scan that fills
   // its box); aim for 1/16 of the target or less per touched cell: R = sqrt(16 N / target), rounded up to a
-  // power of two. Measured on a 5M-triangle synth scan with a 13k target: about 50k occupied cells.
+  // power of two.
   const double r = std::sqrt(16.0 * double(std::max<uint64_t>(total_triangles, 1)) / double(target_));
   int levels = 0;
   while (levels < std::min(grid_bits, kMaxDepth) && (1u << levels) < r) ++levels;
@@ -60,7 +60,6 @@ TileHistogram& TileHistogram::operator=(TileHistogram&&) noexcept = default;
 
 void TileHistogram::add(const Vec3u& c) {
   Impl::bump(impl_->levels.front(), cellOf(c, shift_));
-  ++total_;
 }
 
 bool TileHistogram::beginRefinement() {

@@ -29,8 +29,6 @@
 
 namespace scanpress {
 
-constexpr uint64_t kDefaultTileTriangles = 131072;
-
 // The integer centroid of a triangle over quantized positions.
 inline Vec3u triangleCentroid(const Vec3u& a, const Vec3u& b, const Vec3u& c) {
   return {static_cast<uint32_t>((uint64_t(a[0]) + b[0] + c[0]) / 3),
@@ -51,10 +49,6 @@ class TileHistogram {
   // false when there is nothing to refine; otherwise the caller passes every centroid to addRefined once.
   bool beginRefinement();
   void addRefined(const Vec3u& centroid);
-  int gridBits() const { return grid_bits_; }
-  int fineShift() const { return shift_; }  // first-level cell edge = 2^shift grid units
-  uint64_t target() const { return target_; }
-  uint64_t total() const { return total_; }
 
  private:
   friend class TileIndex;
@@ -63,7 +57,6 @@ class TileHistogram {
   int grid_bits_;
   int shift_;
   uint64_t target_;
-  uint64_t total_ = 0;
 };
 
 struct TileInfo {

@@ -54,7 +54,6 @@ class BitReader {
     return v;
   }
   bool overrun() const { return overrun_; }
-  size_t bytesConsumed() const { return pos_; }
 
  private:
   std::span<const uint8_t> data_;

@@ -6,13 +6,12 @@
 //
 // Core: a 32-bit range coder with LZMA's carry handling (64-bit low, cached byte + run of 0xFF bytes). The first
 // byte LZMA emits is always zero and is not stored; the flush writes 4 bytes. Binary models keep two probability
-// estimates with different adaptation rates (shift 5 and 7) and code with their mean: quick to follow drifting
-// statistics, precise once they settle. Measured against other pairs (4/7, 5/8, 4/8, 6/8, 5/9, 4/6) on stationary
-// sources (p = 0.01 .. 0.45), a source switching between p = 0.05 and 0.6 and a short 3000-bit context, 5/7 was
-// within 0.2% of the best on every one (1.6% above entropy at p = 0.05). Multi-symbol models follow A. Said, "Introduction to arithmetic
-// coding" (2004) / FastAC: counts are updated per symbol, but the coding distribution (scaled to 2^15) is rebuilt
-// only every `update_cycle` symbols, with a cycle that grows as the model settles; this makes encoding a
-// multiply-and-shift and decoding a table lookup plus one division.
+// estimates with different adaptation rates (shift 5 and 7, the pair that did well on every kind of source:
+// bench/RESULTS.md) and code with their mean: quick to follow drifting statistics, precise once they settle.
+// Multi-symbol models follow A. Said, "Introduction to arithmetic coding" (2004) / FastAC: counts are updated
+// per symbol, but the coding distribution (scaled to 2^15) is rebuilt only every `update_cycle` symbols, with a
+// cycle that grows as the model settles; this makes encoding a multiply-and-shift and decoding a table lookup
+// plus one division.
 //
 // Hostile input: RangeDecoder never reads outside its span. Reading past the end yields zero bytes and sets
 // `overrun()`; decoded values are always in range for the model, so callers bound their loops by counts they
