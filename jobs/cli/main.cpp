@@ -146,10 +146,6 @@ options:
   --verify    also read every tile and check its checksums and decoding
 )";
 
-struct UsageError {
-  std::string message;
-};
-
 int fail(const Status& s) {
   std::fprintf(stderr, "scanpress: error: %s\n", s.toString().c_str());
   return exitCodeFor(s.code());
