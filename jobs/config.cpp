@@ -2,11 +2,12 @@
 
 #include <nlohmann/json.hpp>
 
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <set>
 #include <sstream>
+
+#include "jobs/numbers.h"
 
 namespace scanpress {
 namespace {
@@ -24,55 +25,30 @@ class ObjectReader {
 
   bool ok() const { return error_.isOk(); }
 
-  void integer(const char* key, int64_t lo, int64_t hi, int64_t& out) {
-    const json* v = take(key);
-    if (!v) return;
-    if (!v->is_number_integer()) return fail(path(key), "must be an integer, got " + typeName(*v));
-    const int64_t x = v->get<int64_t>();
-    if (v->is_number_unsigned() && v->get<uint64_t>() > uint64_t(INT64_MAX)) return fail(path(key), "out of range");
-    if (x < lo || x > hi)
-      return fail(path(key), "must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
-                                 std::to_string(x));
-    out = x;
+  // Numbers go through jobs/numbers.h as their JSON text, so that a job file accepts what the command line
+  // does (an integer may be written 1e6 or 16.0).
+  template <typename T>
+  void integer(const char* key, int64_t lo, int64_t hi, T& out) {
+    numberAt(take(key), path(key), "an integer", out,
+             [&](const std::string& t, const std::string& where) { return parseInteger(t, lo, hi, where); });
+  }
+  void unsignedInteger(const char* key, uint64_t hi, uint64_t& out) {
+    numberAt(take(key), path(key), "an integer", out,
+             [&](const std::string& t, const std::string& where) { return parseUnsigned(t, hi, where); });
   }
   void number(const char* key, double lo, double hi, double& out) {
-    const json* v = take(key);
-    if (!v) return;
-    if (!v->is_number()) return fail(path(key), "must be a number, got " + typeName(*v));
-    const double x = v->get<double>();
-    if (!(x >= lo && x <= hi))
-      return fail(path(key), "must be a number in [" + fmt(lo) + ", " + fmt(hi) + "], got " + fmt(x));
-    out = x;
+    numberAt(take(key), path(key), "a number", out,
+             [&](const std::string& t, const std::string& where) { return parseNumber(t, lo, hi, where); });
   }
   // [a, b] with both in range.
-  void integerPair(const char* key, int64_t lo, int64_t hi, std::vector<int64_t>& out) {
-    const json* v = take(key);
-    if (!v) return;
-    if (!v->is_array() || v->size() != 2) return fail(path(key), "must be an array of two integers");
-    for (size_t i = 0; i < 2; ++i) {
-      const json& x = (*v)[i];
-      if (!x.is_number_integer() || x.get<int64_t>() < lo || x.get<int64_t>() > hi)
-        return fail(path(key) + "/" + std::to_string(i),
-                    "must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
-      out[i] = x.get<int64_t>();
-    }
-  }
-  void numberPair(const char* key, double lo, double hi, std::vector<double>& out) {
-    const json* v = take(key);
-    if (!v) return;
-    if (!v->is_array() || v->size() != 2) return fail(path(key), "must be an array of two numbers");
-    for (size_t i = 0; i < 2; ++i) {
-      const json& x = (*v)[i];
-      if (!x.is_number() || !(x.get<double>() >= lo && x.get<double>() <= hi))
-        return fail(path(key) + "/" + std::to_string(i), "must be a number in [" + fmt(lo) + ", " + fmt(hi) + "]");
-      out[i] = x.get<double>();
-    }
-  }
   template <typename T>
-  void integerAs(const char* key, int64_t lo, int64_t hi, T& out) {
-    int64_t x = static_cast<int64_t>(out);
-    integer(key, lo, hi, x);
-    out = static_cast<T>(x);
+  void integerPair(const char* key, int64_t lo, int64_t hi, T& a, T& b) {
+    pair(key, "an integer", a, b,
+         [&](const std::string& t, const std::string& where) { return parseInteger(t, lo, hi, where); });
+  }
+  void numberPair(const char* key, double lo, double hi, double& a, double& b) {
+    pair(key, "a number", a, b,
+         [&](const std::string& t, const std::string& where) { return parseNumber(t, lo, hi, where); });
   }
   void boolean(const char* key, bool& out) {
     const json* v = take(key);
@@ -117,6 +93,28 @@ class ObjectReader {
   }
 
  private:
+  // The number `v` at `pointer` (nothing when absent), parsed by `parse` from its JSON text into `out`.
+  template <typename T, typename Parse>
+  void numberAt(const json* v, const std::string& pointer, const char* kind, T& out, Parse parse) {
+    if (!v) return;
+    if (!v->is_number()) return fail(pointer, std::string("must be ") + kind + ", got " + typeName(*v));
+    auto x = parse(v->dump(), pointer);
+    if (!x.isOk()) return fail(x.status());
+    out = static_cast<T>(*x);
+  }
+  template <typename T, typename Parse>
+  void pair(const char* key, const char* kind, T& a, T& b, Parse parse) {
+    const json* v = take(key);
+    if (!v) return;
+    if (!v->is_array() || v->size() != 2)
+      return fail(path(key), std::string("must be an array of two values, each ") + kind);
+    T* out[2] = {&a, &b};
+    for (size_t i = 0; i < 2; ++i)
+      numberAt(&(*v)[i], path(key) + "/" + std::to_string(i), kind, *out[i], parse);
+  }
+  void fail(const Status& status) {
+    if (error_.isOk()) error_ = status.withContext(file_);
+  }
   const json* take(const char* key) {
     if (!ok() || !j_.is_object()) return nullptr;
     taken_.insert(key);
@@ -131,11 +129,6 @@ class ObjectReader {
       else out += c;
     }
     return out;
-  }
-  static std::string fmt(double x) {
-    char buf[32];
-    std::snprintf(buf, sizeof buf, "%g", x);
-    return buf;
   }
   static std::string typeName(const json& v) {
     if (v.is_null()) return "null";
@@ -167,28 +160,6 @@ bool validPattern(const std::string& p) {
 
 }  // namespace
 
-bool parseByteSize(const std::string& text, uint64_t& bytes) {
-  if (text.empty()) return false;
-  size_t i = 0;
-  uint64_t v = 0;
-  while (i < text.size() && std::isdigit(static_cast<unsigned char>(text[i]))) {
-    if (v > (UINT64_MAX - 9) / 10) return false;
-    v = v * 10 + static_cast<uint64_t>(text[i++] - '0');
-  }
-  if (i == 0) return false;
-  uint64_t unit = 1ull << 20;
-  if (i < text.size()) {
-    const std::string suffix = text.substr(i);
-    if (suffix == "K" || suffix == "k" || suffix == "KiB") unit = 1ull << 10;
-    else if (suffix == "M" || suffix == "m" || suffix == "MiB") unit = 1ull << 20;
-    else if (suffix == "G" || suffix == "g" || suffix == "GiB") unit = 1ull << 30;
-    else return false;
-  }
-  if (v > UINT64_MAX / unit) return false;
-  bytes = v * unit;
-  return true;
-}
-
 std::vector<std::string> knownConfigKeys() {
   return {"/inputs",          "/recursive",          "/output/directory", "/output/name",
           "/output/report",   "/output/summary",     "/codec/name",       "/codec/bits",
@@ -205,6 +176,8 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
   } catch (const json::parse_error& e) {
     return makeError(ErrorCode::kInvalidArgument,
                      config_path + ": byte " + std::to_string(e.byte) + ": invalid JSON: " + e.what());
+  } catch (const json::out_of_range& e) {  // a number beyond the double range, e.g. 1e400
+    return makeError(ErrorCode::kInvalidArgument, config_path + ": invalid JSON: " + e.what());
   }
   JobSettings s;
   s.config_path = config_path;
@@ -226,8 +199,8 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
   if (const json* codec = top.object("codec")) {
     ObjectReader c(*codec, "/codec", config_path, error);
     c.string("name", s.encode.codec, false);
-    c.integerAs("bits", kMinGridBits, kMaxGridBits, s.encode.bits);
-    c.integerAs("normal_bits", 4, 16, s.encode.normal_bits);
+    c.integer("bits", kMinGridBits, kMaxGridBits, s.encode.bits);
+    c.integer("normal_bits", 4, 16, s.encode.normal_bits);
     c.boolean("normals", s.encode.keep_normals);
     c.boolean("colors", s.encode.keep_colors);
     c.finish();
@@ -239,7 +212,7 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
   }
   if (const json* tiling = top.object("tiling")) {
     ObjectReader t(*tiling, "/tiling", config_path, error);
-    t.integerAs("target_triangles", 1024, int64_t(1) << 31, s.encode.tile_triangles);
+    t.integer("target_triangles", kMinTileTriangles, kMaxTileTriangles, s.encode.tile_triangles);
     t.finish();
   }
   if (const json* measure = top.object("measure")) {
@@ -247,23 +220,17 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     MeasureSettings& ms = s.encode.measure;
     m.boolean("enabled", ms.enabled);
     m.number("samples_per_triangle", 1e-6, 1e6, ms.samples_per_triangle);
-    m.integerAs("samples", 0, int64_t(1) << 40, ms.samples);
-    m.integerAs("seed", 0, INT64_MAX, ms.seed);
+    m.integer("samples", 0, kMaxMeasureSamples, ms.samples);
+    m.unsignedInteger("seed", UINT64_MAX, ms.seed);
     m.boolean("stratified", ms.stratified);
     m.boolean("vertices", ms.vertices);
     m.boolean("render", ms.render);
-    std::vector<int64_t> size{ms.render_width, ms.render_height};
-    m.integerPair("render_size", 16, 8192, size);
-    ms.render_width = static_cast<int>(size[0]);
-    ms.render_height = static_cast<int>(size[1]);
-    std::vector<double> view{ms.view_azimuth, ms.view_elevation};
-    m.numberPair("view", -360, 360, view);
-    ms.view_azimuth = view[0];
-    ms.view_elevation = view[1];
+    m.integerPair("render_size", 16, 8192, ms.render_width, ms.render_height);
+    m.numberPair("view", -360, 360, ms.view_azimuth, ms.view_elevation);
     m.finish();
     if (error.isOk() && ms.render && !ms.enabled) m.fail("/measure/render", "needs /measure/enabled");
   }
-  top.integerAs("threads", 0, 4096, s.encode.threads);
+  top.integer("threads", 0, 4096, s.encode.threads);
   int64_t budget_mb = 0;
   top.integer("memory_budget_mb", 0, int64_t(1) << 30, budget_mb);
   if (budget_mb > 0 && budget_mb < 16) top.fail("/memory_budget_mb", "must be 0 (no limit) or at least 16");

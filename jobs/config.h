@@ -26,6 +26,10 @@ struct JobSettings {
   EncodeSettings encode;  // input and output are filled in per file
 };
 
+// Limits that the command line and job files share.
+constexpr uint64_t kMinTileTriangles = 1024, kMaxTileTriangles = uint64_t(1) << 31;
+constexpr uint64_t kMaxMeasureSamples = uint64_t(1) << 40;
+
 Result<JobSettings> parseJobConfig(const std::string& json_text, const std::string& config_path);
 Result<JobSettings> loadJobConfig(const std::string& path);
 
@@ -35,8 +39,5 @@ std::vector<std::string> knownConfigKeys();
 // The fingerprint stored in an encode report when it describes a complete output; empty when the report is
 // missing, unreadable, incomplete or has none (resume then redoes the file).
 std::string completeReportFingerprint(const std::string& report_path);
-
-// Parses "512", "512M", "2G", "64K" (default unit MiB) into bytes; false on anything else.
-bool parseByteSize(const std::string& text, uint64_t& bytes);
 
 }  // namespace scanpress

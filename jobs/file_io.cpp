@@ -6,19 +6,15 @@
 
 #include <atomic>
 #include <cerrno>
-#include <cstring>
 #include <filesystem>
+
+#include "jobs/errors.h"
 
 namespace scanpress {
 namespace {
 
 constexpr size_t kBufferSize = 1u << 20;
 std::atomic<uint64_t> g_temp_counter{0};
-
-Status errnoStatus(const std::string& path, const std::string& what, int err) {
-  const ErrorCode code = (err == ENOSPC || err == EDQUOT) ? ErrorCode::kDiskFull : ErrorCode::kIo;
-  return makeError(code, path + ": " + what + ": " + std::strerror(err));
-}
 
 }  // namespace
 
@@ -36,7 +32,7 @@ Result<std::unique_ptr<AtomicFile>> AtomicFile::create(const std::string& path) 
   name += std::to_string(g_temp_counter++);
   const std::string temp = (dir / name).string();
   const int fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-  if (fd < 0) return errnoStatus(path, "cannot create output (temporary " + temp + ")", errno);
+  if (fd < 0) return errnoStatus(errno, path, "cannot create output (temporary " + temp + ")");
   return std::unique_ptr<AtomicFile>(new AtomicFile(fd, path, temp));
 }
 
@@ -45,7 +41,7 @@ AtomicFile::~AtomicFile() {
   if (!committed_) ::unlink(temp_.c_str());
 }
 
-Status AtomicFile::writeError(const std::string& what) const { return errnoStatus(path_, what, errno); }
+Status AtomicFile::writeError(const std::string& what) const { return errnoStatus(errno, path_, what); }
 
 Status AtomicFile::flushBuffer() {
   size_t done = 0;
@@ -108,7 +104,7 @@ Status writeFileAtomically(const std::string& path, std::span<const uint8_t> byt
 
 Result<std::unique_ptr<RandomAccessFile>> RandomAccessFile::open(const std::string& path) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return errnoStatus(path, "cannot open", errno);
+  if (fd < 0) return errnoStatus(errno, path, "cannot open");
   struct stat st {};
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
     ::close(fd);
@@ -129,7 +125,7 @@ Status RandomAccessFile::read(uint64_t offset, size_t n, std::vector<uint8_t>& o
     const ssize_t got = ::pread(fd_, out.data() + done, n - done, static_cast<off_t>(offset + done));
     if (got < 0) {
       if (errno == EINTR) continue;
-      return errnoStatus(path_, "read failed", errno);
+      return errnoStatus(errno, path_, "read failed");
     }
     if (got == 0) return makeError(ErrorCode::kTruncated, path_ + ": file shrank while reading");
     done += static_cast<size_t>(got);

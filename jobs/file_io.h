@@ -2,8 +2,8 @@
 //
 // AtomicFile writes to a temporary name in the target's directory (`.NAME.tmp-PID-N`), and commit() flushes,
 // fsyncs and renames it over the final name. If commit() is not reached (error, exception, early return) the
-// destructor removes the temporary: a failed run never leaves a partial file under the final name. Write
-// errors map ENOSPC/EDQUOT to kDiskFull and everything else to kIo, naming the file.
+// destructor removes the temporary: a failed run never leaves a partial file under the final name. System errors
+// name the file and map as jobs/errors.h says (no space: kDiskFull; anything else: kIo).
 #pragma once
 
 #include <cstdint>

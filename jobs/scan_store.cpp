@@ -6,25 +6,17 @@
 
 #include <algorithm>
 #include <cerrno>
-#include <cstring>
 #include <filesystem>
 
+#include "jobs/errors.h"
+
 namespace scanpress {
-namespace {
-
-Status ioStatus(const std::string& path, const char* what) {
-  const int err = errno;
-  const ErrorCode code = (err == ENOSPC || err == EDQUOT || err == EFBIG) ? ErrorCode::kDiskFull : ErrorCode::kIo;
-  return makeError(code, path + ": " + what + ": " + std::strerror(err));
-}
-
-}  // namespace
 
 Result<ScratchDir> ScratchDir::create(const std::string& parent) {
   std::error_code ec;
   const std::string base = parent.empty() ? std::filesystem::temp_directory_path(ec).string() : parent;
   std::string templ = base + "/scanpress-scratch-XXXXXX";
-  if (!::mkdtemp(templ.data())) return ioStatus(templ, "cannot create scratch directory");
+  if (!::mkdtemp(templ.data())) return errnoStatus(errno, templ, "cannot create scratch directory");
   ScratchDir d;
   d.path_ = templ;
   return d;
@@ -43,7 +35,7 @@ ScratchFile::~ScratchFile() {
 Status ScratchFile::open(const std::string& path) {
   path_ = path;
   fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
-  if (fd_ < 0) return ioStatus(path, "cannot create scratch file");
+  if (fd_ < 0) return errnoStatus(errno, path, "cannot create scratch file");
   return Status::ok();
 }
 
@@ -53,7 +45,7 @@ Status ScratchFile::writeAt(uint64_t offset, const void* data, size_t n) {
     const ssize_t w = ::pwrite(fd_, p, n, static_cast<off_t>(offset));
     if (w < 0) {
       if (errno == EINTR) continue;
-      return ioStatus(path_, "write failed");
+      return errnoStatus(errno, path_, "write failed");
     }
     p += w;
     offset += static_cast<uint64_t>(w);
@@ -68,7 +60,7 @@ Status ScratchFile::readAt(uint64_t offset, void* data, size_t n) const {
     const ssize_t r = ::pread(fd_, p, n, static_cast<off_t>(offset));
     if (r < 0) {
       if (errno == EINTR) continue;
-      return ioStatus(path_, "read failed");
+      return errnoStatus(errno, path_, "read failed");
     }
     if (r == 0) return makeError(ErrorCode::kIo, path_ + ": scratch file shorter than written");
     p += r;

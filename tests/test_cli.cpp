@@ -35,6 +35,34 @@ TEST(Cli, UsageErrorsExitOne) {
   EXPECT_EQ(run("encode a b --codec nope", &out), 1);
   EXPECT_EQ(run("encode a b --what", &out), 1);
   EXPECT_EQ(run("decode a.spz b.ply --tiles 1,x", &out), 1);
+  EXPECT_NE(out.find("--tiles: must be an integer"), std::string::npos) << out;
+  EXPECT_EQ(run("encode a b --tile-triangles 2147483649", &out), 1);
+  EXPECT_NE(out.find("--tile-triangles: must be an integer in [1024, 2147483648]"), std::string::npos) << out;
+  EXPECT_EQ(run("encode a b --memory-budget 8M", &out), 1);
+  EXPECT_NE(out.find("--memory-budget: must be 0 or at least 16M"), std::string::npos) << out;
+  EXPECT_EQ(run("encode a b --memory-budget 2X", &out), 1);
+  EXPECT_NE(out.find("--memory-budget: must be a size"), std::string::npos) << out;
+  for (const char* seed : {"-1", "1.5", "18446744073709551616", "x"}) {
+    EXPECT_EQ(run(std::string("measure a b --seed ") + seed, &out), 1) << seed;
+    EXPECT_NE(out.find("--seed: must be a non-negative integer"), std::string::npos) << out;
+    EXPECT_EQ(run(std::string("synth a.ply --triangles 10 --seed ") + seed, &out), 1) << seed;
+    EXPECT_NE(out.find("--seed: must be a non-negative integer"), std::string::npos) << out;
+  }
+}
+
+// --seed is an unsigned 64-bit integer in measure and in synth alike (measure read a double: 2^64-1
+// overflowed).
+TEST(Cli, SeedsAreUnsigned64BitIntegersEverywhere) {
+  testing::TempDir dir;
+  std::string out;
+  const std::string a = dir.file("a.ply"), b = dir.file("b.ply");
+  ASSERT_EQ(run("synth '" + a + "' --triangles 2e3 --seed 18446744073709551615 --quiet", &out), 0) << out;
+  ASSERT_EQ(run("synth '" + b + "' --triangles 2000 --seed 1e19 --quiet", &out), 0) << out;
+  ASSERT_EQ(run("measure '" + a + "' '" + b + "' --seed 18446744073709551615 --samples 1e4 --json", &out), 0)
+      << out;
+  const auto high = nlohmann::json::parse(out);
+  ASSERT_EQ(run("measure '" + a + "' '" + b + "' --seed 7 --samples 10000 --json", &out), 0) << out;
+  EXPECT_NE(nlohmann::json::parse(out), high);  // the seed reaches the sampler whole
 }
 
 TEST(Cli, HelpOnEveryCommand) {

@@ -44,7 +44,8 @@ TEST(JobConfig, InvalidFilesNameThePointerExitOneWriteNothing) {
       {"inputs_type", "{\"inputs\": 5, \"output\": {\"directory\": \"out\"}}", "/inputs: must be"},
       {"inputs_element_type", "{\"inputs\": [\"" + bunny + "\", 3], \"output\": {\"directory\": \"out\"}}", "/inputs/1"},
       {"inputs_empty_string", "{\"inputs\": [\"\"], \"output\": {\"directory\": \"out\"}}", "/inputs/0"},
-      {"bits_too_high", "{" + in + ", \"codec\": {\"bits\": 30}}", "/codec/bits: must be an integer in [8, 24], got 30"},
+      {"bits_too_high", "{" + in + ", \"codec\": {\"bits\": 30}}",
+       "/codec/bits: must be an integer in [8, 24], got '30'"},
       {"bits_string", "{" + in + ", \"codec\": {\"bits\": \"16\"}}", "/codec/bits: must be an integer"},
       {"bits_fraction", "{" + in + ", \"codec\": {\"bits\": 12.5}}", "/codec/bits"},
       {"unknown_codec", "{" + in + ", \"codec\": {\"name\": \"zip\"}}", "/codec/name: unknown codec"},
@@ -56,6 +57,13 @@ TEST(JobConfig, InvalidFilesNameThePointerExitOneWriteNothing) {
       {"output_name_placeholder", "{" + in.substr(0, in.size() - 1) + ", \"name\": \"{foo}.spz\"}}", "/output/name"},
       {"tile_target_small", "{" + in + ", \"tiling\": {\"target_triangles\": 10}}", "/tiling/target_triangles"},
       {"threads_negative", "{" + in + ", \"threads\": -1}", "/threads"},
+      {"threads_overflow", "{" + in + ", \"threads\": 1e400}", "number overflow parsing '1e400'"},
+      {"threads_fraction", "{" + in + ", \"threads\": 2.5}",
+       "/threads: must be an integer in [0, 4096], got '2.5'"},
+      {"tile_target_above_limit", "{" + in + ", \"tiling\": {\"target_triangles\": 2147483649}}",
+       "/tiling/target_triangles: must be an integer in [1024, 2147483648]"},
+      {"seed_negative", "{" + in + ", \"measure\": {\"seed\": -1}}", "/measure/seed"},
+      {"seed_beyond_64_bits", "{" + in + ", \"measure\": {\"seed\": 18446744073709551616}}", "/measure/seed"},
       {"budget_too_small", "{" + in + ", \"memory_budget_mb\": 8}", "/memory_budget_mb"},
       {"resume_number", "{" + in + ", \"resume\": 1}", "/resume"},
       {"measure_unknown_key", "{" + in + ", \"measure\": {\"enabled\": true, \"sample\": 3}}", "/measure/sample: unknown key"},
@@ -114,6 +122,17 @@ TEST(JobConfig, RelativePathsAreRelativeToTheJobFile) {
   ASSERT_TRUE(job.isOk()) << job.status().toString();
   EXPECT_EQ(job->inputs[0], "/x/jobs/scans/a.ply");
   EXPECT_EQ(job->output_directory, "/x/out");
+}
+
+TEST(JobConfig, NumbersParseAsOnTheCommandLine) {
+  const char* text = R"({"inputs": ["a.ply"], "threads": 2.0, "tiling": {"target_triangles": 2147483648},
+                         "measure": {"seed": 18446744073709551615, "samples": 1e6}})";
+  auto job = parseJobConfig(text, "/x/j.json");
+  ASSERT_TRUE(job.isOk()) << job.status().toString();
+  EXPECT_EQ(job->encode.threads, 2);
+  EXPECT_EQ(job->encode.tile_triangles, kMaxTileTriangles);
+  EXPECT_EQ(job->encode.measure.seed, UINT64_MAX);
+  EXPECT_EQ(job->encode.measure.samples, 1000000u);
 }
 
 TEST(Batch, BadFileIsReportedOthersCompleteResumeSkipsForceRedoes) {
@@ -194,13 +213,6 @@ TEST(Batch, OutputNames) {
   EXPECT_EQ(outputName("{stem}.spz", "/a/b/SCAN.PLY"), "SCAN.spz");
   EXPECT_EQ(outputName("{name}.spz", "/a/b/scan.obj"), "scan.obj.spz");
   EXPECT_EQ(outputName("x-{stem}-{stem}.spz", "scan.stl"), "x-scan-scan.spz");
-  uint64_t bytes = 0;
-  EXPECT_TRUE(parseByteSize("512", bytes));
-  EXPECT_EQ(bytes, 512ull << 20);
-  EXPECT_TRUE(parseByteSize("2G", bytes));
-  EXPECT_EQ(bytes, 2ull << 30);
-  EXPECT_FALSE(parseByteSize("2T", bytes));
-  EXPECT_FALSE(parseByteSize("-1", bytes));
 }
 
 }  // namespace

@@ -1,8 +1,6 @@
 // The scanpress command line. Exit codes: 0 ok, 1 usage or config error, 2 bad input data, 3 environment (I/O,
 // disk full), 4 internal error.
 #include <algorithm>
-#include <cmath>
-#include <cerrno>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -20,6 +18,7 @@
 #include "jobs/file_io.h"
 #include "jobs/measure.h"
 #include "jobs/mesh_io/mesh_reader.h"
+#include "jobs/numbers.h"
 #include "jobs/process.h"
 #include "jobs/progress.h"
 #include "jobs/render.h"
@@ -62,8 +61,8 @@ options:
   --no-colors         drop colors
   --tile-triangles N  target triangles per tile (default 131072; tiles adapt to density around it)
   --threads N         worker threads (default: all cores); the output is the same at any count
-  --memory-budget S   bound the memory for tile data, e.g. 512M or 2G (default unit MiB; 0: no limit);
-                      larger scans stream through scratch files
+  --memory-budget S   bound the memory for tile data, e.g. 512M, 2GiB or 1.5G (units K, M, G, T of 1024;
+                      no unit: MiB; 0: no limit); larger scans stream through scratch files
   --scratch-dir DIR   where scratch files go (default: the system temp directory)
   --measure           measure the error of the decoded result (per tile and overall) into the report
   --samples-per-triangle X   measurement sampling density (default 2)
@@ -147,10 +146,6 @@ options:
   --verify    also read every tile and check its checksums and decoding
 )";
 
-struct UsageError {
-  std::string message;
-};
-
 int fail(const Status& s) {
   std::fprintf(stderr, "scanpress: error: %s\n", s.toString().c_str());
   return exitCodeFor(s.code());
@@ -209,18 +204,30 @@ bool parseArgs(int argc, char** argv, int first, const std::vector<std::string>&
   return true;
 }
 
-bool parseIntOption(const Args& args, const std::string& name, int lo, int hi, int& value, std::string& error) {
+// Option `name`, when given, parsed into `out` by `parse` (a parser of jobs/numbers.h); false with `error`
+// set otherwise.
+template <typename T, typename Parse>
+bool option(const Args& args, const char* name, T& out, std::string& error, Parse parse) {
   const std::string* v = args.get(name);
   if (!v) return true;
-  char* end = nullptr;
-  errno = 0;
-  const long x = std::strtol(v->c_str(), &end, 10);
-  if (v->empty() || *end != '\0' || errno != 0 || x < lo || x > hi)
-    return error = name + " must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got '" +
-                   *v + "'",
-           false;
-  value = static_cast<int>(x);
+  auto r = parse(*v);
+  if (!r.isOk()) return error = r.status().message(), false;
+  out = static_cast<T>(*r);
   return true;
+}
+
+template <typename T>
+bool integerOption(const Args& args, const char* name, int64_t lo, int64_t hi, T& out, std::string& error) {
+  return option(args, name, out, error, [&](const std::string& v) { return parseInteger(v, lo, hi, name); });
+}
+
+template <typename T>
+bool unsignedOption(const Args& args, const char* name, uint64_t hi, T& out, std::string& error) {
+  return option(args, name, out, error, [&](const std::string& v) { return parseUnsigned(v, hi, name); });
+}
+
+bool numberOption(const Args& args, const char* name, double lo, double hi, double& out, std::string& error) {
+  return option(args, name, out, error, [&](const std::string& v) { return parseNumber(v, lo, hi, name); });
 }
 
 std::string codecList() {
@@ -247,29 +254,24 @@ int runEncode(int argc, char** argv) {
   s.output = args.positional[1];
   if (const auto* c = args.get("--codec")) s.codec = *c;
   if (!findCodec(s.codec)) return usage("unknown codec '" + s.codec + "' (available: " + codecList() + ")", "encode");
-  if (!parseIntOption(args, "--bits", kMinGridBits, kMaxGridBits, s.bits, error) ||
-      !parseIntOption(args, "--normal-bits", 4, 16, s.normal_bits, error))
+  if (!integerOption(args, "--bits", kMinGridBits, kMaxGridBits, s.bits, error) ||
+      !integerOption(args, "--normal-bits", 4, 16, s.normal_bits, error))
     return usage(error, "encode");
   s.keep_normals = !args.has("--no-normals");
   s.keep_colors = !args.has("--no-colors");
-  int tile = static_cast<int>(s.tile_triangles);
-  if (!parseIntOption(args, "--tile-triangles", 1024, 1 << 30, tile, error) ||
-      !parseIntOption(args, "--threads", 0, 4096, s.threads, error))
+  if (!integerOption(args, "--tile-triangles", kMinTileTriangles, kMaxTileTriangles, s.tile_triangles,
+                     error) ||
+      !integerOption(args, "--threads", 0, 4096, s.threads, error) ||
+      !option(args, "--memory-budget", s.memory_budget, error,
+              [](const std::string& v) { return parseSize(v, "--memory-budget"); }))
     return usage(error, "encode");
-  s.tile_triangles = static_cast<uint64_t>(tile);
-  if (const auto* b = args.get("--memory-budget")) {
-    if (!parseByteSize(*b, s.memory_budget) || (s.memory_budget != 0 && s.memory_budget < (16u << 20)))
-      return usage("--memory-budget must be 0 or a size of at least 16M, e.g. 512M or 2G, got '" + *b + "'",
-                   "encode");
-  }
+  if (s.memory_budget != 0 && s.memory_budget < (16u << 20))
+    return usage("--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'",
+                 "encode");
   if (const auto* d = args.get("--scratch-dir")) s.scratch_dir = *d;
   s.measure.enabled = args.has("--measure");
-  if (const auto* x = args.get("--samples-per-triangle")) {
-    char* end = nullptr;
-    s.measure.samples_per_triangle = std::strtod(x->c_str(), &end);
-    if (x->empty() || *end != '\0' || !(s.measure.samples_per_triangle > 0) || s.measure.samples_per_triangle > 1e6)
-      return usage("--samples-per-triangle must be a number in (0, 1e6]", "encode");
-  }
+  if (!numberOption(args, "--samples-per-triangle", 1e-6, 1e6, s.measure.samples_per_triangle, error))
+    return usage(error, "encode");
   TerminalProgress progress(args.has("--quiet"));
   if (progress.enabled()) progress.file(0, 1, s.input);
   auto result = encodeFile(s, progress.enabled() ? &progress : nullptr);
@@ -299,45 +301,6 @@ int runEncode(int argc, char** argv) {
   return 0;
 }
 
-// A decimal non-negative integer that fits 64 bits, nothing else.
-bool parseUnsignedArg(const std::string& v, uint64_t& out) {
-  char* end = nullptr;
-  errno = 0;
-  const unsigned long long x = std::strtoull(v.c_str(), &end, 10);
-  if (v.empty() || v[0] == '-' || *end != '\0' || errno != 0) return false;
-  out = x;
-  return true;
-}
-
-// Option `name`, when given, as an unsigned integer no larger than `max`; false with `error` set otherwise.
-bool unsignedOption(const Args& args, const char* name, uint64_t max, std::optional<uint64_t>& out,
-                    std::string& error) {
-  const std::string* v = args.get(name);
-  if (!v) return true;
-  uint64_t x = 0;
-  if (!parseUnsignedArg(*v, x) || x > max) {
-    error = std::string(name) + " must be a non-negative integer";
-    if (max < UINT64_MAX) error += " no larger than " + std::to_string(max);
-    error += ", got '" + *v + "'";
-    return false;
-  }
-  out = x;
-  return true;
-}
-
-bool parseTileList(const std::string& text, std::vector<uint32_t>& out, std::string& error) {
-  size_t i = 0;
-  while (i <= text.size()) {
-    const size_t comma = std::min(text.find(',', i), text.size());
-    uint64_t v = 0;
-    if (!parseUnsignedArg(text.substr(i, comma - i), v) || v > UINT32_MAX)
-      return error = "--tiles expects tile ids separated by commas, got '" + text + "'", false;
-    out.push_back(static_cast<uint32_t>(v));
-    i = comma + 1;
-  }
-  return true;
-}
-
 int runDecode(int argc, char** argv) {
   Args args;
   std::string error;
@@ -349,15 +312,13 @@ int runDecode(int argc, char** argv) {
   s.input = args.positional[0];
   s.output = args.positional[1];
   if (const auto* t = args.get("--tiles")) {
-    std::vector<uint32_t> ids;
-    if (!parseTileList(*t, ids, error)) return usage(error, "decode");
-    s.tiles = std::move(ids);
+    auto ids = parseIntegerList(*t, 0, UINT32_MAX, 0, "--tiles");
+    if (!ids.isOk()) return usage(ids.status().message(), "decode");
+    s.tiles.emplace(ids->begin(), ids->end());
   }
-  std::optional<uint64_t> level;
-  if (!unsignedOption(args, "--level", kMaxGridBits, level, error) ||
+  if (!unsignedOption(args, "--level", kMaxGridBits, s.level, error) ||
       !unsignedOption(args, "--bytes", UINT64_MAX, s.bytes, error))
     return usage(error, "decode");
-  if (level) s.level = static_cast<uint32_t>(*level);
   auto result = decodeFile(s);
   if (!result.isOk()) return fail(result.status());
   if (!args.has("--quiet"))
@@ -397,7 +358,7 @@ int runJobCommand(int argc, char** argv) {
   RunOptions options;
   options.force = args.has("--force");
   options.quiet = args.has("--quiet");
-  if (!parseIntOption(args, "--threads", 0, 4096, options.threads, error)) return usage(error, "run");
+  if (!integerOption(args, "--threads", 0, 4096, options.threads, error)) return usage(error, "run");
   if (!args.has("--threads")) options.threads = -1;
   auto job = loadJobConfig(args.positional[0]);
   if (!job.isOk()) return fail(job.status());
@@ -415,22 +376,10 @@ int runMeasure(int argc, char** argv) {
   if (args.has("--help")) return std::fputs(kMeasureHelp, stdout), 0;
   if (args.positional.size() != 2) return usage("measure needs two meshes A and B", "measure");
   MeasureSettings s;
-  auto number = [&](const char* name, double lo, double& out) {
-    const std::string* v = args.get(name);
-    if (!v) return true;
-    char* end = nullptr;
-    const double x = std::strtod(v->c_str(), &end);
-    if (v->empty() || *end != '\0' || !(x >= lo) || !std::isfinite(x))
-      return error = std::string(name) + " must be a number >= " + std::to_string(lo), false;
-    out = x;
-    return true;
-  };
-  double samples = 0, seed = 1;
-  if (!number("--samples", 1, samples) || !number("--samples-per-triangle", 1e-6, s.samples_per_triangle) ||
-      !number("--seed", 0, seed))
+  if (!unsignedOption(args, "--samples", kMaxMeasureSamples, s.samples, error) ||
+      !numberOption(args, "--samples-per-triangle", 1e-6, 1e6, s.samples_per_triangle, error) ||
+      !unsignedOption(args, "--seed", UINT64_MAX, s.seed, error))
     return usage(error, "measure");
-  s.samples = static_cast<uint64_t>(samples);
-  s.seed = static_cast<uint64_t>(seed);
   s.stratified = !args.has("--monte-carlo");
   auto a = readMeshFile(args.positional[0]);
   if (!a.isOk()) return fail(a.status());
@@ -453,17 +402,6 @@ int runMeasure(int argc, char** argv) {
   return 0;
 }
 
-bool parsePair(const std::string& text, double& a, double& b) {
-  const size_t comma = text.find(',');
-  if (comma == std::string::npos) return false;
-  char* end = nullptr;
-  const std::string first = text.substr(0, comma), second = text.substr(comma + 1);
-  a = std::strtod(first.c_str(), &end);
-  if (first.empty() || *end != '\0' || !std::isfinite(a)) return false;
-  b = std::strtod(second.c_str(), &end);
-  return !second.empty() && *end == '\0' && std::isfinite(b);
-}
-
 int runRender(int argc, char** argv) {
   Args args;
   std::string error;
@@ -471,14 +409,17 @@ int runRender(int argc, char** argv) {
   if (args.has("--help")) return std::fputs(kRenderHelp, stdout), 0;
   if (args.positional.size() != 2) return usage("render needs MESH and OUT.png", "render");
   RenderSettings s;
-  if (const auto* v = args.get("--view"))
-    if (!parsePair(*v, s.azimuth, s.elevation)) return usage("--view expects AZ,EL in degrees", "render");
+  if (const auto* v = args.get("--view")) {
+    auto view = parseNumberList(*v, -360, 360, 2, "--view");
+    if (!view.isOk()) return usage(view.status().message(), "render");
+    s.azimuth = (*view)[0];
+    s.elevation = (*view)[1];
+  }
   if (const auto* v = args.get("--size")) {
-    double w = 0, h = 0;
-    if (!parsePair(*v, w, h) || w < 16 || h < 16 || w > 8192 || h > 8192 || w != std::floor(w) || h != std::floor(h))
-      return usage("--size expects W,H in 16..8192", "render");
-    s.width = static_cast<int>(w);
-    s.height = static_cast<int>(h);
+    auto size = parseIntegerList(*v, 16, 8192, 2, "--size");
+    if (!size.isOk()) return usage(size.status().message(), "render");
+    s.width = static_cast<int>((*size)[0]);
+    s.height = static_cast<int>((*size)[1]);
   }
   auto mesh = readMeshFile(args.positional[0]);
   if (!mesh.isOk()) return fail(mesh.status());
@@ -506,12 +447,9 @@ int runSynth(int argc, char** argv) {
   if (args.positional.size() != 1 || !args.has("--triangles")) return usage("synth needs OUT.ply and --triangles N", "synth");
   SynthSettings s;
   s.output = args.positional[0];
-  std::optional<uint64_t> triangles, seed;
-  if (!unsignedOption(args, "--triangles", UINT64_MAX, triangles, error) ||
-      !unsignedOption(args, "--seed", UINT64_MAX, seed, error))
+  if (!unsignedOption(args, "--triangles", UINT64_MAX, s.triangles, error) ||
+      !unsignedOption(args, "--seed", UINT64_MAX, s.seed, error))
     return usage(error, "synth");
-  s.triangles = triangles.value_or(s.triangles);
-  s.seed = seed.value_or(s.seed);
   if (const auto* f = args.get("--from")) s.from = *f;
   auto r = synthesize(s);
   if (!r.isOk()) return fail(r.status());

@@ -8,12 +8,10 @@
 #include <cstdio>
 #include <system_error>
 
+#include "jobs/errors.h"
+
 namespace scanpress {
 namespace {
-
-Status ioError(const std::string& path, const std::string& what) {
-  return makeError(ErrorCode::kIo, path + ": " + what + ": " + std::strerror(errno));
-}
 
 class FileSource : public InputSource {
  public:
@@ -21,7 +19,7 @@ class FileSource : public InputSource {
   ~FileSource() override { std::fclose(f_); }
   Result<size_t> read(uint8_t* dst, size_t n) override {
     const size_t got = std::fread(dst, 1, n, f_);
-    if (got < n && std::ferror(f_)) return ioError(path_, "read failed");
+    if (got < n && std::ferror(f_)) return errnoStatus(errno, path_, "read failed");
     return got;
   }
   std::optional<uint64_t> contentSize() const override { return size_; }
@@ -90,7 +88,7 @@ class ZstdSource : public InputSource {
 
 Result<std::unique_ptr<InputSource>> InputSource::open(const std::string& path) {
   FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return ioError(path, "cannot open");
+  if (!f) return errnoStatus(errno, path, "cannot open");
   std::optional<uint64_t> size;
   if (std::fseek(f, 0, SEEK_END) == 0) {
     const long s = std::ftell(f);
