@@ -136,6 +136,14 @@ std::string settingsFingerprint(const EncodeSettings& s) {
                     "|normal_bits=" + std::to_string(s.normal_bits) + "|normals=" + std::to_string(s.keep_normals) +
                     "|colors=" + std::to_string(s.keep_colors) + "|tile=" + std::to_string(effectiveTileTarget(s)) +
                     "|input=" + fs::absolute(s.input).lexically_normal().string();
+  for (const StageSpec& st : s.stages) {  // every option of every stage changes the bytes
+    key += "|stage=" + std::string(findStage(st.kind)->name);
+    if (st.kind == StageKind::kSmooth) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, ",%d,%.17g,%.17g", st.smooth.iterations, st.smooth.lambda, st.smooth.mu);
+      key += buf;
+    }
+  }
   const MeasureSettings& m = s.measure;  // changes the report, not the container
   if (m.enabled)
     key += "|measure=" + std::to_string(m.samples_per_triangle) + "," + std::to_string(m.samples) + "," +

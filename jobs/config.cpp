@@ -146,6 +146,39 @@ class ObjectReader {
   std::set<std::string> taken_;
 };
 
+// One stage object of /stages (at `pointer`) into `spec`.
+void readStage(const json& j, const std::string& pointer, const std::string& file, Status& error, StageSpec& spec) {
+  ObjectReader r(j, pointer, file, error);  // fails unless j is an object
+  std::string name;
+  r.string("name", name, false);
+  if (!error.isOk()) return;
+  const StageInfo* info = findStage(name);
+  if (!info) return r.fail(pointer + "/name", "unknown stage '" + name + "' (available: " + stageNames() + ")");
+  spec.kind = info->kind;
+  switch (spec.kind) {
+    case StageKind::kSmooth:
+      r.integer("iterations", 0, kMaxSmoothIterations, spec.smooth.iterations);
+      r.number("lambda", -1e9, 1e9, spec.smooth.lambda);
+      r.number("mu", -1e9, 1e9, spec.smooth.mu);
+      break;
+  }
+  r.finish();
+  if (!error.isOk()) return;
+  const Status valid = validateStage(spec);
+  if (!valid.isOk()) r.fail(pointer + "/" + valid.message().substr(0, valid.message().find(':')),
+                            valid.message().substr(valid.message().find(':') + 2));
+}
+
+// /stages: an array of stage objects.
+void readStages(const json& j, const std::string& file, Status& error, std::vector<StageSpec>& out) {
+  if (!j.is_array()) {
+    error = makeError(ErrorCode::kInvalidArgument, file + ": /stages: must be an array of stage objects");
+    return;
+  }
+  out.assign(j.size(), StageSpec{});
+  for (size_t i = 0; i < j.size() && error.isOk(); ++i) readStage(j[i], "/stages/" + std::to_string(i), file, error, out[i]);
+}
+
 bool validPattern(const std::string& p) {
   for (size_t i = 0; i < p.size(); ++i)
     if (p[i] == '{') {
@@ -163,7 +196,7 @@ bool validPattern(const std::string& p) {
 std::vector<std::string> knownConfigKeys() {
   return {"/inputs",          "/recursive",          "/output/directory", "/output/name",
           "/output/report",   "/output/summary",     "/codec/name",       "/codec/bits",
-          "/codec/normal_bits", "/codec/normals",    "/codec/colors",     "/tiling/target_triangles",
+          "/codec/normal_bits", "/codec/normals",    "/codec/colors",     "/stages", "/tiling/target_triangles",
           "/threads",         "/memory_budget_mb",   "/scratch_directory", "/resume",
           "/measure/enabled", "/measure/samples_per_triangle", "/measure/samples", "/measure/seed",
           "/measure/stratified", "/measure/vertices", "/measure/render", "/measure/render_size", "/measure/view"};
@@ -210,6 +243,7 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
       c.fail("/codec/name", "unknown codec '" + s.encode.codec + "' (available: " + names + ")");
     }
   }
+  if (const json* stages = top.object("stages")) readStages(*stages, config_path, error, s.encode.stages);
   if (const json* tiling = top.object("tiling")) {
     ObjectReader t(*tiling, "/tiling", config_path, error);
     t.integer("target_triangles", kMinTileTriangles, kMaxTileTriangles, s.encode.tile_triangles);
@@ -252,6 +286,36 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
   resolve(s.output_directory);
   resolve(s.encode.scratch_dir);
   return s;
+}
+
+Result<std::vector<StageSpec>> parseStagesOption(const std::string& text, const std::string& option) {
+  // NAME[:KEY=VALUE...][,NAME...] as the JSON array of /stages, read by the same code.
+  json stages = json::array();
+  size_t start = 0;
+  while (start <= text.size()) {
+    const size_t comma = std::min(text.find(',', start), text.size());
+    const std::string item = text.substr(start, comma - start);
+    json stage = json::object();
+    size_t at = item.find(':');
+    stage["name"] = item.substr(0, at);
+    while (at != std::string::npos) {
+      const size_t next = item.find(':', at + 1);
+      const std::string kv = item.substr(at + 1, next == std::string::npos ? std::string::npos : next - at - 1);
+      const size_t eq = kv.find('=');
+      if (eq == std::string::npos || eq == 0)
+        return makeError(ErrorCode::kInvalidArgument, option + ": expected KEY=VALUE, got '" + kv + "'");
+      const json value = json::parse(kv.substr(eq + 1), nullptr, false);
+      stage[kv.substr(0, eq)] = value.is_discarded() ? json(kv.substr(eq + 1)) : value;
+      at = next;
+    }
+    stages.push_back(std::move(stage));
+    start = comma + 1;
+  }
+  Status error;
+  std::vector<StageSpec> out;
+  readStages(stages, option, error, out);
+  if (!error.isOk()) return error;
+  return out;
 }
 
 std::string completeReportFingerprint(const std::string& report_path) {

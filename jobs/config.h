@@ -33,6 +33,10 @@ constexpr uint64_t kMaxMeasureSamples = uint64_t(1) << 40;
 Result<JobSettings> parseJobConfig(const std::string& json_text, const std::string& config_path);
 Result<JobSettings> loadJobConfig(const std::string& path);
 
+// The encode option --stages: NAME[:KEY=VALUE...][,NAME...], the same stages and keys as /stages in job files
+// (e.g. "smooth:iterations=5:lambda=0.4:mu=-0.42"); errors name `option` and the stage's pointer.
+Result<std::vector<StageSpec>> parseStagesOption(const std::string& text, const std::string& option);
+
 // Every key the parser knows, as JSON pointers (for the reference test).
 std::vector<std::string> knownConfigKeys();
 

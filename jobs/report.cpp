@@ -65,6 +65,7 @@ nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& 
   j["output"] = settings.output;
   j["format"] = r.read.format_detail;
   j["codec"] = r.codec;
+  j["stages"] = r.stages;
   j["grid"] = gridJson(r.grid);
   j["attributes"] = layoutJson(r.layout);
   j["input_vertices"] = r.read.vertices;
@@ -224,9 +225,16 @@ std::string containerInfoText(const ContainerFile& file) {
      << "  colors:    " << (h.layout.hasColors() ? std::to_string(h.layout.color_channels) + " channels" : "no")
      << "\n"
      << "  tiles:     " << h.tile_count << "\n";
-  for (const auto& t : file.tiles())
+  for (const auto& t : file.tiles()) {
     os << "    tile " << t.tile_id << ": " << codecName(t.codec) << " v" << t.codec_version << ", " << t.vertices
-       << " vertices, " << t.faces << " faces, " << t.chunk_bytes << " bytes\n";
+       << " vertices, " << t.faces << " faces, " << t.chunk_bytes << " bytes";
+    // Progressive tiles: their levels, first and last, with what they mean.
+    auto levels = file.tileLevels(t);
+    if (levels.isOk() && !levels->empty())
+      os << ", levels " << levels->front().level << ".." << levels->back().level << " ("
+         << describeLevel(levels->front()) << " .. " << describeLevel(levels->back()) << ")";
+    os << "\n";
+  }
   return os.str();
 }
 

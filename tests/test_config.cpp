@@ -71,6 +71,16 @@ TEST(JobConfig, InvalidFilesNameThePointerExitOneWriteNothing) {
       {"measure_render_size", "{" + in + ", \"measure\": {\"enabled\": true, \"render_size\": [10, 20000]}}", "/measure/render_size/0"},
       {"measure_render_without_enabled", "{" + in + ", \"measure\": {\"render\": true}}", "/measure/render"},
       {"escaped_key", "{" + in + ", \"a/b\": 1}", "/a~1b: unknown key"},
+      {"stages_not_array", "{" + in + ", \"stages\": {\"name\": \"smooth\"}}", "/stages: must be an array"},
+      {"stage_unknown", "{" + in + ", \"stages\": [{\"name\": \"sharpen\"}]}",
+       "/stages/0/name: unknown stage 'sharpen' (available: smooth)"},
+      {"stage_without_name", "{" + in + ", \"stages\": [{\"iterations\": 3}]}", "/stages/0/name"},
+      {"stage_unknown_key", "{" + in + ", \"stages\": [{\"name\": \"smooth\", \"sigma\": 3}]}",
+       "/stages/0/sigma: unknown key"},
+      {"stage_bad_mu", "{" + in + ", \"stages\": [{\"name\": \"smooth\"}, {\"name\": \"smooth\", \"mu\": -0.1}]}",
+       "/stages/1/mu: must be in (-1, -lambda)"},
+      {"stage_iterations", "{" + in + ", \"stages\": [{\"name\": \"smooth\", \"iterations\": 5000}]}",
+       "/stages/0/iterations"},
       {"glob_matches_nothing", "{\"inputs\": [\"" + dir.path() + "/*.nothing\"], \"output\": {\"directory\": \"out\"}}", "/inputs/0"},
       {"output_collision", "{\"inputs\": [\"" + bunny + "\", \"" + dir.path() + "/bun_zipper.obj\"], \"output\": {\"directory\": \"out\"}}", "/output/name"},
   };
@@ -115,6 +125,29 @@ TEST(JobConfig, EveryExampleParsesAndTheReferenceListsEveryKey) {
   EXPECT_EQ(ref->output_name, defaults.output_name);
   EXPECT_EQ(ref->report_name, defaults.report_name);
   EXPECT_EQ(ref->summary_name, defaults.summary_name);
+}
+
+// Stages from a job file and from the CLI's --stages are the same specs, read by the same code.
+TEST(JobConfig, StagesFromJobFilesAndTheCommandLine) {
+  auto job = parseJobConfig(R"({"inputs": ["a.ply"], "stages": [{"name": "smooth", "iterations": 4, "lambda": 0.5,
+                                "mu": -0.53}, {"name": "smooth"}]})", "/x/j.json");
+  ASSERT_TRUE(job.isOk()) << job.status().toString();
+  ASSERT_EQ(job->encode.stages.size(), 2u);
+  EXPECT_EQ(job->encode.stages[0].kind, StageKind::kSmooth);
+  EXPECT_EQ(job->encode.stages[0].smooth.iterations, 4);
+  EXPECT_EQ(job->encode.stages[0].smooth.lambda, 0.5);
+  EXPECT_EQ(job->encode.stages[0].smooth.mu, -0.53);
+  EXPECT_EQ(job->encode.stages[1].smooth.iterations, SmoothOptions{}.iterations);
+  auto cli = parseStagesOption("smooth:iterations=4:lambda=0.5:mu=-0.53,smooth", "--stages");
+  ASSERT_TRUE(cli.isOk()) << cli.status().toString();
+  ASSERT_EQ(cli->size(), 2u);
+  EXPECT_EQ((*cli)[0].smooth.iterations, 4);
+  EXPECT_EQ((*cli)[0].smooth.mu, -0.53);
+  EXPECT_NE(parseStagesOption("smooth:iterations", "--stages").status().message().find("KEY=VALUE"),
+            std::string::npos);
+  EXPECT_NE(parseStagesOption("smooth:lambda=2", "--stages").status().message().find("--stages: /stages/0/lambda"),
+            std::string::npos);
+  EXPECT_NE(parseStagesOption("blur", "--stages").status().message().find("unknown stage 'blur'"), std::string::npos);
 }
 
 TEST(JobConfig, RelativePathsAreRelativeToTheJobFile) {

@@ -306,7 +306,6 @@ class Engine {
     return m;
   }
 
-  int levelReached() const { return level_; }
   AttributeLayout layout;  // set by the caller before run()
 
  private:

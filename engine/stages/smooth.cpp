@@ -14,9 +14,8 @@
 namespace scanpress {
 
 Result<StagedTile> smoothStage(const TileContext& ctx, const TileView& tile, const StageSpec& spec) {
+  SP_RETURN_IF_ERROR(validateStage(spec).withContext("smooth"));
   const SmoothOptions& o = spec.smooth;
-  if (o.iterations < 0 || !(o.lambda > 0 && o.lambda < 1) || !(o.mu > -1 && o.mu < -o.lambda))
-    return makeError(ErrorCode::kInvalidArgument, "smooth: needs iterations >= 0, 0 < lambda < 1, -1 < mu < -lambda");
   const QuantizedMesh& in = tile.mesh;
   const size_t n = in.positions.size();
   StagedTile out;

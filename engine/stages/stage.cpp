@@ -57,6 +57,22 @@ bool hasFlags(const TileView& t) { return t.locked.size() == t.mesh.positions.si
 
 std::span<const StageInfo> allStages() { return kStages; }
 
+Status validateStage(const StageSpec& spec) {
+  switch (spec.kind) {
+    case StageKind::kSmooth: {
+      const SmoothOptions& o = spec.smooth;
+      if (o.iterations < 0 || o.iterations > kMaxSmoothIterations)
+        return makeError(ErrorCode::kInvalidArgument,
+                         "iterations: must be in [0, " + std::to_string(kMaxSmoothIterations) + "]");
+      if (!(o.lambda > 0 && o.lambda < 1)) return makeError(ErrorCode::kInvalidArgument, "lambda: must be in (0, 1)");
+      if (!(o.mu > -1 && o.mu < -o.lambda))
+        return makeError(ErrorCode::kInvalidArgument, "mu: must be in (-1, -lambda)");
+      return Status::ok();
+    }
+  }
+  return makeError(ErrorCode::kInvalidArgument, "unknown stage");
+}
+
 const StageInfo* findStage(StageKind kind) {
   for (const auto& s : kStages)
     if (s.kind == kind) return &s;
@@ -103,6 +119,7 @@ Status checkBorderContract(const TileContext& ctx, const TileView& before, const
 Result<StagedTile> runStage(const TileContext& ctx, const TileView& tile, const StageSpec& spec, bool thorough) {
   const StageInfo* stage = findStage(spec.kind);
   if (!stage) return makeError(ErrorCode::kInvalidArgument, "unknown stage");
+  SP_RETURN_IF_ERROR(validateStage(spec).withContext(std::string(stage->name)));
   SP_ASSIGN_OR_RETURN(StagedTile out, stage->run(ctx, tile, spec));
   SP_RETURN_IF_ERROR(checkBorderContract(ctx, tile, out.view(), thorough).withContext(std::string(stage->name)));
   return out;

@@ -37,6 +37,7 @@ enum class StageKind : uint8_t {
 // Taubin's lambda|mu smoothing (Taubin, "A signal processing approach to fair surface design", SIGGRAPH 1995):
 // alternating shrinking (lambda > 0) and inflating (mu < -lambda) Laplacian steps, which remove scanner noise
 // without the shrinkage of plain Laplacian smoothing. Unlocked vertices only; the connectivity is unchanged.
+constexpr int kMaxSmoothIterations = 1000;
 struct SmoothOptions {
   int iterations = 10;   // lambda and mu steps, each
   double lambda = 0.33;  // in (0, 1)
@@ -55,6 +56,9 @@ struct StageInfo {
   std::string_view name;
   StageFunction run;
 };
+
+// Checks a stage's options (kInvalidArgument naming the option); runStage checks them too.
+Status validateStage(const StageSpec& spec);
 
 std::span<const StageInfo> allStages();
 const StageInfo* findStage(StageKind kind);

@@ -54,6 +54,8 @@ Compresses the mesh IN into the container OUT.spz. The output appears complete o
 
 options:
   --codec NAME        tile codec (default store; available: %s)
+  --stages LIST       geometry stages every tile runs before the codec, in order: NAME[:KEY=VALUE...][,NAME...]
+                      (available: %s); e.g. smooth:iterations=5 (configs/REFERENCE.md, "Stages")
   --bits N            quantization bits, 8..24 (default 16): the largest bounding-box extent is divided into 2^N
                       cubic cells, as Draco's -qp does
   --normal-bits N     octahedral bits per normal component, 4..16 (default 12)
@@ -240,12 +242,12 @@ int runEncode(int argc, char** argv) {
   Args args;
   std::string error;
   if (!parseArgs(argc, argv, 2,
-                 {"--codec", "--bits", "--normal-bits", "--report", "--tile-triangles", "--threads", "--memory-budget",
-                  "--scratch-dir", "--samples-per-triangle"},
+                 {"--codec", "--stages", "--bits", "--normal-bits", "--report", "--tile-triangles", "--threads",
+                  "--memory-budget", "--scratch-dir", "--samples-per-triangle"},
                  {"--no-normals", "--no-colors", "--measure", "--quiet", "--help"}, args, error))
     return usage(error, "encode");
   if (args.has("--help")) {
-    std::printf(kEncodeHelp, codecList().c_str());
+    std::printf(kEncodeHelp, codecList().c_str(), stageNames().c_str());
     return 0;
   }
   if (args.positional.size() != 2) return usage("encode needs IN and OUT", "encode");
@@ -254,6 +256,11 @@ int runEncode(int argc, char** argv) {
   s.output = args.positional[1];
   if (const auto* c = args.get("--codec")) s.codec = *c;
   if (!findCodec(s.codec)) return usage("unknown codec '" + s.codec + "' (available: " + codecList() + ")", "encode");
+  if (const auto* st = args.get("--stages")) {
+    auto stages = parseStagesOption(*st, "--stages");
+    if (!stages.isOk()) return usage(stages.status().message(), "encode");
+    s.stages = std::move(stages).value();
+  }
   if (!integerOption(args, "--bits", kMinGridBits, kMaxGridBits, s.bits, error) ||
       !integerOption(args, "--normal-bits", 4, 16, s.normal_bits, error))
     return usage(error, "encode");
@@ -466,7 +473,7 @@ int run(int argc, char** argv) {
   if (isHelp(cmd) || cmd == "help") {
     if (argc >= 3) {
       const std::string sub = argv[2];
-      if (sub == "encode") return std::printf(kEncodeHelp, codecList().c_str()), 0;
+      if (sub == "encode") return std::printf(kEncodeHelp, codecList().c_str(), stageNames().c_str()), 0;
       if (sub == "decode") return std::fputs(kDecodeHelp, stdout), 0;
       if (sub == "info") return std::fputs(kInfoHelp, stdout), 0;
       if (sub == "run") return std::fputs(kRunHelp, stdout), 0;
