@@ -6,7 +6,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "test_util.h"
+#include "jobs_util.h"
 
 namespace scanpress {
 namespace {

@@ -10,7 +10,7 @@
 #include "jobs/batch.h"
 #include "jobs/config.h"
 #include "jobs/mesh_io/mesh_writer.h"
-#include "test_util.h"
+#include "jobs_util.h"
 
 namespace scanpress {
 namespace {

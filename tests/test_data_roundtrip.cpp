@@ -8,7 +8,7 @@
 #include "engine/container/container.h"
 #include "jobs/commands.h"
 #include "jobs/mesh_io/mesh_reader.h"
-#include "test_util.h"
+#include "jobs_util.h"
 
 namespace scanpress {
 namespace {

@@ -8,6 +8,7 @@
 #include "jobs/file_io.h"
 #include "jobs/numbers.h"
 #include "jobs/scan_store.h"
+#include "jobs_util.h"
 #include "test_util.h"
 
 namespace scanpress {

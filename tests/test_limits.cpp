@@ -10,6 +10,7 @@
 #include "engine/container/container.h"
 #include "engine/io/bytes.h"
 #include "engine/io/crc32c.h"
+#include "jobs_util.h"
 #include "test_util.h"
 
 namespace scanpress {

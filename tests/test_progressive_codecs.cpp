@@ -47,12 +47,14 @@ void expectRoundTrip(const CodecInfo& codec, const TileContext& ctx, const Quant
   EXPECT_EQ(got.lo, enc.decoded.lo);
   EXPECT_EQ(got.hi, enc.decoded.hi);
   // A limit one below either count is refused before decoding.
-  if (enc.decoded.vertices > 0)
+  if (enc.decoded.vertices > 0) {
     EXPECT_EQ(codec.decode(ctx, 1, enc.payload, DecodeLimits{enc.decoded.vertices - 1, enc.decoded.faces})
                   .status().code(), ErrorCode::kMalformed);
-  if (enc.decoded.faces > 0)
+  }
+  if (enc.decoded.faces > 0) {
     EXPECT_EQ(codec.decode(ctx, 1, enc.payload, DecodeLimits{enc.decoded.vertices, enc.decoded.faces - 1})
                   .status().code(), ErrorCode::kMalformed);
+  }
   // Every input position comes back (isolated vertices included).
   auto positions = [](const QuantizedMesh& m) {
     std::vector<Vec3u> p = m.positions;

@@ -111,8 +111,11 @@ TEST(SmoothStage, DenoisesASphereAndKeepsTheContract) {
   ASSERT_TRUE(out.isOk()) << out.status().toString();
   EXPECT_EQ(out->mesh.triangles, q.triangles);
   EXPECT_EQ(out->locked, locked);
-  for (size_t v = 0; v < locked.size(); ++v)
-    if (locked[v]) EXPECT_EQ(out->mesh.positions[v], q.positions[v]);
+  for (size_t v = 0; v < locked.size(); ++v) {
+    if (locked[v]) {
+      EXPECT_EQ(out->mesh.positions[v], q.positions[v]);
+    }
+  }
   const double before = rmsOffSphere(q, true), after = rmsOffSphere(out->mesh, true);
   RecordProperty("rms_before_cells", std::to_string(before / grid.cell));
   RecordProperty("rms_after_cells", std::to_string(after / grid.cell));

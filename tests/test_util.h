@@ -1,11 +1,11 @@
-// Helpers shared by the tests.
+// Helpers shared by the tests of every layer (standard library and the engine only; the jobs tests' helpers
+// that run the CLI or find the shared scans are in jobs_util.h).
 #pragma once
 
 #include <algorithm>
 #include <cmath>
 #include <compare>
 #include <array>
-#include <sys/wait.h>
 
 #include <cstdio>
 #include <cstdlib>
@@ -80,24 +80,6 @@ inline bool sameNormalDirections(const std::vector<OctNormal>& a, const std::vec
     if (x[0] * y[0] + x[1] * y[1] + x[2] * y[2] < 1.f - 1e-6f) return false;
   }
   return true;
-}
-
-// Runs the scanpress binary with `args` (shell words), capturing stdout and stderr; returns its exit code. `env`:
-// shell assignments (NAME='value' ...) for the command.
-inline int runScanpress(const std::string& args, std::string* out = nullptr, const std::string& env = "") {
-  FILE* p = ::popen((env + " '" + SCANPRESS_BIN + "' " + args + " 2>&1").c_str(), "r");
-  std::string text;
-  char buf[4096];
-  size_t n;
-  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) text.append(buf, n);
-  const int status = ::pclose(p);
-  if (out) *out = text;
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-inline std::string sharedDataDir() {
-  if (const char* env = std::getenv("SCANPRESS_DATA")) return env;
-  return SCANPRESS_SHARED_DATA;
 }
 
 // A fresh temporary directory, removed with the object.

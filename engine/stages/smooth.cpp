@@ -37,9 +37,10 @@ Result<StagedTile> smoothStage(const TileContext& ctx, const TileView& tile, con
   for (const auto& e : edges) ++start[e.first + 1];
   for (size_t v = 0; v < n; ++v) start[v + 1] += start[v];
 
-  std::vector<Vec3d> p(n), next(n);
-  for (size_t v = 0; v < n; ++v)
-    for (int a = 0; a < 3; ++a) p[v][a] = in.positions[v][a];
+  std::vector<Vec3d> p;
+  p.reserve(n);
+  for (const Vec3u& q : in.positions) p.push_back({double(q[0]), double(q[1]), double(q[2])});
+  std::vector<Vec3d> next = p;
   for (int it = 0; it < 2 * o.iterations; ++it) {
     const double factor = it % 2 == 0 ? o.lambda : o.mu;
     for (size_t v = 0; v < n; ++v) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cstdio>
 #include <string>
 
 namespace scanpress {
@@ -48,7 +49,9 @@ std::vector<Vec3u> lockedPositions(const TileView& t) {
 }
 
 std::string str(const Vec3u& p) {
-  return "(" + std::to_string(p[0]) + ", " + std::to_string(p[1]) + ", " + std::to_string(p[2]) + ")";
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "(%u, %u, %u)", p[0], p[1], p[2]);
+  return buf;
 }
 
 bool hasFlags(const TileView& t) { return t.locked.size() == t.mesh.positions.size(); }
