@@ -140,6 +140,7 @@ TEST(Cli, ProgressiveDecodeByLevelAndBytes) {
     EXPECT_NE(out.find("level 7:"), std::string::npos) << out;
 
     EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --level 13", &out), 1);
+    EXPECT_NE(out.find("level 13 is past the last (12)"), std::string::npos) << out;
     EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --bytes 3", &out), 1);
     EXPECT_NE(out.find("below the coarsest level"), std::string::npos) << out;
     EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --level -1", &out), 1);

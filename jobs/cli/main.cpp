@@ -132,8 +132,9 @@ centers of the container's grid; they are written as float, or as double when fl
 
 options:
   --tiles ID,ID,...   decode only these tiles (welded together)
-  --level L           progressive codecs (kdtree, octree): the mesh of level L, cells of 2^(bits-L) grid cells as
-                      vertices at their centers with that level's triangles (L = grid bits: lossless)
+  --level L           progressive codecs: every tile at level L, as its codec numbers levels (`info` lists each
+                      level and what it means; kdtree, octree: cells of 2^(bits-L) grid cells as vertices at their
+                      centers with that level's triangles, L = grid bits is lossless)
   --bytes N           progressive codecs: the finest level whose payloads fit in N bytes (info --json lists
                       the bytes of every level)
   --quiet             print nothing on success
@@ -323,7 +324,7 @@ int runDecode(int argc, char** argv) {
     if (!ids.isOk()) return usage(ids.status().message(), "decode");
     s.tiles.emplace(ids->begin(), ids->end());
   }
-  if (!unsignedOption(args, "--level", kMaxGridBits, s.level, error) ||
+  if (!unsignedOption(args, "--level", UINT32_MAX, s.level, error) ||
       !unsignedOption(args, "--bytes", UINT64_MAX, s.bytes, error))
     return usage(error, "decode");
   auto result = decodeFile(s);
