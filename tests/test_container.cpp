@@ -5,33 +5,11 @@
 
 #include "engine/container/container.h"
 #include "engine/io/crc32c.h"
+#include "container_fixture.h"
 #include "test_util.h"
 
 namespace scanpress {
 namespace {
-
-struct Fixture {
-  Grid grid;
-  AttributeLayout layout{12, 4};
-  std::vector<QuantizedMesh> tiles;
-  std::vector<uint8_t> bytes;
-};
-
-Fixture makeFixture(int tile_count = 2) {
-  Fixture f;
-  Mesh m = testing::octahedron(2.0);
-  for (size_t i = 0; i < m.positions.size(); ++i) {
-    const auto& p = m.positions[i];
-    m.normals.push_back({static_cast<float>(p[0] / 2), static_cast<float>(p[1] / 2), static_cast<float>(p[2] / 2)});
-    m.colors.push_back({static_cast<uint8_t>(40 * i), 7, 200, 255});
-  }
-  m.color_channels = 4;
-  f.grid = *makeGrid(boundingBox(m), 12);
-  auto q = quantizeMesh(m, f.grid, f.layout, nullptr);
-  for (int t = 0; t < tile_count; ++t) f.tiles.push_back(*q);
-  f.bytes = *encodeContainer(f.grid, f.layout, *findCodec(CodecId::kStore), f.tiles);
-  return f;
-}
 
 // Full decode of an in-memory container: header, footer, index, every tile.
 Status decodeAll(std::span<const uint8_t> file) {
@@ -47,7 +25,7 @@ Status decodeAll(std::span<const uint8_t> file) {
 }
 
 TEST(Container, RoundTripsTilesWithAttributes) {
-  Fixture f = makeFixture(3);
+  testing::ContainerFixture f = testing::makeContainerFixture(3);
   auto pc = parseContainer(f.bytes, "mem");
   ASSERT_TRUE(pc.isOk()) << pc.status().toString();
   EXPECT_EQ(pc->header.tile_count, 3u);
@@ -69,7 +47,7 @@ TEST(Container, RoundTripsTilesWithAttributes) {
 }
 
 TEST(Container, EveryTruncationIsRejected) {
-  Fixture f = makeFixture(2);
+  testing::ContainerFixture f = testing::makeContainerFixture(2);
   ASSERT_TRUE(decodeAll(f.bytes).isOk());
   for (size_t len = 0; len < f.bytes.size(); ++len) {
     std::vector<uint8_t> cut(f.bytes.begin(), f.bytes.begin() + static_cast<ptrdiff_t>(len));
@@ -80,7 +58,7 @@ TEST(Container, EveryTruncationIsRejected) {
 }
 
 TEST(Container, EveryFlippedByteIsRejected) {
-  Fixture f = makeFixture(2);
+  testing::ContainerFixture f = testing::makeContainerFixture(2);
   for (size_t i = 0; i < f.bytes.size(); ++i) {
     for (uint8_t mask : {uint8_t{0x01}, uint8_t{0x80}, uint8_t{0xFF}}) {
       auto bytes = f.bytes;
@@ -99,7 +77,7 @@ void patchHeader(std::vector<uint8_t>& bytes, size_t offset, const void* value, 
 }
 
 TEST(Container, UnknownVersionAndCodecAreTheirOwnErrors) {
-  Fixture f = makeFixture(1);
+  testing::ContainerFixture f = testing::makeContainerFixture(1);
   auto bytes = f.bytes;
   const uint32_t v2 = 2;
   patchHeader(bytes, 8, &v2, 4);
@@ -133,7 +111,7 @@ TEST(Container, UnknownVersionAndCodecAreTheirOwnErrors) {
 }
 
 TEST(StoreCodec, HostilePayloadsFailCleanly) {
-  Fixture f = makeFixture(1);
+  testing::ContainerFixture f = testing::makeContainerFixture(1);
   TileContext ctx{f.grid.bits, f.layout};
   auto encoded = encodeMesh(*findCodec(CodecId::kStore), ctx, f.tiles[0]);
   ASSERT_TRUE(encoded.isOk());

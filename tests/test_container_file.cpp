@@ -4,36 +4,14 @@
 
 #include "engine/container/container.h"
 #include "jobs/container_file.h"
+#include "container_fixture.h"
 #include "test_util.h"
 
 namespace scanpress {
 namespace {
 
-struct Fixture {
-  Grid grid;
-  AttributeLayout layout{12, 4};
-  std::vector<QuantizedMesh> tiles;
-  std::vector<uint8_t> bytes;
-};
-
-Fixture makeFixture(int tile_count = 2) {
-  Fixture f;
-  Mesh m = testing::octahedron(2.0);
-  for (size_t i = 0; i < m.positions.size(); ++i) {
-    const auto& p = m.positions[i];
-    m.normals.push_back({static_cast<float>(p[0] / 2), static_cast<float>(p[1] / 2), static_cast<float>(p[2] / 2)});
-    m.colors.push_back({static_cast<uint8_t>(40 * i), 7, 200, 255});
-  }
-  m.color_channels = 4;
-  f.grid = *makeGrid(boundingBox(m), 12);
-  auto q = quantizeMesh(m, f.grid, f.layout, nullptr);
-  for (int t = 0; t < tile_count; ++t) f.tiles.push_back(*q);
-  f.bytes = *encodeContainer(f.grid, f.layout, *findCodec(CodecId::kStore), f.tiles);
-  return f;
-}
-
 TEST(Container, OneTileReadsWithoutTheOthers) {
-  Fixture f = makeFixture(3);
+  testing::ContainerFixture f = testing::makeContainerFixture(3);
   testing::TempDir dir;
   const std::string path = dir.file("c.spz");
   testing::writeBytes(path, std::string(f.bytes.begin(), f.bytes.end()));

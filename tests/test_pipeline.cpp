@@ -263,16 +263,7 @@ Result<StagedTile> moveUnlocked(const TileContext& ctx, const TileView& t, uint3
       auto& p = out.mesh.positions[v];
       p[0] = p[0] < max ? p[0] + 1 : p[0] - 1;
     }
-  // Undo moves that made a triangle degenerate (two corners in one cell).
-  for (bool changed = true; changed;) {
-    changed = false;
-    for (const auto& tri : out.mesh.triangles) {
-      const auto& q = out.mesh.positions;
-      if (q[tri[0]] != q[tri[1]] && q[tri[1]] != q[tri[2]] && q[tri[0]] != q[tri[2]]) continue;
-      for (uint32_t v : tri)
-        if (out.mesh.positions[v] != t.mesh.positions[v]) out.mesh.positions[v] = t.mesh.positions[v], changed = true;
-    }
-  }
+  undoDegenerateMoves(t.mesh, out.mesh);
   return out;
 }
 

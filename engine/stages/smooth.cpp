@@ -60,19 +60,7 @@ Result<StagedTile> smoothStage(const TileContext& ctx, const TileView& tile, con
     for (int a = 0; a < 3; ++a)
       out.mesh.positions[v][a] = static_cast<uint32_t>(std::clamp(std::round(p[v][a]), 0.0, max_coord));
   }
-  // Undo the moves that made a triangle degenerate, until none does (the input has none, so this ends).
-  for (bool changed = true; changed;) {
-    changed = false;
-    for (const auto& t : out.mesh.triangles) {
-      const auto& q = out.mesh.positions;
-      if (q[t[0]] != q[t[1]] && q[t[1]] != q[t[2]] && q[t[0]] != q[t[2]]) continue;
-      for (uint32_t v : t)
-        if (out.mesh.positions[v] != in.positions[v]) {
-          out.mesh.positions[v] = in.positions[v];
-          changed = true;
-        }
-    }
-  }
+  undoDegenerateMoves(in, out.mesh);
   return out;
 }
 

@@ -119,6 +119,21 @@ Status checkBorderContract(const TileContext& ctx, const TileView& before, const
   return Status::ok();
 }
 
+void undoDegenerateMoves(const QuantizedMesh& before, QuantizedMesh& after) {
+  auto& q = after.positions;
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (const auto& t : after.triangles) {
+      if (q[t[0]] != q[t[1]] && q[t[1]] != q[t[2]] && q[t[0]] != q[t[2]]) continue;
+      for (uint32_t v : t)
+        if (q[v] != before.positions[v]) {
+          q[v] = before.positions[v];
+          changed = true;
+        }
+    }
+  }
+}
+
 Result<StagedTile> runStage(const TileContext& ctx, const TileView& tile, const StageSpec& spec, bool thorough) {
   const StageInfo* stage = findStage(spec.kind);
   if (!stage) return makeError(ErrorCode::kInvalidArgument, "unknown stage");

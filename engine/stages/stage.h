@@ -76,6 +76,11 @@ Result<StagedTile> runStage(const TileContext& ctx, const TileView& tile, const 
 // Returns kInternal naming the first violation (a stage that breaks the contract is a bug).
 Status checkBorderContract(const TileContext& ctx, const TileView& before, const TileView& after, bool thorough);
 
+// For stages that move vertices of `before` (same vertices, same triangles) into `after`: undoes the moves that made a
+// triangle degenerate (two corners in one grid cell, which the coders refuse), until none does. Ends because
+// `before` has no degenerate triangle.
+void undoDegenerateMoves(const QuantizedMesh& before, QuantizedMesh& after);
+
 // `smooth` (smooth.cpp).
 Result<StagedTile> smoothStage(const TileContext& ctx, const TileView& tile, const StageSpec& spec);
 
