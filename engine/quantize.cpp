@@ -53,6 +53,15 @@ BoundingBox boundingBox(const Mesh& mesh) {
   return box;
 }
 
+BoundingBox usedBoundingBox(const Mesh& mesh) {
+  if (mesh.triangles.empty()) return boundingBox(mesh);
+  BoundingBox box;
+  for (const Triangle& t : mesh.triangles)
+    for (uint32_t v : t)
+      if (v < mesh.positions.size()) box.extend(mesh.positions[v]);
+  return box;
+}
+
 Result<QuantizedMesh> quantizeMesh(const Mesh& mesh, const Grid& grid, const AttributeLayout& layout,
                                    QuantizeStats* stats) {
   const size_t n = mesh.positions.size();

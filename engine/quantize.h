@@ -46,6 +46,9 @@ struct Grid {
 Result<Grid> makeGrid(const BoundingBox& box, int bits);
 
 BoundingBox boundingBox(const Mesh& mesh);
+// The box of the vertices that triangles use (the grid's and the relative error's box: a vertex no triangle uses
+// is dropped, and must not stretch either); of all vertices when the mesh has no triangles (a point cloud).
+BoundingBox usedBoundingBox(const Mesh& mesh);
 
 struct QuantizeStats {
   uint64_t degenerate_triangles = 0;   // triangles with two corners in one cell, dropped

@@ -136,6 +136,9 @@ std::string settingsFingerprint(const EncodeSettings& s) {
                     "|normal_bits=" + std::to_string(s.normal_bits) + "|normals=" + std::to_string(s.keep_normals) +
                     "|colors=" + std::to_string(s.keep_colors) + "|tile=" + std::to_string(effectiveTileTarget(s)) +
                     "|input=" + fs::absolute(s.input).lexically_normal().string();
+  // Allowing degenerate triangles turns a failure into an output; written only when set, so the fingerprints of
+  // earlier runs stay valid.
+  if (s.allow_degenerate) key += "|allow_degenerate=1";
   for (const StageSpec& st : s.stages) {  // every option of every stage changes the bytes
     key += "|stage=" + std::string(findStage(st.kind)->name);
     if (st.kind == StageKind::kSmooth) {

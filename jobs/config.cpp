@@ -196,7 +196,7 @@ bool validPattern(const std::string& p) {
 std::vector<std::string> knownConfigKeys() {
   return {"/inputs",          "/recursive",          "/output/directory", "/output/name",
           "/output/report",   "/output/summary",     "/codec/name",       "/codec/bits",
-          "/codec/normal_bits", "/codec/normals",    "/codec/colors",     "/stages", "/tiling/target_triangles",
+          "/codec/normal_bits", "/codec/normals",    "/codec/colors",     "/codec/allow_degenerate", "/stages", "/tiling/target_triangles",
           "/threads",         "/memory_budget_mb",   "/scratch_directory", "/resume",
           "/measure/enabled", "/measure/samples_per_triangle", "/measure/samples", "/measure/seed",
           "/measure/stratified", "/measure/vertices", "/measure/render", "/measure/render_size", "/measure/view"};
@@ -236,6 +236,7 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     c.integer("normal_bits", 4, 16, s.encode.normal_bits);
     c.boolean("normals", s.encode.keep_normals);
     c.boolean("colors", s.encode.keep_colors);
+    c.boolean("allow_degenerate", s.encode.allow_degenerate);
     c.finish();
     if (error.isOk() && !findCodec(s.encode.codec)) {
       std::string names;

@@ -68,9 +68,10 @@ Status measureSurfaces(std::span<const Vec3d> original_positions, std::span<cons
 Result<MeasureResult> measureMeshes(const Mesh& original, const Mesh& decoded, const MeasureSettings& s,
                                     std::shared_ptr<EmbreeDevice> device) {
   if (original.triangles.empty() || decoded.triangles.empty())
-    return makeError(ErrorCode::kInvalidArgument, "both meshes need triangles to measure a surface distance");
+    return makeError(ErrorCode::kUnsupported, "both meshes need triangles to measure a surface distance (a point "
+                                              "cloud has no surface; measure does not compare point sets)");
   MeasureResult r;
-  r.diagonal = boundingBox(original).diagonal();
+  r.diagonal = usedBoundingBox(original).diagonal();  // as the encoder's: a stray vertex does not stretch it
   // One density for both directions, from the original, so both sample the surfaces alike.
   const double density =
       samplingDensity(s, original.triangles.size(), surfaceArea(original.positions, original.triangles));

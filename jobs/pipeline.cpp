@@ -6,8 +6,10 @@
 #include <oneapi/tbb/task_arena.h>
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <exception>
 #include <new>
 #include <optional>
@@ -84,6 +86,11 @@ class SurveySink : public MeshSink {
   }
   Status triangles(std::span<const Triangle> t) override {
     triangle_count += t.size();
+    // Readers deliver a triangle after its vertices: the bitmap covers every index seen so far.
+    if (used_.size() * 64 < vertex_count) used_.resize((vertex_count + 63) / 64, 0);
+    for (const Triangle& tri : t)
+      for (uint32_t v : tri)
+        if (v < vertex_count) used_[v >> 6] |= uint64_t(1) << (v & 63);
     if (kept()) SP_RETURN_IF_ERROR(collector_.triangles(t));
     checkLimit();
     return Status::ok();
@@ -94,6 +101,13 @@ class SurveySink : public MeshSink {
   }
   bool kept() const { return !dropped_; }
   uint8_t colorChannels() const { return channels_; }
+  // Which vertices some triangle uses (bit i of word i / 64); one bit per vertex, so 125 MB for 10^9 vertices.
+  const std::vector<uint64_t>& used() const { return used_; }
+  uint64_t usedCount() const {
+    uint64_t n = 0;
+    for (uint64_t w : used_) n += static_cast<uint64_t>(std::popcount(w));
+    return n;
+  }
   // The kept mesh, with every attribute array covering every vertex (only when kept()).
   Mesh& keptMesh() {
     collector_.finish();
@@ -118,16 +132,45 @@ class SurveySink : public MeshSink {
   uint64_t keep_limit_;
   bool dropped_ = false;
   uint8_t channels_ = 0;
+  std::vector<uint64_t> used_;
   Mesh mesh_;
   MeshCollector collector_{mesh_};
+};
+
+// The box of the vertices a triangle uses (`used`, from the survey), over a replay or a second read of the input.
+// Once `vertex_count` vertices are seen, it stops the read (a reader delivers vertices before the triangles that
+// use them, so only the vertex part of a PLY is parsed again): `complete` tells that stop from a failure.
+class UsedBoxSink : public MeshSink {
+ public:
+  UsedBoxSink(const std::vector<uint64_t>& used, uint64_t vertex_count) : used_(used), vertex_count_(vertex_count) {}
+  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f>, std::span<const Rgba8>, uint8_t) override {
+    for (const Vec3d& v : p) {
+      if (next_ >> 6 < used_.size() && (used_[next_ >> 6] >> (next_ & 63) & 1)) box.extend(v);
+      ++next_;
+    }
+    if (next_ < vertex_count_) return Status::ok();
+    complete = true;
+    return makeError(ErrorCode::kInternal, "stop: every vertex seen");
+  }
+  Status triangles(std::span<const Triangle>) override { return Status::ok(); }
+  Status vertexNormals(uint64_t, std::span<const Vec3f>) override { return Status::ok(); }
+
+  BoundingBox box;
+  bool complete = false;
+
+ private:
+  const std::vector<uint64_t>& used_;
+  uint64_t vertex_count_;
+  uint64_t next_ = 0;
 };
 
 // Pass 2: quantize into the store, drop degenerate triangles, valences, histogram, spill.
 class IngestSink : public MeshSink {
  public:
+  // `points`: a point cloud, whose every vertex is tiled by its position, as a triangle (v, v, v) would be.
   IngestSink(const Grid& grid, const AttributeLayout& layout, VertexStore& store, TileHistogram& hist,
-             TriangleSpill& spill)
-      : grid_(grid), layout_(layout), store_(store), hist_(hist), spill_(spill) {}
+             TriangleSpill& spill, bool points)
+      : grid_(grid), layout_(layout), store_(store), hist_(hist), spill_(spill), points_(points) {}
   static Vec3d originalOf(const VertexRecord& r) { return {r.original[0], r.original[1], r.original[2]}; }
   Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c,
                   uint8_t) override {
@@ -138,6 +181,12 @@ class IngestSink : public MeshSink {
       for (int a = 0; a < 3; ++a) r.original[a] = static_cast<float>(p[i][a] - grid_.origin[a]);
       if (layout_.hasNormals()) r.normal = n.empty() ? no_normal : encodeOctahedral(n[i], layout_.normal_bits);
       if (layout_.hasColors() && !c.empty()) r.color = c[i];
+      if (points_) {
+        const uint32_t v = static_cast<uint32_t>(store_.size());
+        hist_.add(r.q);
+        SP_RETURN_IF_ERROR(spill_.append({{v, v, v}, r.q}));
+        ++referenced;
+      }
       SP_RETURN_IF_ERROR(store_.append(r));
     }
     return Status::ok();
@@ -148,6 +197,7 @@ class IngestSink : public MeshSink {
       for (int k = 0; k < 3; ++k) SP_RETURN_IF_ERROR(store_.get(t[k], r[k]));
       if (r[0].q == r[1].q || r[1].q == r[2].q || r[0].q == r[2].q) {
         ++stats.degenerate_triangles;
+        input_degenerate += t[0] == t[1] || t[1] == t[2] || t[0] == t[2];
         continue;
       }
       for (uint32_t v : t) {
@@ -170,7 +220,8 @@ class IngestSink : public MeshSink {
   }
 
   QuantizeStats stats;
-  uint64_t referenced = 0;
+  uint64_t input_degenerate = 0;  // of the degenerate triangles, those with a repeated index (no grid keeps them)
+  uint64_t referenced = 0;  // vertices encoded: used by a kept triangle, or points
   double area = 0;  // of the kept triangles, original positions
 
  private:
@@ -179,6 +230,7 @@ class IngestSink : public MeshSink {
   VertexStore& store_;
   TileHistogram& hist_;
   TriangleSpill& spill_;
+  bool points_;
 };
 
 // Feeds a buffered mesh to a sink in chunks, as a reader would.
@@ -255,19 +307,42 @@ class ScanEncoder {
     SP_ASSIGN_OR_RETURN(result_.read, readMesh(s_.input, survey_));
     if (s_.keep_normals && survey_.has_normals) result_.layout.normal_bits = static_cast<uint8_t>(s_.normal_bits);
     if (s_.keep_colors && survey_.colorChannels()) result_.layout.color_channels = survey_.colorChannels();
-    auto grid = makeGrid(survey_.box, s_.bits);
+    result_.point_cloud = survey_.triangle_count == 0 && survey_.vertex_count > 0;
+    SP_ASSIGN_OR_RETURN(const BoundingBox box, gridBox());
+    auto grid = makeGrid(box, s_.bits);
     if (!grid.isOk()) return grid.status().withContext(s_.input);
     result_.grid = *grid;
-    result_.diagonal = survey_.box.diagonal();
+    result_.diagonal = box.diagonal();
     result_.seconds.read = clock_.lap();
     return Status::ok();
+  }
+
+  // The box the grid spans: of the vertices that triangles use, so that vertices no triangle uses (dropped anyway)
+  // cannot stretch the grid (one stray vertex far away made nearly every triangle degenerate); a point cloud's box
+  // is of all its points. Only when some vertex is unused: the kept mesh is replayed, or a streamed scan's vertex
+  // part is read once more. Measured (bench/RESULTS.md, "Unused vertices"): a 3M-triangle binary PLY streamed
+  // under a 64 MiB budget, read pass 0.98 s -> 1.34 s with one stray vertex (encode 7.4 s either way), peak RSS
+  // +0.3 MiB; the survey's bitmap costs one bit per vertex. Keeping float positions in the scratch store would
+  // cost 12 bytes per vertex instead.
+  Result<BoundingBox> gridBox() {
+    if (survey_.triangle_count == 0 || survey_.usedCount() == survey_.vertex_count) return survey_.box;
+    UsedBoxSink used(survey_.used(), survey_.vertex_count);
+    Status read = survey_.kept() ? replay(survey_.keptMesh(), used, ReadOptions().chunk)
+                                 : readMesh(s_.input, used).status();
+    if (!used.complete) {
+      if (!read.isOk()) return read;
+      return makeError(ErrorCode::kIo, s_.input + ": file changed between the two passes");
+    }
+    return used.box;
   }
 
   // Where tile data lives (memory or scratch files), then pass 2: quantization into the store.
   Status ingest() {
     const uint64_t n_vertices = survey_.vertex_count, n_triangles = survey_.triangle_count;
+    // A point cloud's points go through the spill and the bins as triangles (v, v, v) at their own positions.
+    const uint64_t n_items = result_.point_cloud ? n_vertices : n_triangles;
     const uint64_t in_memory_bytes =
-        n_vertices * sizeof(VertexRecord) + n_triangles * (sizeof(SpilledTriangle) + sizeof(Triangle));
+        n_vertices * sizeof(VertexRecord) + n_items * (sizeof(SpilledTriangle) + sizeof(Triangle));
     storage_budget_ = s_.memory_budget > 0 ? s_.memory_budget : kAutoStorageBudget;
     in_memory_ = in_memory_bytes <= storage_budget_ / 2;
     result_.out_of_core = !in_memory_;
@@ -278,9 +353,9 @@ class ScanEncoder {
     }
     stage("quantizing");
     store_.emplace(scratchFile("vertices.bin"), in_memory_ ? UINT64_MAX / 2 : storage_budget_ / 4);
-    histogram_.emplace(result_.grid.bits, n_triangles, target_);
-    spill_.emplace(scratchFile("triangles.bin"), in_memory_, n_triangles);
-    IngestSink ingest(result_.grid, result_.layout, *store_, *histogram_, *spill_);
+    histogram_.emplace(result_.grid.bits, n_items, target_);
+    spill_.emplace(scratchFile("triangles.bin"), in_memory_, n_items);
+    IngestSink ingest(result_.grid, result_.layout, *store_, *histogram_, *spill_, result_.point_cloud);
     if (survey_.kept()) {
       SP_RETURN_IF_ERROR(replay(survey_.keptMesh(), ingest, ReadOptions().chunk));
       survey_.releaseMesh();
@@ -294,7 +369,8 @@ class ScanEncoder {
     result_.quantize = ingest.stats;
     result_.quantize.unreferenced_vertices = n_vertices - ingest.referenced;
     result_.vertices = ingest.referenced;
-    result_.faces = spill_->size();
+    result_.faces = result_.point_cloud ? 0 : spill_->size();
+    SP_RETURN_IF_ERROR(checkDegenerate(n_triangles, ingest.stats.degenerate_triangles - ingest.input_degenerate));
     area_ = ingest.area;
     result_.seconds.quantize = clock_.lap();
     return Status::ok();
@@ -342,7 +418,8 @@ class ScanEncoder {
     SP_ASSIGN_OR_RETURN(file_, AtomicFile::create(s_.output));
     writer_.emplace(*file_, result_.grid, result_.layout);
     SP_RETURN_IF_ERROR(writer_->begin());
-    result_.measured = s_.measure.enabled;
+    // A point cloud has no surface to sample (jobs/measure.h): it is not measured.
+    result_.measured = s_.measure.enabled && !result_.point_cloud;
     density_ = samplingDensity(s_.measure, result_.faces, area_);
     if (result_.measured && !device_) {
       SP_ASSIGN_OR_RETURN(device_, EmbreeDevice::create());
@@ -398,6 +475,20 @@ class ScanEncoder {
   EncodeResult& result() { return result_; }
 
  private:
+  // Fails (exit 2) when quantization made more than kMaxDegenerateShare of the triangles degenerate: the grid is
+  // too coarse for the scan (or an outlying vertex that a triangle uses stretched it), and the archive would
+  // silently lose its surface.
+  Status checkDegenerate(uint64_t triangles, uint64_t dropped) const {
+    if (s_.allow_degenerate || double(dropped) <= kMaxDegenerateShare * double(triangles)) return Status::ok();
+    char share[32];
+    std::snprintf(share, sizeof share, "%.2f%%", 100.0 * double(dropped) / double(triangles));
+    return makeError(ErrorCode::kLimitExceeded,
+                     s_.input + ": quantization at " + std::to_string(s_.bits) + " bits makes " +
+                         std::to_string(dropped) + " of " + std::to_string(triangles) + " triangles degenerate (" +
+                         share + ", more than the 0.1% allowed): raise --bits (job key /codec/bits), or drop them " +
+                         "with --allow-degenerate (/codec/allow_degenerate)");
+  }
+
   void stage(const char* name) {
     if (progress_) progress_->stage(name);
   }
@@ -437,6 +528,8 @@ class ScanEncoder {
       if (r.status.isOk())
         r.status = buildTileMesh(tile, triangles, *store_, result_.layout, tm,
                                  result_.measured ? &originals : nullptr);
+      // A point cloud's bins hold (v, v, v) per point: its vertices, in input order, without triangles.
+      if (result_.point_cloud) tm.mesh.triangles.clear();
       r.input_vertices = static_cast<uint32_t>(tm.mesh.positions.size());
       r.input_faces = static_cast<uint32_t>(tm.mesh.triangles.size());
       r.border = static_cast<uint32_t>(std::count(tm.border.begin(), tm.border.end(), 1));

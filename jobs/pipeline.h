@@ -1,10 +1,13 @@
 // The encode pipeline for one scan, in named steps (jobs/pipeline.cpp):
 //
-//   survey  stream the input once: bounding box, counts, which attributes exist (and the mesh itself, if small)
-//   ingest  the scan's one global grid; stream again (or replay the kept mesh): quantize vertices into the vertex
-//           store, drop triangles that quantization makes degenerate, count each vertex's valence, histogram
-//           triangle centroids
-//   tile    octree tiles from the histogram (spatial/tiling.h), then a counting sort of triangles into tile bins
+//   survey  stream the input once: bounding box, counts, which attributes exist, which vertices triangles use (and
+//           the mesh itself, if small); the scan's one global grid, from the box of the vertices that triangles use
+//           (a point cloud: of all its points)
+//   ingest  stream again (or replay the kept mesh): quantize vertices into the vertex store, drop triangles that
+//           quantization makes degenerate (failing when more than kMaxDegenerateShare of them, unless allowed),
+//           count each vertex's valence, histogram triangle centroids (a point cloud: its points)
+//   tile    octree tiles from the histogram (spatial/tiling.h), then a counting sort of triangles (or points) into
+//           tile bins
 //   encode  a oneTBB flow graph: source -> limiter -> tile task (parallel: build the tile with its lock flags,
 //           the stages, the codec, the measurement) -> sequencer (tile order) -> serial container writer
 //   finish  index, footer, sync, rename
@@ -39,6 +42,7 @@ struct EncodeSettings {
   int normal_bits = kDefaultNormalBits;
   bool keep_normals = true;
   bool keep_colors = true;
+  bool allow_degenerate = false;     // quantization may drop more than kMaxDegenerateShare of the triangles
   uint64_t tile_triangles = 131072;  // target triangles per tile (tiles adapt to density around it)
   int threads = 0;                   // 0: all cores
   uint64_t memory_budget = 0;        // bytes; 0: no limit (the scan is processed in memory)
@@ -47,6 +51,11 @@ struct EncodeSettings {
   std::vector<StageSpec> stages;     // geometry stages every tile runs before the codec, in order
   CodecOptions codec_options;        // the codec's typed options
 };
+
+// The share of a mesh's triangles that quantization may make degenerate (two corners in one cell) and drop before
+// the encode fails with kLimitExceeded, unless EncodeSettings::allow_degenerate. Triangles that are degenerate in
+// the input already (a repeated vertex index) do not count: no grid keeps them.
+constexpr double kMaxDegenerateShare = 0.001;
 
 struct StageSeconds {
   double read = 0;      // first pass over the input: bounds, counts (and the mesh itself when it fits)
@@ -74,6 +83,7 @@ struct EncodeResult {
   QuantizeStats quantize;
   uint64_t vertices = 0;       // distinct vertices encoded (after dropping)
   uint64_t faces = 0;          // triangles encoded
+  bool point_cloud = false;    // the input has vertices and no triangles: its points are encoded
   uint64_t tile_vertices = 0;  // vertices summed over tiles (border vertices count once per tile)
   uint64_t bytes = 0;          // container size
   std::vector<TileReport> tiles;
@@ -82,7 +92,7 @@ struct EncodeResult {
   int threads = 0;
   uint64_t peak_rss = 0;  // bytes, this process so far
   bool measured = false;
-  double diagonal = 0;  // of the input's bounding box
+  double diagonal = 0;  // of the grid's bounding box: the vertices that triangles use (a point cloud: all)
   ErrorAccumulator forward, backward;  // over all tiles: original -> decoded, decoded -> original
   StageSeconds seconds;
   std::string codec;

@@ -81,7 +81,7 @@ Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& s, std::
   SP_ASSIGN_OR_RETURN(SurfaceIndex scene, SurfaceIndex::build(device, mesh.positions, mesh.triangles));
   std::optional<SurfaceIndex> reference;
   RenderResult out;
-  const BoundingBox box = boundingBox(against ? *against : mesh);
+  const BoundingBox box = usedBoundingBox(against ? *against : mesh);  // the encoder's and measure's diagonal
   out.diagonal = box.diagonal();
   if (against) {
     SP_ASSIGN_OR_RETURN(SurfaceIndex r, SurfaceIndex::build(device, against->positions, against->triangles));

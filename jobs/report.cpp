@@ -73,6 +73,7 @@ nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& 
   j["input_polygons_triangulated"] = r.read.polygons;
   j["vertices"] = r.vertices;
   j["faces"] = r.faces;
+  j["point_cloud"] = r.point_cloud;
   j["tile_vertices"] = r.tile_vertices;
   j["degenerate_triangles_dropped"] = r.quantize.degenerate_triangles;
   j["unreferenced_vertices_dropped"] = r.quantize.unreferenced_vertices;

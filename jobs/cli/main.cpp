@@ -61,6 +61,8 @@ options:
   --normal-bits N     octahedral bits per normal component, 4..16 (default 12)
   --no-normals        drop normals
   --no-colors         drop colors
+  --allow-degenerate  keep going when quantization makes more than 0.1%% of the triangles degenerate (they are
+                      dropped); without it such a scan fails with exit 2 (raise --bits instead)
   --tile-triangles N  target triangles per tile (default 131072; tiles adapt to density around it)
   --threads N         worker threads (default: all cores); the output is the same at any count
   --memory-budget S   bound the memory for tile data, e.g. 512M, 2GiB or 1.5G (units K, M, G, T of 1024;
@@ -245,7 +247,7 @@ int runEncode(int argc, char** argv) {
   if (!parseArgs(argc, argv, 2,
                  {"--codec", "--stages", "--bits", "--normal-bits", "--report", "--tile-triangles", "--threads",
                   "--memory-budget", "--scratch-dir", "--samples-per-triangle"},
-                 {"--no-normals", "--no-colors", "--measure", "--quiet", "--help"}, args, error))
+                 {"--no-normals", "--no-colors", "--allow-degenerate", "--measure", "--quiet", "--help"}, args, error))
     return usage(error, "encode");
   if (args.has("--help")) {
     std::printf(kEncodeHelp, codecList().c_str(), stageNames().c_str());
@@ -267,6 +269,7 @@ int runEncode(int argc, char** argv) {
     return usage(error, "encode");
   s.keep_normals = !args.has("--no-normals");
   s.keep_colors = !args.has("--no-colors");
+  s.allow_degenerate = args.has("--allow-degenerate");
   if (!integerOption(args, "--tile-triangles", kMinTileTriangles, kMaxTileTriangles, s.tile_triangles,
                      error) ||
       !integerOption(args, "--threads", 0, 4096, s.threads, error) ||
