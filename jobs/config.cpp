@@ -197,7 +197,7 @@ std::vector<std::string> knownConfigKeys() {
   return {"/inputs",          "/recursive",          "/output/directory", "/output/name",
           "/output/report",   "/output/summary",     "/codec/name",       "/codec/bits",
           "/codec/normal_bits", "/codec/normals",    "/codec/colors",     "/stages", "/tiling/target_triangles",
-          "/threads",         "/memory_budget_mb",   "/scratch_directory", "/resume",
+          "/strict",          "/threads",         "/memory_budget_mb",   "/scratch_directory", "/resume",
           "/measure/enabled", "/measure/samples_per_triangle", "/measure/samples", "/measure/seed",
           "/measure/stratified", "/measure/vertices", "/measure/render", "/measure/render_size", "/measure/view"};
 }
@@ -271,6 +271,7 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
   s.encode.memory_budget = static_cast<uint64_t>(budget_mb) << 20;
   top.string("scratch_directory", s.encode.scratch_dir);
   top.boolean("resume", s.resume);
+  top.boolean("strict", s.encode.strict);
   top.finish();
   if (error.isOk() && s.inputs.empty()) top.fail("/inputs", "must name at least one file, directory or glob");
   for (size_t i = 0; error.isOk() && i < s.inputs.size(); ++i)

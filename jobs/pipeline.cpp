@@ -395,6 +395,23 @@ class ScanEncoder {
     return Status::ok();
   }
 
+  // After the survey: what the container will not keep. Normals and colors the settings drop are listed (not
+  // silent); what the reader skipped is silent unless reported, and under `strict` it fails the file before
+  // anything is written.
+  Status checkDrops() {
+    if (!s_.keep_normals && survey_.has_normals)
+      result_.dropped_on_request.push_back({"vertex normals", survey_.vertex_count});
+    if (!s_.keep_colors && survey_.colorChannels())
+      result_.dropped_on_request.push_back({"vertex colors", survey_.vertex_count});
+    if (s_.strict && !result_.read.dropped.empty())
+      return makeError(ErrorCode::kUnsupported,
+                       s_.input + ": strict: the container would not keep " +
+                           describeDropped(result_.read.dropped) +
+                           " (scanpress keeps positions, triangles, normals and colors; encode without "
+                           "--strict or /strict to drop them)");
+    return Status::ok();
+  }
+
   EncodeResult& result() { return result_; }
 
  private:
@@ -512,6 +529,7 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
     if (!findStage(st.kind)) return makeError(ErrorCode::kInvalidArgument, "unknown stage");
   ScanEncoder encoder(s, *codec, progress, std::move(device), hooks);
   SP_RETURN_IF_ERROR(encoder.survey());
+  SP_RETURN_IF_ERROR(encoder.checkDrops());
   SP_RETURN_IF_ERROR(encoder.ingest());
   SP_RETURN_IF_ERROR(encoder.tile());
   SP_RETURN_IF_ERROR(encoder.encodeTiles());

@@ -46,6 +46,7 @@ struct EncodeSettings {
   MeasureSettings measure;           // error of the decoded result, per tile and overall
   std::vector<StageSpec> stages;     // geometry stages every tile runs before the codec, in order
   CodecOptions codec_options;        // the codec's typed options
+  bool strict = false;               // fail (kUnsupported) when the input holds anything the container drops
 };
 
 struct StageSeconds {
@@ -68,7 +69,8 @@ struct TileReport {
 };
 
 struct EncodeResult {
-  ReadStats read;
+  ReadStats read;  // read.dropped: what the input holds that scanpress does not keep (unsupported)
+  std::vector<DroppedProperty> dropped_on_request;  // normals and colors the settings dropped
   Grid grid;
   AttributeLayout layout;
   QuantizeStats quantize;

@@ -76,6 +76,14 @@ nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& 
   j["tile_vertices"] = r.tile_vertices;
   j["degenerate_triangles_dropped"] = r.quantize.degenerate_triangles;
   j["unreferenced_vertices_dropped"] = r.quantize.unreferenced_vertices;
+  // What the input holds that the container does not keep: unsupported by scanpress (yet), or dropped because
+  // the settings asked (--no-normals, --no-colors).
+  json dropped = json::array();
+  for (const auto& d : r.read.dropped)
+    dropped.push_back({{"name", d.name}, {"count", d.count}, {"reason", "unsupported"}});
+  for (const auto& d : r.dropped_on_request)
+    dropped.push_back({{"name", d.name}, {"count", d.count}, {"reason", "requested"}});
+  j["dropped"] = std::move(dropped);
   j["bytes"] = r.bytes;
   j["bpv"] = r.bitsPerVertex();
   j["bits_per_triangle"] = r.faces ? 8.0 * r.bytes / r.faces : 0.0;

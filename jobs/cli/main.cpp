@@ -61,6 +61,10 @@ options:
   --normal-bits N     octahedral bits per normal component, 4..16 (default 12)
   --no-normals        drop normals
   --no-colors         drop colors
+  --strict            fail (exit 2) when the input holds anything the container would not keep
+                      (texture coordinates, materials, per-vertex scalars such as confidence, per-face
+                      properties, extra PLY elements); without it they are dropped with one warning and
+                      listed in the report
   --tile-triangles N  target triangles per tile (default 131072; tiles adapt to density around it)
   --threads N         worker threads (default: all cores); the output is the same at any count
   --memory-budget S   bound the memory for tile data, e.g. 512M, 2GiB or 1.5G (units K, M, G, T of 1024;
@@ -69,7 +73,7 @@ options:
   --measure           measure the error of the decoded result (per tile and overall) into the report
   --samples-per-triangle X   measurement sampling density (default 2)
   --report R.json     write a JSON report (counts, bytes, bits per vertex, seconds per stage, tiles, error)
-  --quiet             print nothing on success (progress shows only on a terminal anyway)
+  --quiet             print nothing on success, warnings included (progress shows only on a terminal anyway)
 )";
 
 constexpr const char* kRunHelp = R"(usage: scanpress run JOB.json [options]
@@ -244,7 +248,7 @@ int runEncode(int argc, char** argv) {
   if (!parseArgs(argc, argv, 2,
                  {"--codec", "--stages", "--bits", "--normal-bits", "--report", "--tile-triangles", "--threads",
                   "--memory-budget", "--scratch-dir", "--samples-per-triangle"},
-                 {"--no-normals", "--no-colors", "--measure", "--quiet", "--help"}, args, error))
+                 {"--no-normals", "--no-colors", "--strict", "--measure", "--quiet", "--help"}, args, error))
     return usage(error, "encode");
   if (args.has("--help")) {
     std::printf(kEncodeHelp, codecList().c_str(), stageNames().c_str());
@@ -266,6 +270,7 @@ int runEncode(int argc, char** argv) {
     return usage(error, "encode");
   s.keep_normals = !args.has("--no-normals");
   s.keep_colors = !args.has("--no-colors");
+  s.strict = args.has("--strict");
   if (!integerOption(args, "--tile-triangles", kMinTileTriangles, kMaxTileTriangles, s.tile_triangles,
                      error) ||
       !integerOption(args, "--threads", 0, 4096, s.threads, error) ||
@@ -284,6 +289,9 @@ int runEncode(int argc, char** argv) {
   auto result = encodeFile(s, progress.enabled() ? &progress : nullptr);
   progress.clear();
   if (!result.isOk()) return fail(result.status());
+  if (!args.has("--quiet") && !result->read.dropped.empty())
+    std::fprintf(stderr, "scanpress: warning: dropped %s (not kept by scanpress; --strict fails instead)\n",
+                 describeDropped(result->read.dropped).c_str());
   if (const auto* report = args.get("--report")) {
     const std::string text = encodeReportJson(s, *result, settingsFingerprint(s));
     Status w = writeFileAtomically(*report, std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
