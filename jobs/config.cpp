@@ -333,6 +333,10 @@ std::string completeReportFingerprint(const std::string& report_path) {
 }
 
 Result<JobSettings> loadJobConfig(const std::string& path) {
+  // A directory opens as a stream on Linux and reads as nothing ("invalid JSON: byte 1"): say what it is.
+  std::error_code ec;
+  if (fs::is_directory(path, ec))
+    return makeError(ErrorCode::kInvalidArgument, path + ": is a directory, not a job file");
   std::ifstream f(path, std::ios::binary);
   if (!f) return makeError(ErrorCode::kInvalidArgument, path + ": cannot open job file");
   std::stringstream ss;

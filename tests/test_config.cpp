@@ -292,5 +292,14 @@ TEST(Batch, StrictFailsInputsThatWouldDropData) {
   EXPECT_NE(settingsFingerprint(lax), settingsFingerprint(strict));
 }
 
+// A job path that is a directory says so (it read as "invalid JSON: byte 1").
+TEST(JobConfig, ADirectoryIsNotAJobFile) {
+  testing::TempDir dir;
+  std::string out;
+  EXPECT_EQ(run("run '" + dir.path() + "'", &out), 1);
+  EXPECT_NE(out.find(dir.path() + ": is a directory, not a job file"), std::string::npos) << out;
+  EXPECT_EQ(out.find("invalid JSON"), std::string::npos) << out;
+}
+
 }  // namespace
 }  // namespace scanpress
