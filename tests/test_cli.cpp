@@ -260,5 +260,19 @@ TEST(Cli, BundledScanDropsAreNamed) {
   EXPECT_FALSE(fs::exists(dir.file("c.spz")));
 }
 
+// decode: a tile named twice, and --level with --bytes, are usage errors (one of each silently won before).
+TEST(Cli, DecodeRefusesDuplicateTilesAndTwoLevelChoices) {
+  testing::TempDir dir;
+  std::string out;
+  const std::string spz = dir.file("b.spz");
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + spz + "' --codec kdtree --bits 12 --quiet", &out), 0) << out;
+  EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --tiles 0,0", &out), 1);
+  EXPECT_NE(out.find("tile 0 is named twice"), std::string::npos) << out;
+  EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --level 6 --bytes 100000", &out), 1);
+  EXPECT_NE(out.find("--level and --bytes"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir.file("x.ply")));
+  ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --tiles 0 --level 6", &out), 0) << out;
+}
+
 }  // namespace
 }  // namespace scanpress
