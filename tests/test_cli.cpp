@@ -274,5 +274,25 @@ TEST(Cli, DecodeRefusesDuplicateTilesAndTwoLevelChoices) {
   ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --tiles 0 --level 6", &out), 0) << out;
 }
 
+// `info` counts vertices summed over tiles, the report distinct vertices: both say which is which, and the
+// report's bpv_tile_vertices is info's bpv.
+TEST(Cli, InfoAndReportSayWhichVertexCountTheyUse) {
+  testing::TempDir dir;
+  std::string out;
+  const std::string spz = dir.file("b.spz");
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + spz + "' --tile-triangles 8000 --quiet --report '" +
+                    dir.file("r.json") + "'", &out), 0) << out;
+  const auto report = nlohmann::json::parse(std::ifstream(dir.file("r.json")));
+  ASSERT_EQ(run("info '" + spz + "' --json", &out), 0) << out;
+  const auto info = nlohmann::json::parse(out);
+  EXPECT_GT(report["tile_vertices"].get<uint64_t>(), report["vertices"].get<uint64_t>());  // several tiles
+  EXPECT_EQ(info["vertices"], report["tile_vertices"]);
+  EXPECT_DOUBLE_EQ(info["bpv"].get<double>(), report["bpv_tile_vertices"].get<double>());
+  EXPECT_TRUE(report["counts"].contains("vertices"));
+  EXPECT_TRUE(info["counts"].contains("vertices"));
+  ASSERT_EQ(run("info '" + spz + "'", &out), 0) << out;
+  EXPECT_NE(out.find(" (decoded, summed over tiles: a border vertex once per tile)"), std::string::npos) << out;
+}
+
 }  // namespace
 }  // namespace scanpress
