@@ -2,6 +2,7 @@
 #include "jobs/pipeline.h"
 
 #include <oneapi/tbb/flow_graph.h>
+#include <oneapi/tbb/global_control.h>
 #include <oneapi/tbb/info.h>
 #include <oneapi/tbb/task_arena.h>
 
@@ -352,6 +353,12 @@ class ScanEncoder {
       in_flight = std::clamp<size_t>(s_.memory_budget / 4 / (target_ * kTileBytesPerTriangle), 1, in_flight);
     result_.tiles.resize(tile_count_);
 
+    // More threads than cores: oneTBB's worker limit defaults to the cores, and an arena asking for more
+    // printed "TBB Warning: The number of workers is currently limited to ..." on stderr (through --quiet
+    // too). The user asked for this many threads: allow them while the encode runs (at least the cores, so
+    // this never lowers the limit).
+    tbb::global_control allow_threads(tbb::global_control::max_allowed_parallelism,
+                                      std::max<size_t>(result_.threads, tbb::info::default_concurrency()));
     tbb::task_arena arena(result_.threads);
     arena.execute([&] {
       namespace flow = tbb::flow;

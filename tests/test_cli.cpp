@@ -294,5 +294,14 @@ TEST(Cli, InfoAndReportSayWhichVertexCountTheyUse) {
   EXPECT_NE(out.find(" (decoded, summed over tiles: a border vertex once per tile)"), std::string::npos) << out;
 }
 
+// --quiet prints nothing, whatever the thread count (oneTBB warned about more threads than cores).
+TEST(Cli, QuietIsQuietWithMoreThreadsThanCores) {
+  testing::TempDir dir;
+  std::string out;
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + dir.file("b.spz") + "' --codec kdtree --bits 12 --tile-triangles 4000 "
+                "--threads 64 --quiet", &out), 0);
+  EXPECT_EQ(out, "");
+}
+
 }  // namespace
 }  // namespace scanpress
