@@ -139,6 +139,7 @@ std::string settingsFingerprint(const EncodeSettings& s) {
   // Allowing degenerate triangles turns a failure into an output; written only when set, so the fingerprints of
   // earlier runs stay valid.
   if (s.allow_degenerate) key += "|allow_degenerate=1";
+  if (s.strict) key += "|strict";  // a complete output made without it may have dropped what strict refuses
   for (const StageSpec& st : s.stages) {  // every option of every stage changes the bytes
     key += "|stage=" + std::string(findStage(st.kind)->name);
     if (st.kind == StageKind::kSmooth) {
@@ -230,6 +231,10 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
     f.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     progress.clear();
     if (!options.quiet) {
+      if (f.has_result && !f.result.read.dropped.empty())
+        std::fprintf(stderr,
+                     "scanpress: warning: %s: dropped %s (not kept by scanpress; /strict fails instead)\n",
+                     f.input.c_str(), describeDropped(f.result.read.dropped).c_str());
       if (f.state == FileOutcome::State::kFailed) std::fprintf(stderr, "scanpress: error: %s\n", f.error.toString().c_str());
       else
         std::printf("%s -> %s: %llu triangles, %llu bytes, %.3f bpv, %zu tiles, %.2f s\n", f.input.c_str(),

@@ -17,6 +17,12 @@ Result<std::vector<const TileEntry*>> chooseTiles(const ContainerFile& file, con
                                                  const std::optional<std::vector<uint32_t>>& tiles) {
   std::vector<const TileEntry*> chosen;
   if (tiles) {
+    // A tile named twice would be decoded twice and welded with itself: refused rather than guessed at.
+    std::vector<uint32_t> sorted = *tiles;
+    std::sort(sorted.begin(), sorted.end());
+    if (auto dup = std::adjacent_find(sorted.begin(), sorted.end()); dup != sorted.end())
+      return makeError(ErrorCode::kInvalidArgument,
+                       path + ": tile " + std::to_string(*dup) + " is named twice");
     for (uint32_t id : *tiles) {
       const TileEntry* e = file.findTile(id);
       if (!e) return makeError(ErrorCode::kInvalidArgument, path + ": no tile with id " + std::to_string(id));
@@ -101,6 +107,9 @@ bool floatPositionsSuffice(const QuantizedMesh& mesh, const Grid& grid) {
 }
 
 Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
+  if (settings.level && settings.bytes)  // one would silently win over the other
+    return makeError(ErrorCode::kInvalidArgument,
+                     "--level and --bytes choose the level two ways: give one of them");
   SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(settings.input));
   SP_ASSIGN_OR_RETURN(auto chosen, chooseTiles(file, settings.input, settings.tiles));
   const ContainerHeader& header = file.header();

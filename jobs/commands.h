@@ -18,9 +18,10 @@ namespace scanpress {
 struct DecodeSettings {
   std::string input;
   std::string output;
-  std::optional<std::vector<uint32_t>> tiles;  // all tiles when empty
+  std::optional<std::vector<uint32_t>> tiles;  // all tiles when empty; each at most once
   std::optional<uint32_t> level;               // progressive codecs: decode this level (grid bits = lossless)
   std::optional<uint64_t> bytes;               // progressive codecs: the finest level within this many payload bytes
+                                               // (not with `level`)
 };
 
 struct DecodeResult {

@@ -196,8 +196,8 @@ bool validPattern(const std::string& p) {
 std::vector<std::string> knownConfigKeys() {
   return {"/inputs",          "/recursive",          "/output/directory", "/output/name",
           "/output/report",   "/output/summary",     "/codec/name",       "/codec/bits",
-          "/codec/normal_bits", "/codec/normals",    "/codec/colors",     "/codec/allow_degenerate", "/stages", "/tiling/target_triangles",
-          "/threads",         "/memory_budget_mb",   "/scratch_directory", "/resume",
+          "/codec/normal_bits", "/codec/normals",    "/codec/colors",     "/codec/allow_degenerate", "/stages",
+          "/tiling/target_triangles", "/strict", "/threads", "/memory_budget_mb", "/scratch_directory", "/resume",
           "/measure/enabled", "/measure/samples_per_triangle", "/measure/samples", "/measure/seed",
           "/measure/stratified", "/measure/vertices", "/measure/render", "/measure/render_size", "/measure/view"};
 }
@@ -272,6 +272,7 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
   s.encode.memory_budget = static_cast<uint64_t>(budget_mb) << 20;
   top.string("scratch_directory", s.encode.scratch_dir);
   top.boolean("resume", s.resume);
+  top.boolean("strict", s.encode.strict);
   top.finish();
   if (error.isOk() && s.inputs.empty()) top.fail("/inputs", "must name at least one file, directory or glob");
   for (size_t i = 0; error.isOk() && i < s.inputs.size(); ++i)
@@ -333,6 +334,10 @@ std::string completeReportFingerprint(const std::string& report_path) {
 }
 
 Result<JobSettings> loadJobConfig(const std::string& path) {
+  // A directory opens as a stream on Linux and reads as nothing ("invalid JSON: byte 1"): say what it is.
+  std::error_code ec;
+  if (fs::is_directory(path, ec))
+    return makeError(ErrorCode::kInvalidArgument, path + ": is a directory, not a job file");
   std::ifstream f(path, std::ios::binary);
   if (!f) return makeError(ErrorCode::kInvalidArgument, path + ": cannot open job file");
   std::stringstream ss;

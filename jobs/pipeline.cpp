@@ -2,6 +2,7 @@
 #include "jobs/pipeline.h"
 
 #include <oneapi/tbb/flow_graph.h>
+#include <oneapi/tbb/global_control.h>
 #include <oneapi/tbb/info.h>
 #include <oneapi/tbb/task_arena.h>
 
@@ -429,6 +430,12 @@ class ScanEncoder {
       in_flight = std::clamp<size_t>(s_.memory_budget / 4 / (target_ * kTileBytesPerTriangle), 1, in_flight);
     result_.tiles.resize(tile_count_);
 
+    // More threads than cores: oneTBB's worker limit defaults to the cores, and an arena asking for more
+    // printed "TBB Warning: The number of workers is currently limited to ..." on stderr (through --quiet
+    // too). The user asked for this many threads: allow them while the encode runs (at least the cores, so
+    // this never lowers the limit).
+    tbb::global_control allow_threads(tbb::global_control::max_allowed_parallelism,
+                                      std::max<size_t>(result_.threads, tbb::info::default_concurrency()));
     tbb::task_arena arena(result_.threads);
     arena.execute([&] {
       namespace flow = tbb::flow;
@@ -469,6 +476,23 @@ class ScanEncoder {
     result_.bytes = writer_->bytesWritten();
     result_.seconds.write = clock_.lap();
     result_.peak_rss = peakRss();
+    return Status::ok();
+  }
+
+  // After the survey: what the container will not keep. Normals and colors the settings drop are listed (not
+  // silent); what the reader skipped is silent unless reported, and under `strict` it fails the file before
+  // anything is written.
+  Status checkDrops() {
+    if (!s_.keep_normals && survey_.has_normals)
+      result_.dropped_on_request.push_back({"vertex normals", survey_.vertex_count});
+    if (!s_.keep_colors && survey_.colorChannels())
+      result_.dropped_on_request.push_back({"vertex colors", survey_.vertex_count});
+    if (s_.strict && !result_.read.dropped.empty())
+      return makeError(ErrorCode::kUnsupported,
+                       s_.input + ": strict: the container would not keep " +
+                           describeDropped(result_.read.dropped) +
+                           " (scanpress keeps positions, triangles, normals and colors; encode without "
+                           "--strict or /strict to drop them)");
     return Status::ok();
   }
 
@@ -605,6 +629,7 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
     if (!findStage(st.kind)) return makeError(ErrorCode::kInvalidArgument, "unknown stage");
   ScanEncoder encoder(s, *codec, progress, std::move(device), hooks);
   SP_RETURN_IF_ERROR(encoder.survey());
+  SP_RETURN_IF_ERROR(encoder.checkDrops());
   SP_RETURN_IF_ERROR(encoder.ingest());
   SP_RETURN_IF_ERROR(encoder.tile());
   SP_RETURN_IF_ERROR(encoder.encodeTiles());

@@ -50,6 +50,7 @@ struct EncodeSettings {
   MeasureSettings measure;           // error of the decoded result, per tile and overall
   std::vector<StageSpec> stages;     // geometry stages every tile runs before the codec, in order
   CodecOptions codec_options;        // the codec's typed options
+  bool strict = false;               // fail (kUnsupported) when the input holds anything the container drops
 };
 
 // The share of a mesh's triangles that quantization may make degenerate (two corners in one cell) and drop before
@@ -77,7 +78,8 @@ struct TileReport {
 };
 
 struct EncodeResult {
-  ReadStats read;
+  ReadStats read;  // read.dropped: what the input holds that scanpress does not keep (unsupported)
+  std::vector<DroppedProperty> dropped_on_request;  // normals and colors the settings dropped
   Grid grid;
   AttributeLayout layout;
   QuantizeStats quantize;

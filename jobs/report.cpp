@@ -51,6 +51,21 @@ json errorJson(const ErrorStats& f, const ErrorStats& b, double diagonal) {
           {"symmetric", errorSide(symmetricOf(f, b), diagonal)}};
 }
 
+// Two vertex counts describe one container: the distinct vertices encoded (the report's `vertices` and `bpv`)
+// and the vertices summed over tiles, a border vertex once per tile that holds it (the container header's
+// count, so `info`'s `vertices` and `bpv`, and the report's `tile_vertices`). Both documents say which is
+// which.
+const json kReportCounts = {
+    {"vertices", "distinct vertices encoded: input vertices that kept triangles use"},
+    {"tile_vertices", "vertices summed over tiles (a border vertex once per tile): info's vertices"},
+    {"bpv", "8 * bytes / vertices"},
+    {"bpv_tile_vertices", "8 * bytes / tile_vertices: info's bpv"}};
+const json kInfoCounts = {
+    {"vertices",
+     "vertices summed over tiles (a border vertex once per tile): an encode report's tile_vertices"},
+    {"bpv", "8 * bytes / vertices (summed over tiles): an encode report's bpv_tile_vertices; its bpv divides "
+            "by the distinct vertices"}};
+
 json layoutJson(const AttributeLayout& l) {
   return {{"normals", l.hasNormals()}, {"normal_bits", l.normal_bits}, {"color_channels", l.color_channels}};
 }
@@ -77,8 +92,18 @@ nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& 
   j["tile_vertices"] = r.tile_vertices;
   j["degenerate_triangles_dropped"] = r.quantize.degenerate_triangles;
   j["unreferenced_vertices_dropped"] = r.quantize.unreferenced_vertices;
+  // What the input holds that the container does not keep: unsupported by scanpress (yet), or dropped because
+  // the settings asked (--no-normals, --no-colors).
+  json dropped = json::array();
+  for (const auto& d : r.read.dropped)
+    dropped.push_back({{"name", d.name}, {"count", d.count}, {"reason", "unsupported"}});
+  for (const auto& d : r.dropped_on_request)
+    dropped.push_back({{"name", d.name}, {"count", d.count}, {"reason", "requested"}});
+  j["dropped"] = std::move(dropped);
   j["bytes"] = r.bytes;
   j["bpv"] = r.bitsPerVertex();
+  j["bpv_tile_vertices"] = r.tile_vertices ? 8.0 * r.bytes / r.tile_vertices : 0.0;  // `info`'s bpv
+  j["counts"] = kReportCounts;
   j["bits_per_triangle"] = r.faces ? 8.0 * r.bytes / r.faces : 0.0;
   j["threads"] = r.threads;
   j["memory_budget"] = settings.memory_budget;
@@ -168,6 +193,7 @@ std::string containerInfoJson(const ContainerFile& file) {
   j["faces"] = h.faces;
   j["bytes"] = file.size();
   j["bpv"] = h.vertices ? 8.0 * file.size() / h.vertices : 0.0;
+  j["counts"] = kInfoCounts;
   json tiles = json::array();
   // Progressive tiles list their levels (payload bytes needed for each, and what the level means, as the codec
   // states it); the container-wide list sums the bytes over tiles (a tile whose first level is coarser counts its
@@ -218,9 +244,10 @@ std::string containerInfoText(const ContainerFile& file) {
   os << file.path() << ": scanpress container v" << h.version << "\n"
      << "  grid:      " << h.grid.bits << " bits, cell " << h.grid.cell << ", origin (" << h.grid.origin[0] << ", "
      << h.grid.origin[1] << ", " << h.grid.origin[2] << ")\n"
-     << "  vertices:  " << h.vertices << "\n"
+     << "  vertices:  " << h.vertices << " (decoded, summed over tiles: a border vertex once per tile)\n"
      << "  faces:     " << h.faces << "\n"
-     << "  bytes:     " << file.size() << " (" << (h.vertices ? 8.0 * file.size() / h.vertices : 0.0) << " bpv)\n"
+     << "  bytes:     " << file.size() << " (" << (h.vertices ? 8.0 * file.size() / h.vertices : 0.0)
+     << " bpv over the vertices above; an encode report's bpv divides by the distinct vertices)\n"
      << "  normals:   " << (h.layout.hasNormals() ? std::to_string(h.layout.normal_bits) + "-bit octahedral" : "no")
      << "\n"
      << "  colors:    " << (h.layout.hasColors() ? std::to_string(h.layout.color_channels) + " channels" : "no")

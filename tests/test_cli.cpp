@@ -198,5 +198,111 @@ TEST(Cli, FullDiskLeavesNothingBehind) {
   EXPECT_EQ(temporaries(dir.path()), 0);
 }
 
+// An OBJ with texture coordinates, materials and normals (a small quad).
+const char* kTexturedObj =
+    "mtllib quad.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
+    "usemtl paint\nf 1/1/1 2/2/1 3/3/1 4/4/1\n";
+
+// Lines of `out` that contain `what`.
+int linesWith(const std::string& out, const std::string& what) {
+  int n = 0;
+  for (size_t at = 0; (at = out.find(what, at)) != std::string::npos; at += what.size()) ++n;
+  return n;
+}
+
+// What the reader skips is named: one warning line, the report's `dropped` array, and with --strict a failure
+// (exit 2, nothing written). Normals dropped on request are listed in the report, not warned about.
+TEST(Cli, DroppedDataIsWarnedReportedAndFailsUnderStrict) {
+  testing::TempDir dir;
+  const std::string in = dir.file("quad.obj");
+  testing::writeBytes(in, kTexturedObj);
+  std::string out;
+  ASSERT_EQ(run("encode '" + in + "' '" + dir.file("q.spz") + "' --report '" + dir.file("r.json") + "'", &out), 0)
+      << out;
+  EXPECT_EQ(linesWith(out, "warning"), 1) << out;
+  EXPECT_NE(out.find("scanpress: warning: dropped obj mtllib x 1, obj vt x 4, obj usemtl x 1 "), std::string::npos)
+      << out;
+  auto report = nlohmann::json::parse(std::ifstream(dir.file("r.json")));
+  EXPECT_EQ(report["dropped"], nlohmann::json::parse(R"([{"name": "obj mtllib", "count": 1, "reason": "unsupported"},
+      {"name": "obj vt", "count": 4, "reason": "unsupported"}, {"name": "obj usemtl", "count": 1,
+      "reason": "unsupported"}])"));
+
+  ASSERT_EQ(run("encode '" + in + "' '" + dir.file("q.spz") + "' --quiet", &out), 0) << out;
+  EXPECT_EQ(out, "");  // --quiet: nothing, the warning included (the report still lists the drops)
+
+  EXPECT_EQ(run("encode '" + in + "' '" + dir.file("s.spz") + "' --strict", &out), 2) << out;
+  EXPECT_NE(out.find("quad.obj: strict: the container would not keep obj mtllib x 1, obj vt x 4, obj usemtl x 1"),
+            std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir.file("s.spz")));
+
+  // Nothing unsupported: --strict encodes; --no-normals is listed as requested and warned about by nobody.
+  testing::writeBytes(in, "v 0 0 0\nv 1 0 0\nv 1 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n");
+  ASSERT_EQ(run("encode '" + in + "' '" + dir.file("s.spz") + "' --strict --no-normals --report '" +
+                    dir.file("r.json") + "'", &out), 0) << out;
+  EXPECT_EQ(linesWith(out, "warning"), 0) << out;
+  report = nlohmann::json::parse(std::ifstream(dir.file("r.json")));
+  EXPECT_EQ(report["dropped"],
+            nlohmann::json::parse(R"([{"name": "vertex normals", "count": 3, "reason": "requested"}])"));
+}
+
+// The bunny's confidence and intensity, through the CLI: named in the warning and the report.
+TEST(Cli, BundledScanDropsAreNamed) {
+  testing::TempDir dir;
+  std::string out;
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + dir.file("b.spz") + "' --report '" + dir.file("r.json") + "'", &out), 0)
+      << out;
+  EXPECT_NE(out.find("scanpress: warning: dropped vertex.confidence x 35947, vertex.intensity x 35947"),
+            std::string::npos) << out;
+  const auto report = nlohmann::json::parse(std::ifstream(dir.file("r.json")));
+  ASSERT_EQ(report["dropped"].size(), 2u);
+  EXPECT_EQ(report["dropped"][1]["name"], "vertex.intensity");
+  EXPECT_EQ(run("encode '" + kBunny + "' '" + dir.file("c.spz") + "' --strict", &out), 2);
+  EXPECT_NE(out.find("vertex.confidence x 35947, vertex.intensity x 35947"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir.file("c.spz")));
+}
+
+// decode: a tile named twice, and --level with --bytes, are usage errors (one of each silently won before).
+TEST(Cli, DecodeRefusesDuplicateTilesAndTwoLevelChoices) {
+  testing::TempDir dir;
+  std::string out;
+  const std::string spz = dir.file("b.spz");
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + spz + "' --codec kdtree --bits 12 --quiet", &out), 0) << out;
+  EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --tiles 0,0", &out), 1);
+  EXPECT_NE(out.find("tile 0 is named twice"), std::string::npos) << out;
+  EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --level 6 --bytes 100000", &out), 1);
+  EXPECT_NE(out.find("--level and --bytes"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir.file("x.ply")));
+  ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --tiles 0 --level 6", &out), 0) << out;
+}
+
+// `info` counts vertices summed over tiles, the report distinct vertices: both say which is which, and the
+// report's bpv_tile_vertices is info's bpv.
+TEST(Cli, InfoAndReportSayWhichVertexCountTheyUse) {
+  testing::TempDir dir;
+  std::string out;
+  const std::string spz = dir.file("b.spz");
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + spz + "' --tile-triangles 8000 --quiet --report '" +
+                    dir.file("r.json") + "'", &out), 0) << out;
+  const auto report = nlohmann::json::parse(std::ifstream(dir.file("r.json")));
+  ASSERT_EQ(run("info '" + spz + "' --json", &out), 0) << out;
+  const auto info = nlohmann::json::parse(out);
+  EXPECT_GT(report["tile_vertices"].get<uint64_t>(), report["vertices"].get<uint64_t>());  // several tiles
+  EXPECT_EQ(info["vertices"], report["tile_vertices"]);
+  EXPECT_DOUBLE_EQ(info["bpv"].get<double>(), report["bpv_tile_vertices"].get<double>());
+  EXPECT_TRUE(report["counts"].contains("vertices"));
+  EXPECT_TRUE(info["counts"].contains("vertices"));
+  ASSERT_EQ(run("info '" + spz + "'", &out), 0) << out;
+  EXPECT_NE(out.find(" (decoded, summed over tiles: a border vertex once per tile)"), std::string::npos) << out;
+}
+
+// --quiet prints nothing, whatever the thread count (oneTBB warned about more threads than cores).
+TEST(Cli, QuietIsQuietWithMoreThreadsThanCores) {
+  testing::TempDir dir;
+  std::string out;
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + dir.file("b.spz") + "' --codec kdtree --bits 12 --tile-triangles 4000 "
+                "--threads 64 --quiet", &out), 0);
+  EXPECT_EQ(out, "");
+}
+
 }  // namespace
 }  // namespace scanpress

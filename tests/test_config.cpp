@@ -248,5 +248,58 @@ TEST(Batch, OutputNames) {
   EXPECT_EQ(outputName("x-{stem}-{stem}.spz", "scan.stl"), "x-scan-scan.spz");
 }
 
+// /strict: an input holding what the container would not keep fails (exit 2, naming it); the others run; the
+// setting is part of the resume fingerprint (a complete output made without it is redone, and fails).
+TEST(Batch, StrictFailsInputsThatWouldDropData) {
+  testing::TempDir dir;
+  fs::create_directories(dir.file("scans"));
+  testing::writeBytes(dir.file("scans/tex.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/1 3/1\n");
+  ASSERT_TRUE(writeObj(dir.file("scans/octa.obj"), testing::octahedron()).isOk());
+  const std::string job = dir.file("job.json");
+  auto writeJob = [&](bool strict) {
+    testing::writeBytes(job, std::string("{\"inputs\": [\"scans\"], \"output\": {\"directory\": \"out\"}, ") +
+                                 "\"strict\": " + (strict ? "true" : "false") + "}");
+  };
+  writeJob(false);
+  std::string out;
+  EXPECT_EQ(run("run '" + job + "'", &out), 0) << out;
+  EXPECT_NE(out.find("scanpress: warning: " + dir.file("scans/tex.obj") + ": dropped obj vt x 1"), std::string::npos)
+      << out;
+  auto report = nlohmann::json::parse(slurp(dir.file("out/tex.report.json")));
+  ASSERT_EQ(report["dropped"].size(), 1u);
+
+  writeJob(true);
+  EXPECT_EQ(run("run '" + job + "' --quiet", &out), 2) << out;
+  const auto summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  for (const auto& f : summary["files"]) {
+    const std::string name = fs::path(f["input"].get<std::string>()).filename();
+    if (name == "tex.obj") {
+      EXPECT_EQ(f["status"], "failed");
+      EXPECT_EQ(f["exit_code"], 2);
+      EXPECT_NE(f["error"].get<std::string>().find("strict: the container would not keep obj vt x 1"),
+                std::string::npos) << f["error"];
+    } else {
+      EXPECT_EQ(f["status"], "ok") << name;  // redone: strict is in the fingerprint
+    }
+  }
+  auto settings = loadJobConfig(job);
+  ASSERT_TRUE(settings.isOk());
+  EXPECT_TRUE(settings->encode.strict);
+  EncodeSettings lax = settings->encode;
+  lax.input = dir.file("scans/octa.obj");
+  EncodeSettings strict = lax;
+  lax.strict = false;
+  EXPECT_NE(settingsFingerprint(lax), settingsFingerprint(strict));
+}
+
+// A job path that is a directory says so (it read as "invalid JSON: byte 1").
+TEST(JobConfig, ADirectoryIsNotAJobFile) {
+  testing::TempDir dir;
+  std::string out;
+  EXPECT_EQ(run("run '" + dir.path() + "'", &out), 1);
+  EXPECT_NE(out.find(dir.path() + ": is a directory, not a job file"), std::string::npos) << out;
+  EXPECT_EQ(out.find("invalid JSON"), std::string::npos) << out;
+}
+
 }  // namespace
 }  // namespace scanpress

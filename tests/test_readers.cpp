@@ -5,9 +5,10 @@
 #include <algorithm>
 #include <cstring>
 
+#include "jobs/mesh_io/input.h"
 #include "jobs/mesh_io/mesh_reader.h"
 #include "jobs/mesh_io/mesh_writer.h"
-#include "test_util.h"
+#include "jobs_util.h"
 
 namespace scanpress {
 namespace {
@@ -245,4 +246,174 @@ TEST(Writers, PlyAndObjRoundTripThroughReaders) {
 }
 
 }  // namespace
+// ---- nothing dropped silently ------------------------------------------------------------------------------
+
+std::string droppedText(const ReadStats& stats) { return describeDropped(stats.dropped); }
+
+// Counts what a reader delivers, keeping nothing (for the large scans).
+class CountingSink : public MeshSink {
+ public:
+  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f>, std::span<const Rgba8>, uint8_t) override {
+    return vertices_ += p.size(), Status::ok();
+  }
+  Status triangles(std::span<const Triangle> t) override { return triangles_ += t.size(), Status::ok(); }
+  Status vertexNormals(uint64_t, std::span<const Vec3f>) override { return Status::ok(); }
+  uint64_t vertices_ = 0, triangles_ = 0;
+};
+
+TEST(Readers, PlyListsEverySkippedPropertyAndElement) {
+  TempDir dir;
+  const std::string p = dir.file("a.ply");
+  writeBytes(p,
+             "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float confidence\n"
+             "property float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n"
+             "property list uchar float texcoord\nelement face 1\nproperty uchar flags\n"
+             "property list uchar int vertex_indices\nproperty float quality\nelement camera 1\nproperty float f\n"
+             "element empty 0\nproperty float g\nend_header\n"
+             "0 0.5 0 0 1 2 3 2 0.1 0.2\n1 0.5 0 0 1 2 3 0\n7 3 0 1 1 0.25\n1.5\n");
+  ReadStats stats;
+  Mesh m = readOk(p, &stats);
+  EXPECT_EQ(m.triangles.size(), 1u);
+  // Kept roles (x, y, z, colors, indices) are not listed; an element with no records drops nothing.
+  EXPECT_EQ(droppedText(stats),
+            "vertex.confidence x 2, vertex.texcoord x 2, face.flags x 1, face.quality x 1, element camera x 1");
+}
+
+TEST(Readers, ObjListsTextureCoordinatesMaterialsAndOtherRecords) {
+  TempDir dir;
+  const std::string p = dir.file("m.obj");
+  writeBytes(p,
+             "# comment\nmtllib x.mtl\no thing\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0 0.5\nvt 0 0\nvt 1 0\nvt 1 1\n"
+             "vn 0 0 1\nvn 0 0 -1\nvn 1 0 0\ns off\nusemtl a\nf 1/1/1 2/2/1 3/3/1\nusemtl b\ns 1\n"
+             "f 1/1/2 3/3/2 4/1/2\n");
+  ReadStats stats;
+  Mesh m = readOk(p, &stats);
+  EXPECT_EQ(m.triangles.size(), 2u);
+  // "s off" states nothing; vn 3 is named by no face; vertices 1 and 3 have normal 1, then a corner names 2.
+  EXPECT_EQ(droppedText(stats),
+            "obj mtllib x 1, obj o x 1, obj vt x 3, obj usemtl x 2, obj s x 1, obj vn unused x 1, "
+            "obj vn per corner x 2, obj v w x 1");
+
+  // A plain OBJ drops nothing.
+  writeBytes(p, "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n");
+  readOk(p, &stats);
+  EXPECT_TRUE(stats.dropped.empty()) << droppedText(stats);
+
+  // Distinct keywords are capped: a hostile file cannot grow the list without bound.
+  std::string many = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+  for (int i = 0; i < 1000; ++i) many += "kw" + std::to_string(i) + " 1\n";
+  writeBytes(p, many);
+  readOk(p, &stats);
+  ASSERT_EQ(stats.dropped.size(), 33u);
+  EXPECT_EQ(stats.dropped.back().name, "obj records of other kinds");
+  EXPECT_EQ(stats.dropped.back().count, 968u);
+}
+
+TEST(Readers, OffListsFaceColorsAndStlFacetAttributes) {
+  TempDir dir;
+  const std::string p = dir.file("m.off");
+  writeBytes(p, "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0 9\n3 0 1 2\n4 0 1 2 3 255 0 0\n");
+  ReadStats stats;
+  readOk(p, &stats);
+  EXPECT_EQ(droppedText(stats), "off vertex extra values x 1, off face colors x 1");
+  writeBytes(p, "COFF 3 1 0\n0 0 0 255 0 0 255\n1 0 0 0 255 0\n0 1 0 0 0 255\n3 0 1 2\n");
+  readOk(p, &stats);
+  EXPECT_TRUE(stats.dropped.empty()) << droppedText(stats);
+
+  const std::string b = dir.file("b.stl");
+  std::string s(80, ' ');
+  s += bin<uint32_t>(2);
+  const float tris[2][9] = {{0, 0, 0, 1, 0, 0, 0, 1, 0}, {1, 0, 0, 1, 1, 0, 0, 1, 0}};
+  for (int i = 0; i < 2; ++i) {
+    s += std::string(12, '\0');
+    for (float c : tris[i]) s += bin<float>(c);
+    s += bin<uint16_t>(i == 0 ? 0x7C00 : 0);  // a VisCAM color on the first facet
+  }
+  writeBytes(b, s);
+  readOk(b, &stats);
+  EXPECT_EQ(droppedText(stats), "stl facet attribute x 1");
+}
+
+// The real scans: bun_zipper's confidence and intensity, lato000's camera element and vertex and face flags and
+// quality, horse's confidence.
+TEST(Readers, ScansListWhatTheyDrop) {
+  const std::string data = testing::sharedDataDir();
+  if (!std::filesystem::exists(data + "/lato000.ply.zst")) GTEST_SKIP() << "no " << data;
+  const std::pair<const char*, const char*> cases[] = {
+      {"bun_zipper.ply.zst", "vertex.confidence x 35947, vertex.intensity x 35947"},
+      {"lato000.ply.zst",
+       "element camera x 1, vertex.flags x 44461, vertex.quality x 44461, face.flags x 86766, face.quality x 86766"},
+      {"horse.ply.zst", "vertex.confidence x 48485"},
+      {"igea.ply.zst", ""}};
+  for (const auto& [name, expected] : cases) {
+    CountingSink sink;
+    auto stats = readMesh(data + "/" + name, sink);
+    ASSERT_TRUE(stats.isOk()) << stats.status().toString();
+    EXPECT_EQ(droppedText(*stats), expected) << name;
+  }
+}
+
+// ---- declared counts and limits ------------------------------------------------------------------------------
+
+// A binary STL whose header declares fewer triangles than the file holds would lose the rest without a word.
+TEST(StlReader, BinaryDataPastTheDeclaredCountIsMalformed) {
+  TempDir dir;
+  const std::string b = dir.file("b.stl");
+  std::string s(80, ' ');
+  s += bin<uint32_t>(1);
+  for (int i = 0; i < 3; ++i) {
+    s += std::string(12, '\0');
+    for (float c : {0.f, 0.f, float(i), 1.f, 0.f, float(i), 0.f, 1.f, float(i)}) s += bin<float>(c);
+    s += std::string(2, '\0');
+  }
+  writeBytes(b, s);
+  auto r = readMeshFile(b);
+  ASSERT_FALSE(r.isOk());
+  EXPECT_EQ(r.status().code(), ErrorCode::kMalformed);
+  EXPECT_EQ(r.status().message(),
+            b + ": byte 134: binary STL declares 1 triangles, which end at byte 134, but the data goes on to byte "
+                "234 (100 more bytes, 2 triangles and 0 bytes): the triangle count in the header is wrong");
+  s.resize(s.size() - 7);
+  writeBytes(b, s);
+  r = readMeshFile(b);
+  ASSERT_FALSE(r.isOk());
+  EXPECT_NE(r.status().message().find("93 more bytes, 1 triangles and 43 bytes"), std::string::npos)
+      << r.status().toString();
+  // Compressed without a content size in the frame (streamed): still caught, at its decompressed offset.
+  ZSTD_CCtx* cctx = ZSTD_createCCtx();
+  ZSTD_CCtx_setParameter(cctx, ZSTD_c_contentSizeFlag, 0);
+  std::string packed(ZSTD_compressBound(s.size()) + 64, '\0');
+  ZSTD_outBuffer out{packed.data(), packed.size(), 0};
+  ZSTD_inBuffer in{s.data(), s.size(), 0};
+  ASSERT_EQ(ZSTD_compressStream2(cctx, &out, &in, ZSTD_e_end), 0u);
+  ZSTD_freeCCtx(cctx);
+  packed.resize(out.pos);
+  writeBytes(b + ".zst", packed);
+  r = readMeshFile(b + ".zst");
+  ASSERT_FALSE(r.isOk());
+  EXPECT_EQ(r.status().message(), b + ".zst: byte 134 of the decompressed data: binary STL declares 1 triangles, "
+                                      "which end at byte 134, but the data goes on: the triangle count in the "
+                                      "header is wrong");
+}
+
+// The 16 MiB line limit of the text readers holds for every line, also one the buffer could hold and the last one.
+TEST(Readers, TextLinesLongerThan16MiBFailNamingTheLine) {
+  TempDir dir;
+  const std::string p = dir.file("long.obj");
+  const std::string long_comment = "#" + std::string(Scanner::kMaxLine, 'x');  // one byte past the limit
+  writeBytes(p, "v 0 0 0\n" + long_comment + "\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  auto r = readMeshFile(p);
+  ASSERT_FALSE(r.isOk());
+  EXPECT_EQ(r.status().code(), ErrorCode::kLimitExceeded);
+  EXPECT_EQ(r.status().message(), p + ":2: line longer than 16 MiB (the limit for text formats)");
+  writeBytes(p, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n" + long_comment);  // the last line, unterminated
+  r = readMeshFile(p);
+  ASSERT_FALSE(r.isOk());
+  EXPECT_EQ(r.status().message(), p + ":5: line longer than 16 MiB (the limit for text formats)");
+  writeBytes(p, "v 0 0 0\n" + long_comment.substr(1) + "\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");  // at the limit: fine
+  ReadStats stats;
+  readOk(p, &stats);
+  EXPECT_EQ(droppedText(stats), "obj records of other kinds x 1");  // a long keyword is not kept as a name
+}
+
 }  // namespace scanpress

@@ -63,6 +63,10 @@ options:
   --no-colors         drop colors
   --allow-degenerate  keep going when quantization makes more than 0.1%% of the triangles degenerate (they are
                       dropped); without it such a scan fails with exit 2 (raise --bits instead)
+  --strict            fail (exit 2) when the input holds anything the container would not keep
+                      (texture coordinates, materials, per-vertex scalars such as confidence, per-face
+                      properties, extra PLY elements); without it they are dropped with one warning and
+                      listed in the report
   --tile-triangles N  target triangles per tile (default 131072; tiles adapt to density around it)
   --threads N         worker threads (default: all cores); the output is the same at any count
   --memory-budget S   bound the memory for tile data, e.g. 512M, 2GiB or 1.5G (units K, M, G, T of 1024;
@@ -71,7 +75,7 @@ options:
   --measure           measure the error of the decoded result (per tile and overall) into the report
   --samples-per-triangle X   measurement sampling density (default 2)
   --report R.json     write a JSON report (counts, bytes, bits per vertex, seconds per stage, tiles, error)
-  --quiet             print nothing on success (progress shows only on a terminal anyway)
+  --quiet             print nothing on success, warnings included (progress shows only on a terminal anyway)
 )";
 
 constexpr const char* kRunHelp = R"(usage: scanpress run JOB.json [options]
@@ -247,7 +251,8 @@ int runEncode(int argc, char** argv) {
   if (!parseArgs(argc, argv, 2,
                  {"--codec", "--stages", "--bits", "--normal-bits", "--report", "--tile-triangles", "--threads",
                   "--memory-budget", "--scratch-dir", "--samples-per-triangle"},
-                 {"--no-normals", "--no-colors", "--allow-degenerate", "--measure", "--quiet", "--help"}, args, error))
+                 {"--no-normals", "--no-colors", "--allow-degenerate", "--strict", "--measure", "--quiet", "--help"},
+                 args, error))
     return usage(error, "encode");
   if (args.has("--help")) {
     std::printf(kEncodeHelp, codecList().c_str(), stageNames().c_str());
@@ -270,6 +275,7 @@ int runEncode(int argc, char** argv) {
   s.keep_normals = !args.has("--no-normals");
   s.keep_colors = !args.has("--no-colors");
   s.allow_degenerate = args.has("--allow-degenerate");
+  s.strict = args.has("--strict");
   if (!integerOption(args, "--tile-triangles", kMinTileTriangles, kMaxTileTriangles, s.tile_triangles,
                      error) ||
       !integerOption(args, "--threads", 0, 4096, s.threads, error) ||
@@ -288,6 +294,9 @@ int runEncode(int argc, char** argv) {
   auto result = encodeFile(s, progress.enabled() ? &progress : nullptr);
   progress.clear();
   if (!result.isOk()) return fail(result.status());
+  if (!args.has("--quiet") && !result->read.dropped.empty())
+    std::fprintf(stderr, "scanpress: warning: dropped %s (not kept by scanpress; --strict fails instead)\n",
+                 describeDropped(result->read.dropped).c_str());
   if (const auto* report = args.get("--report")) {
     const std::string text = encodeReportJson(s, *result, settingsFingerprint(s));
     Status w = writeFileAtomically(*report, std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()));

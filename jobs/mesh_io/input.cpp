@@ -120,6 +120,14 @@ Status Scanner::errorAtLine(ErrorCode code, const std::string& message) const {
   return makeError(code, name_ + ":" + std::to_string(std::max<uint64_t>(line_, 1)) + ": " + message);
 }
 
+// The line being read is the one after the last returned; the limit applies to every line, the last one (with no
+// terminator) included, whatever the buffer happened to hold.
+Status Scanner::lineTooLong() const {
+  return makeError(ErrorCode::kLimitExceeded, name_ + ":" + std::to_string(line_ + 1) + ": line longer than " +
+                                                  std::to_string(kMaxLine >> 20) +
+                                                  " MiB (the limit for text formats)");
+}
+
 Result<bool> Scanner::fill() {
   if (eof_) return false;
   if (pos_ > 0) {  // move the unread tail to the front
@@ -180,6 +188,7 @@ Result<bool> Scanner::nextLine(std::string_view& line) {
         break;
       }
     if (hit) {
+      if (i - pos_ > kMaxLine) return lineTooLong();
       line = std::string_view(reinterpret_cast<const char*>(buf_.data() + pos_), i - pos_);
       if (buf_[i] == '\r') skip_lf_ = true;
       pos_ = i + 1;
@@ -187,11 +196,12 @@ Result<bool> Scanner::nextLine(std::string_view& line) {
       return true;
     }
     const size_t scanned = end_ - pos_;
-    if (scanned > kMaxLine) return errorAtLine(ErrorCode::kLimitExceeded, "line longer than 16 MiB");
+    if (scanned > kMaxLine) return lineTooLong();
     SP_ASSIGN_OR_RETURN(bool more, fill());
     scan = pos_ + scanned;
     if (!more) {
       if (pos_ == end_) return false;
+      if (end_ - pos_ > kMaxLine) return lineTooLong();
       line = std::string_view(reinterpret_cast<const char*>(buf_.data() + pos_), end_ - pos_);
       pos_ = end_;
       ++line_;

@@ -36,6 +36,7 @@ class Scanner {
   uint64_t offset() const { return consumed_ + pos_; }
   uint64_t line() const { return line_; }
   std::optional<uint64_t> contentSize() const { return source_->contentSize(); }
+  bool compressedInput() const { return source_->compressed(); }
   // Bytes left when the size is known in advance.
   std::optional<uint64_t> remaining() const {
     auto s = contentSize();
@@ -68,6 +69,7 @@ class Scanner {
 
  private:
   Status readSlow(uint8_t* dst, size_t n);
+  Status lineTooLong() const;
   Result<bool> fill();  // makes more bytes available; false at end of input
 
   std::unique_ptr<InputSource> source_;

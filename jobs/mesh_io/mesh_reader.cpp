@@ -26,6 +26,12 @@ Status ChunkBuffer::flushTriangles() {
   return s;
 }
 
+std::string describeDropped(std::span<const DroppedProperty> dropped) {
+  std::string s;
+  for (const auto& d : dropped) s += (s.empty() ? "" : ", ") + d.name + " x " + std::to_string(d.count);
+  return s;
+}
+
 MeshFormat formatFromName(const std::string& path) {
   std::string name = path;
   for (auto& ch : name) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));

@@ -7,6 +7,9 @@
 // present, come with their vertices (OBJ only: normals that faces assign to vertices arrive at the end through
 // vertexNormals). Polygons are fan-triangulated.
 //
+// Nothing is dropped silently: every property, element or record a reader skips is listed in ReadStats::dropped
+// by name and count (per-vertex scalars, per-face properties, extra PLY elements, OBJ vt/mtllib/usemtl, ...).
+//
 // Errors name the file and the line (text formats) or byte offset (binary formats; for compressed files, the
 // offset in the decompressed data). Malformed input fails with kMalformed or kTruncated, never a crash; declared
 // counts are never trusted for allocation.
@@ -15,6 +18,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "engine/mesh.h"
 #include "engine/status.h"
@@ -27,6 +31,17 @@ struct ReadOptions {
   size_t chunk = 1u << 16;  // vertices or triangles per sink call
 };
 
+// Something the file holds that scanpress does not keep (yet): a PLY property or element, OBJ texture coordinates
+// or materials. `name` says what ("vertex.confidence", "face.quality", "element camera", "obj vt", "obj usemtl"),
+// `count` how many values or records were dropped.
+struct DroppedProperty {
+  std::string name;
+  uint64_t count = 0;
+};
+
+// "vertex.confidence x 35947, element camera x 1": for warnings and errors.
+std::string describeDropped(std::span<const DroppedProperty> dropped);
+
 struct ReadStats {
   MeshFormat format = MeshFormat::kUnknown;
   std::string format_detail;  // e.g. "PLY binary_big_endian", "STL ascii"
@@ -34,6 +49,7 @@ struct ReadStats {
   uint64_t triangles = 0;     // triangles delivered (after triangulation)
   uint64_t polygons = 0;      // faces with more than 3 corners that were triangulated
   uint64_t source_vertices = 0;  // vertex records in the file (STL: 3 per facet)
+  std::vector<DroppedProperty> dropped;  // what the reader read past, in file order (empty: nothing)
 };
 
 class MeshSink {

@@ -1,7 +1,11 @@
 // Wavefront OBJ reader: `v x y z [w | r g b [a]]`, `vn`, `f` with corners `a`, `a/b`, `a//c`, `a/b/c`, negative
 // (relative) indices, polygons (fan-triangulated). Every other record (vt, g, o, s, usemtl, mtllib, l, p, ...)
-// is ignored. A vertex's normal is the `vn` its first face corner names; those arrive at the end (vertexNormals)
-// because OBJ states them only in faces.
+// is skipped and listed in ReadStats::dropped as "obj KEYWORD" with its count ("s off" and "s 0" state nothing
+// and are not listed). A vertex's normal is the `vn` its first face corner names; those arrive at the end
+// (vertexNormals) because OBJ states them only in faces. Also listed: `vn` records no face names ("obj vn
+// unused"), face corners naming another normal than their vertex's first one ("obj vn per corner"), `v`
+// weights other than 1 ("obj v w") and `v` colors after a first `v` without them ("obj v colors").
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -24,6 +28,36 @@ bool resolveIndex(int64_t raw, uint64_t count, uint32_t& out) {
   return true;
 }
 
+// Counts of skipped records by keyword, in order of first appearance; distinct keywords and their length are
+// capped so that a hostile file cannot grow the list without bound (the rest count as "other kinds").
+class SkippedRecords {
+ public:
+  void add(std::string_view keyword) {
+    for (auto& d : list_)
+      if (d.name.size() == 4 + keyword.size() && d.name.compare(4, std::string::npos, keyword) == 0) {
+        ++d.count;
+        return;
+      }
+    if (list_.size() < kMaxKeywords && keyword.size() <= kMaxKeywordLength) {
+      list_.push_back({"obj " + std::string(keyword), 1});
+      return;
+    }
+    ++other_;
+  }
+  // The list for ReadStats::dropped, `extra` appended.
+  std::vector<DroppedProperty> take(std::vector<DroppedProperty> extra) {
+    if (other_) list_.push_back({"obj records of other kinds", other_});
+    for (auto& d : extra)
+      if (d.count) list_.push_back(std::move(d));
+    return std::move(list_);
+  }
+
+ private:
+  static constexpr size_t kMaxKeywords = 32, kMaxKeywordLength = 32;
+  std::vector<DroppedProperty> list_;
+  uint64_t other_ = 0;
+};
+
 }  // namespace
 
 Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& options) {
@@ -39,6 +73,9 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
   std::vector<uint32_t> poly_normals;
   std::string_view line;
   uint64_t vertex_count = 0;
+  SkippedRecords skipped;
+  std::vector<bool> vn_used;  // per `vn`: named by a face corner
+  uint64_t weights = 0, late_colors = 0, corner_normals = 0;
   for (;;) {
     SP_ASSIGN_OR_RETURN(bool got, in.nextLine(line));
     if (!got) break;
@@ -63,6 +100,8 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
         channels = (n >= 6) ? (n == 7 ? 4 : 3) : 0;
         out.emplace(sink, options.chunk, channels, false);
       }
+      if (n == 4 && c[3] != 1.0) ++weights;
+      if (n >= 6 && channels == 0) ++late_colors;
       Rgba8 col{255, 255, 255, 255};
       if (n >= 6)
         for (int k = 0; k < n - 3 && k < 4; ++k) {
@@ -81,6 +120,7 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
           return in.errorAtLine(ErrorCode::kMalformed, "'vn' record needs three finite numbers");
       if (vn.size() >= kMaxVertices) return in.errorAtLine(ErrorCode::kLimitExceeded, "too many 'vn' records");
       vn.push_back({static_cast<float>(c[0]), static_cast<float>(c[1]), static_cast<float>(c[2])});
+      vn_used.push_back(false);
     } else if (word == "f") {
       poly.clear();
       poly_normals.clear();
@@ -118,9 +158,16 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
       for (size_t i = 1; i + 1 < poly.size(); ++i) SP_RETURN_IF_ERROR(out->addTriangle({poly[0], poly[i], poly[i + 1]}));
       for (size_t i = 0; i < poly.size(); ++i) {
         if (poly_normals[i] == UINT32_MAX) continue;
+        vn_used[poly_normals[i]] = true;
         if (vertex_normal.size() <= poly[i]) vertex_normal.resize(poly[i] + 1, UINT32_MAX);
         if (vertex_normal[poly[i]] == UINT32_MAX) vertex_normal[poly[i]] = poly_normals[i];
+        else if (vertex_normal[poly[i]] != poly_normals[i]) ++corner_normals;
       }
+    } else if (word == "s") {
+      std::string_view t;
+      if (!tok.next(t) || !(t == "off" || t == "0")) skipped.add(word);
+    } else {
+      skipped.add(word);
     }
   }
   if (out) SP_RETURN_IF_ERROR(out->flush());
@@ -135,6 +182,11 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
       SP_RETURN_IF_ERROR(sink.vertexNormals(first, chunk));
     }
   }
+  const uint64_t vn_unused = static_cast<uint64_t>(std::count(vn_used.begin(), vn_used.end(), false));
+  stats.dropped = skipped.take({{"obj vn unused", vn_unused},
+                                {"obj vn per corner", corner_normals},
+                                {"obj v w", weights},
+                                {"obj v colors", late_colors}});
   stats.vertices = stats.source_vertices = vertex_count;
   stats.triangles = out ? out->triangles() : 0;
   return stats;

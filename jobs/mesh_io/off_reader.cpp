@@ -1,5 +1,7 @@
 // OFF reader: headers OFF, COFF (colors), NOFF (normals), CNOFF; counts on the header line or the next one;
-// `#` comments; faces `n i1 .. in [color]` (fan-triangulated). Binary OFF is not supported (clear error).
+// `#` comments; faces `n i1 .. in [color]` (fan-triangulated; face colors, and vertex values past those kept, are
+// listed in ReadStats::dropped). Binary OFF is not supported (clear error).
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -61,6 +63,7 @@ Result<ReadStats> readOff(Scanner& in, MeshSink& sink, const ReadOptions& option
                                                      std::to_string(nf) + " faces, but only " +
                                                      std::to_string(*left) + " bytes remain");
   ChunkBuffer out(sink, options.chunk, colors ? 4 : 0, normals);
+  uint64_t vertex_extra = 0, face_extra = 0;  // lines with values past what is kept (ReadStats::dropped)
   for (uint64_t v = 0; v < nv; ++v) {
     SP_ASSIGN_OR_RETURN(got, meaningful(line));
     if (!got) return in.errorAtLine(ErrorCode::kTruncated, "OFF file ends after " + std::to_string(v) + " vertices");
@@ -78,6 +81,8 @@ Result<ReadStats> readOff(Scanner& in, MeshSink& sink, const ReadOptions& option
     if (n < need) return in.errorAtLine(ErrorCode::kMalformed, "vertex line has " + std::to_string(n) + " numbers");
     for (int k = 0; k < 3 + (normals ? 3 : 0); ++k)
       if (!std::isfinite(c[k])) return in.errorAtLine(ErrorCode::kMalformed, "NaN or infinite value");
+    const int used = colors ? std::min(n, need + 1) : need;  // a fourth color value is alpha
+    if (n > used || vt.next(t)) ++vertex_extra;
     Vec3f nrm{0, 0, 0};
     if (normals) nrm = {static_cast<float>(c[3]), static_cast<float>(c[4]), static_cast<float>(c[5])};
     Rgba8 col{255, 255, 255, 255};
@@ -112,10 +117,13 @@ Result<ReadStats> readOff(Scanner& in, MeshSink& sink, const ReadOptions& option
         return in.errorAtLine(ErrorCode::kMalformed, "vertex index " + std::to_string(idx) + " out of range");
       poly.push_back(static_cast<uint32_t>(idx));
     }
+    if (ft.next(t)) ++face_extra;  // a face color (or anything else after the indices)
     if (n > 3) ++stats.polygons;
     for (size_t i = 1; i + 1 < poly.size(); ++i) SP_RETURN_IF_ERROR(out.addTriangle({poly[0], poly[i], poly[i + 1]}));
   }
   SP_RETURN_IF_ERROR(out.flush());
+  if (vertex_extra) stats.dropped.push_back({"off vertex extra values", vertex_extra});
+  if (face_extra) stats.dropped.push_back({"off face colors", face_extra});
   stats.vertices = stats.source_vertices = out.vertices();
   stats.triangles = out.triangles();
   return stats;

@@ -3,7 +3,8 @@
 // ascii, binary_little_endian and binary_big_endian; any property order and types; float or double x/y/z;
 // optional nx/ny/nz and red/green/blue[/alpha] (uchar, other integer types or float); faces as
 // `vertex_indices` or `vertex_index` lists of any integer types (fan-triangulated); `tristrips` with -1
-// restarts (odd triangles flipped, the usual strip decoding); every other element and property is skipped.
+// restarts (odd triangles flipped, the usual strip decoding); every other element and property is skipped and
+// listed in ReadStats::dropped.
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -135,6 +136,7 @@ class PlyParser {
       SP_RETURN_IF_ERROR(readElement(e));
     }
     SP_RETURN_IF_ERROR(out.flush());
+    listDropped();
     stats_.vertices = out.vertices();
     stats_.source_vertices = out.vertices();
     stats_.triangles = out.triangles();
@@ -143,6 +145,21 @@ class PlyParser {
   }
 
  private:
+  // Every value the elements were read past, by name: properties of vertex and face that have no role
+  // (per-vertex scalars such as confidence, intensity, quality, flags; per-face flags, quality, colors, ...)
+  // and whole elements other than vertex, face and tristrips (a VCG `camera`, `edge`, `material`, ...).
+  void listDropped() {
+    for (const auto& e : elements_) {
+      if (e.count == 0) continue;
+      if (e.kind == ElementKind::kOther) {
+        stats_.dropped.push_back({"element " + e.name, e.count});
+        continue;
+      }
+      for (const auto& p : e.props)
+        if (p.role == Role::kNone) stats_.dropped.push_back({e.name + "." + p.name, e.count});
+    }
+  }
+
   Status headerError(const std::string& msg) { return in_.errorAtLine(ErrorCode::kMalformed, msg); }
 
   Status parseHeader() {

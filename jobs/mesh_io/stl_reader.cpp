@@ -1,7 +1,10 @@
 // STL reader, binary and ascii. STL is a triangle soup: corners with bit-identical positions are welded into
 // one vertex (a hash map from the three float bit patterns; the only reader state that grows with the file).
-// Facet normals are not kept (they are per face and recomputable). Binary vs ascii: a file that starts with
-// "solid" and has "facet" or "endsolid" in its first 512 bytes is ascii; anything else is binary.
+// Facet normals are not kept (they are per face and recomputable from the corners, so they are not listed as
+// dropped); non-zero attribute words of binary facets (colors in some writers) are listed in
+// ReadStats::dropped. A binary file whose data goes on past its declared triangle count is malformed (the rest
+// would be lost). Binary vs ascii: a file that starts with "solid" and has "facet" or "endsolid" in its first
+// 512 bytes is ascii; anything else is binary.
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -60,6 +63,7 @@ Status readBinary(Scanner& in, ChunkBuffer& out, ReadStats& stats) {
                                                        " bytes) but " + std::to_string(*left) + " bytes remain");
   Welder welder(out);
   uint8_t rec[50];
+  uint64_t attributes = 0;  // facets with a non-zero attribute word
   for (uint32_t t = 0; t < count; ++t) {
     SP_RETURN_IF_ERROR(in.read(rec, 50));
     Triangle tri;
@@ -72,7 +76,28 @@ Status readBinary(Scanner& in, ChunkBuffer& out, ReadStats& stats) {
                                                     " has a NaN or infinite coordinate");
       SP_RETURN_IF_ERROR(welder.corner({p[0], p[1], p[2]}, bitsKey(p), tri[c]));
     }
+    uint16_t attribute;  // "attribute byte count": 0 by the standard, colors in some writers (VisCAM, Magics)
+    std::memcpy(&attribute, rec + 48, 2);
+    attributes += attribute != 0;
     SP_RETURN_IF_ERROR(out.addTriangle(tri));
+  }
+  if (attributes) stats.dropped.push_back({"stl facet attribute", attributes});
+  // Data past the declared triangles: the count in the header is too low (a writer that did not update it, or a
+  // concatenation), and the rest of the scan would be lost without a word.
+  const uint64_t end = in.offset();
+  SP_ASSIGN_OR_RETURN(auto more, in.peek(1));
+  if (!more.empty()) {
+    const auto left = in.remaining();
+    const std::string place = in.name() + ": byte " + std::to_string(end) +
+                              (in.compressedInput() ? " of the decompressed data" : "");
+    return makeError(ErrorCode::kMalformed,
+                     place + ": binary STL declares " + std::to_string(count) + " triangles, which end at byte " +
+                         std::to_string(end) + ", but the data goes on" +
+                         (left ? " to byte " + std::to_string(end + *left) + " (" + std::to_string(*left) +
+                                     " more bytes, " + std::to_string(*left / 50) + " triangles and " +
+                                     std::to_string(*left % 50) + " bytes)"
+                               : "") +
+                         ": the triangle count in the header is wrong");
   }
   stats.format_detail = "STL binary";
   stats.source_vertices = uint64_t(count) * 3;
