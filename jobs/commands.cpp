@@ -101,6 +101,7 @@ bool floatPositionsSuffice(const QuantizedMesh& mesh, const Grid& grid) {
 }
 
 Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
+  SP_RETURN_IF_ERROR(checkOutputPath(settings.output, {settings.input}));  // `decode X X` must not replace X
   SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(settings.input));
   SP_ASSIGN_OR_RETURN(auto chosen, chooseTiles(file, settings.input, settings.tiles));
   const ContainerHeader& header = file.header();
