@@ -83,10 +83,14 @@ size_t trackedCount() {
 void installInterruptCleanup() {
   sigset_t set;
   sigemptyset(&set);
-  sigaddset(&set, SIGINT);
-  sigaddset(&set, SIGTERM);
-  sigaddset(&set, SIGHUP);
-  if (::pthread_sigmask(SIG_BLOCK, &set, nullptr) != 0) return;  // signals keep their default action
+  for (const int sig : {SIGINT, SIGTERM, SIGHUP}) {
+    // A signal ignored on entry stays ignored (nohup ignores SIGHUP; a shell ignores SIGINT for `cmd &`).
+    struct sigaction current {};
+    if (::sigaction(sig, nullptr, &current) == 0 && current.sa_handler == SIG_IGN) continue;
+    sigaddset(&set, sig);
+  }
+  // Nothing to wait for, or the mask cannot be set: the signals keep their default actions.
+  if (sigisemptyset(&set) || ::pthread_sigmask(SIG_BLOCK, &set, nullptr) != 0) return;
   // The registry is constructed here, before any signal can need it.
   registry();
   std::thread(cleanupOnSignal, set).detach();

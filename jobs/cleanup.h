@@ -39,8 +39,8 @@ void underRegistryLock(const std::function<void()>& fn);
 // How many temporaries are registered (for tests).
 size_t trackedCount();
 
-// Blocks SIGINT, SIGTERM and SIGHUP in the calling thread and starts the thread that cleans up and exits on
-// them. Call once, from main(), before any other thread starts.
+// Blocks SIGINT, SIGTERM and SIGHUP (those not ignored on entry, as under nohup) in the calling thread and
+// starts the thread that cleans up and exits on them. Call once, from main(), before any other thread starts.
 void installInterruptCleanup();
 
 }  // namespace scanpress

@@ -21,8 +21,10 @@
 #include <sstream>
 #include <thread>
 
+#include "jobs/cleanup.h"
 #include "jobs/container_file.h"
 #include "jobs/file_io.h"
+#include "jobs/scan_store.h"
 #include "jobs_util.h"
 
 namespace scanpress {
@@ -90,6 +92,32 @@ pid_t deadPid() {
   if (pid == 0) ::_exit(0);
   waitStatus(pid);
   return pid;
+}
+
+// Temporaries are registered for the signal cleanup while they live, and forgotten once committed or removed.
+TEST(Outputs, TemporariesAreRegisteredWhileTheyLive) {
+  testing::TempDir dir;
+  const size_t before = trackedCount();
+  {
+    auto file = AtomicFile::create(dir.file("a.bin"));
+    ASSERT_TRUE(file.isOk()) << file.status().toString();
+    EXPECT_EQ(trackedCount(), before + 1);
+    auto scratch = ScratchDir::create(dir.path());
+    ASSERT_TRUE(scratch.isOk()) << scratch.status().toString();
+    EXPECT_EQ(trackedCount(), before + 2);
+    ASSERT_TRUE((*file)->append(std::string_view("bytes")).isOk());
+    ASSERT_TRUE((*file)->commit().isOk());
+    EXPECT_EQ(trackedCount(), before + 1);
+  }
+  EXPECT_EQ(trackedCount(), before);
+  {
+    auto file = AtomicFile::create(dir.file("b.bin"));  // never committed: removed and forgotten
+    ASSERT_TRUE(file.isOk());
+  }
+  EXPECT_EQ(trackedCount(), before);
+  EXPECT_TRUE(fs::exists(dir.file("a.bin")));
+  EXPECT_FALSE(fs::exists(dir.file("b.bin")));
+  EXPECT_TRUE(leftovers(dir.path()).empty());
 }
 
 TEST(Outputs, EncodeOrDecodeOntoTheInputIsRefused) {
