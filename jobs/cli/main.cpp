@@ -1,5 +1,5 @@
 // The scanpress command line. Exit codes: 0 ok, 1 usage or config error, 2 bad input data, 3 environment (I/O,
-// disk full), 4 internal error.
+// disk full), 4 internal error; 128 + the signal when SIGINT, SIGTERM or SIGHUP ended it (jobs/cleanup.h).
 #include <signal.h>
 
 #include <algorithm>
@@ -48,7 +48,8 @@ commands:
   synth    write a deterministic scan-like mesh of N triangles (for tests and benchmarks)
 
 'scanpress <command> --help' shows a command's options.
-exit codes: 0 ok, 1 usage or config error, 2 bad input data, 3 environment (I/O, disk full), 4 internal error
+exit codes: 0 ok, 1 usage or config error, 2 bad input data, 3 environment (I/O, disk full), 4 internal error;
+  130 (Ctrl-C), 143 (SIGTERM), 129 (SIGHUP): interrupted, temporary files removed
 )";
 
 constexpr const char* kEncodeHelp = R"(usage: scanpress encode IN OUT.spz [options]
