@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <set>
 
 #include "jobs/container_file.h"
@@ -20,6 +21,8 @@ namespace scanpress {
 namespace {
 
 namespace fs = std::filesystem;
+
+constexpr const char* kErrorPictureName = "{stem}.error.png";  // with /measure/render
 
 bool isMeshFile(const fs::path& p) { return formatFromName(p.filename().string()) != MeshFormat::kUnknown; }
 
@@ -48,6 +51,65 @@ Status renderErrorPicture(const EncodeSettings& s, const std::string& png, std::
   rs.elevation = s.measure.view_elevation;
   SP_ASSIGN_OR_RETURN(RenderResult picture, renderMesh(decoded, rs, device, &original));
   return writePng(png, picture.image);
+}
+
+// Refuses a job whose outputs would destroy something, before anything is written: an output (container,
+// report, error picture, summary) that is one of the inputs (by path, or by device and inode: hard links,
+// symlinks), that another output of the job writes too, or that exists as a FIFO, device or socket. The error
+// names the JSON pointer of the name that makes the output (exit 1).
+Status checkJobOutputs(const JobSettings& job, const std::vector<std::string>& inputs) {
+  const std::string where = job.config_path.empty() ? "" : job.config_path + ": ";
+  auto canonical = [](const std::string& p) {
+    std::error_code ec;
+    const fs::path c = fs::weakly_canonical(fs::absolute(p, ec), ec);
+    return ec ? fs::path(p).lexically_normal().string() : c.string();
+  };
+  std::map<std::string, std::string> input_paths;            // canonical path -> input
+  std::map<std::pair<dev_t, ino_t>, std::string> input_ids;  // existing inputs' identities -> input
+  for (const std::string& in : inputs) {
+    input_paths.emplace(canonical(in), in);
+    struct stat st {};
+    if (::stat(in.c_str(), &st) == 0) input_ids.emplace(std::make_pair(st.st_dev, st.st_ino), in);
+  }
+  std::map<std::string, std::string> written;  // canonical path -> pointer of the name that writes it
+  auto plan = [&](const std::string& path, const std::string& pointer) -> Status {
+    const std::string c = canonical(path);
+    std::string input;
+    if (auto it = input_paths.find(c); it != input_paths.end()) input = it->second;
+    struct stat st {};
+    if (input.empty() && ::stat(path.c_str(), &st) == 0)
+      if (auto it = input_ids.find({st.st_dev, st.st_ino}); it != input_ids.end()) input = it->second;
+    if (!input.empty())
+      return makeError(ErrorCode::kInvalidArgument, where + pointer + ": the output '" + path +
+                                                        "' is the input '" + input +
+                                                        "'; refusing to overwrite it");
+    if (auto [it, fresh] = written.emplace(c, pointer); !fresh)
+      return makeError(ErrorCode::kInvalidArgument,
+                       where + pointer + ": " +
+                           (it->second == pointer ? std::string("two inputs map to the output '")
+                                                  : "writes the same file as " + it->second + ": '") +
+                           path + "'");
+    const Status kind = checkOutputPath(path, {});
+    return kind.isOk() ? kind : Status(kind.code(), where + pointer + ": " + kind.message());
+  };
+  const fs::path dir(job.output_directory);
+  for (const std::string& in : inputs) {
+    SP_RETURN_IF_ERROR(plan((dir / outputName(job.output_name, in)).string(), "/output/name"));
+    if (!job.report_name.empty())
+      SP_RETURN_IF_ERROR(plan((dir / outputName(job.report_name, in)).string(), "/output/report"));
+    if (job.encode.measure.enabled && job.encode.measure.render)
+      SP_RETURN_IF_ERROR(plan((dir / outputName(kErrorPictureName, in)).string(), "/measure/render"));
+  }
+  if (!job.summary_name.empty())
+    SP_RETURN_IF_ERROR(plan((dir / job.summary_name).string(), "/output/summary"));
+  return Status::ok();
+}
+
+// Whether resume may trust the container at `path`: it opens (header, footer, index and their checksums) and
+// every tile chunk matches its checksums. Not a full decode: that would cost as much as encoding again.
+bool verifiedContainer(const std::string& path) {
+  auto file = ContainerFile::open(path);
+  return file.isOk() && file->verifyChecksums().isOk();
 }
 
 }  // namespace
@@ -166,17 +228,14 @@ std::string settingsFingerprint(const EncodeSettings& s) {
 
 Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
   SP_ASSIGN_OR_RETURN(std::vector<std::string> inputs, expandInputs(job));
-  // Two inputs must not write the same output.
-  std::set<std::string> outputs;
-  for (const auto& in : inputs) {
-    const std::string out = outputName(job.output_name, in);
-    if (!outputs.insert(out).second)
-      return makeError(ErrorCode::kInvalidArgument, (job.config_path.empty() ? "" : job.config_path + ": ") +
-                                                        "/output/name: two inputs map to the output '" + out + "'");
-  }
+  SP_RETURN_IF_ERROR(checkJobOutputs(job, inputs));
   std::error_code ec;
   fs::create_directories(job.output_directory, ec);
   if (ec) return makeError(ErrorCode::kIo, job.output_directory + ": cannot create output directory: " + ec.message());
+  // Temporaries of runs that died without cleaning up (SIGKILL, a crash): their PID is no live process.
+  if (const size_t stale = removeStaleTemporaries(job.output_directory); stale > 0 && !options.quiet)
+    std::printf("%s: removed %zu temporary file(s) of runs that did not finish\n",
+                job.output_directory.c_str(), stale);
 
   BatchResult batch;
   TerminalProgress progress(options.quiet);
@@ -196,8 +255,8 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
     if (options.threads >= 0) s.threads = options.threads;
     const std::string fingerprint = settingsFingerprint(s);
     const auto start = std::chrono::steady_clock::now();
-    if (job.resume && !options.force && !f.report.empty() && completeReportFingerprint(f.report) == fingerprint &&
-        ContainerFile::open(f.output).isOk()) {
+    if (job.resume && !options.force && !f.report.empty() &&
+        completeReportFingerprint(f.report) == fingerprint && verifiedContainer(f.output)) {
       f.state = FileOutcome::State::kSkipped;
       batch.files.push_back(std::move(f));
       continue;
@@ -216,8 +275,8 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
             break;
           }
       if (s.measure.render && f.state == FileOutcome::State::kOk) {
-        Status w = renderErrorPicture(s, (fs::path(job.output_directory) / outputName("{stem}.error.png", f.input)).string(),
-                                      device);
+        Status w = renderErrorPicture(
+            s, (fs::path(job.output_directory) / outputName(kErrorPictureName, f.input)).string(), device);
         if (!w.isOk()) f.state = FileOutcome::State::kFailed, f.error = w;
       }
       if (!f.report.empty()) {

@@ -110,6 +110,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   if (settings.level && settings.bytes)  // one would silently win over the other
     return makeError(ErrorCode::kInvalidArgument,
                      "--level and --bytes choose the level two ways: give one of them");
+  SP_RETURN_IF_ERROR(checkOutputPath(settings.output, {settings.input}));  // `decode X X` must not replace X
   SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(settings.input));
   SP_ASSIGN_OR_RETURN(auto chosen, chooseTiles(file, settings.input, settings.tiles));
   const ContainerHeader& header = file.header();

@@ -62,13 +62,14 @@ class ObjectReader {
     if (!v->is_string()) return fail(path(key), "must be a string, got " + typeName(*v));
     out = v->get<std::string>();
     if (!allow_empty && out.empty()) fail(path(key), "must not be empty");
+    noNul(out, path(key));
   }
   void stringList(const char* key, std::vector<std::string>& out) {
     const json* v = take(key);
     if (!v) return;
     if (v->is_string()) {
       out = {v->get<std::string>()};
-      return;
+      return noNul(out[0], path(key));
     }
     if (!v->is_array()) return fail(path(key), "must be a string or an array of strings, got " + typeName(*v));
     out.clear();
@@ -76,6 +77,7 @@ class ObjectReader {
       if (!(*v)[i].is_string())
         return fail(path(key) + "/" + std::to_string(i), "must be a string, got " + typeName((*v)[i]));
       out.push_back((*v)[i].get<std::string>());
+      noNul(out.back(), path(key) + "/" + std::to_string(i));
     }
   }
   // A nested object; returns nullptr when absent.
@@ -93,6 +95,11 @@ class ObjectReader {
   }
 
  private:
+  // JSON strings may hold "\u0000"; as a path, everything after it would be cut off silently by the system
+  // calls.
+  void noNul(const std::string& s, const std::string& pointer) {
+    if (s.find('\0') != std::string::npos) fail(pointer, "must not contain a NUL byte (\\u0000)");
+  }
   // The number `v` at `pointer` (nothing when absent), parsed by `parse` from its JSON text into `out`.
   template <typename T, typename Parse>
   void numberAt(const json* v, const std::string& pointer, const char* kind, T& out, Parse parse) {
@@ -227,7 +234,14 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     o.finish();
     if (error.isOk() && !validPattern(s.output_name)) o.fail("/output/name", "unknown placeholder (use {stem} or {name})");
     if (error.isOk() && !validPattern(s.report_name)) o.fail("/output/report", "unknown placeholder (use {stem} or {name})");
-    if (error.isOk() && s.output_name.find('/') != std::string::npos) o.fail("/output/name", "must be a file name");
+    // Names of files inside the output directory: no '/', so none escapes it (`../x`) or names a directory.
+    for (auto [pointer, name] : {std::pair<const char*, const std::string*>{"/output/name", &s.output_name},
+                                 {"/output/report", &s.report_name},
+                                 {"/output/summary", &s.summary_name}})
+      if (error.isOk() && (name->find('/') != std::string::npos || *name == "." || *name == ".."))
+        o.fail(pointer, "must be a file name (no '/'): files are written inside /output/directory");
+    if (error.isOk() && s.report_name == s.output_name)
+      o.fail("/output/report", "must differ from /output/name: the report would replace the container");
   }
   if (const json* codec = top.object("codec")) {
     ObjectReader c(*codec, "/codec", config_path, error);

@@ -39,6 +39,15 @@ Result<QuantizedMesh> ContainerFile::decodeTile(const TileEntry& entry, std::opt
   return decodeTilePayload(header_, entry, payload, path(), level, complete);
 }
 
+Status ContainerFile::verifyChecksums() const {
+  std::vector<uint8_t> chunk;
+  for (const TileEntry& entry : tiles_) {
+    auto payload = readPayload(entry, chunk);
+    if (!payload.isOk()) return payload.status();
+  }
+  return Status::ok();
+}
+
 Result<std::vector<CodecLevel>> ContainerFile::tileLevels(const TileEntry& entry) const {
   const CodecInfo* codec = findCodec(entry.codec);
   if (!codec || !codec->levels) return std::vector<CodecLevel>{};

@@ -22,6 +22,10 @@ class ContainerFile {
   // Reads, verifies (both checksums) and decodes one tile (see decodeTilePayload).
   Result<QuantizedMesh> decodeTile(const TileEntry& entry, std::optional<uint32_t> level = std::nullopt,
                                    bool* complete = nullptr) const;
+  // Reads every tile's chunk and checks both its checksums, without decoding: with the header, footer and
+  // index (checked by open), every checksum of the container. What resume requires of an output before
+  // skipping it.
+  Status verifyChecksums() const;
   // The levels of a progressive tile (empty for single-rate codecs).
   Result<std::vector<CodecLevel>> tileLevels(const TileEntry& entry) const;
 

@@ -1,9 +1,16 @@
-// Files: outputs that appear all-or-nothing, and random-access reads.
+// Files: outputs that appear all-or-nothing and never destroy anything, and random-access reads.
 //
 // AtomicFile writes to a temporary name in the target's directory (`.NAME.tmp-PID-N`), and commit() flushes,
-// fsyncs and renames it over the final name. If commit() is not reached (error, exception, early return) the
-// destructor removes the temporary: a failed run never leaves a partial file under the final name. System errors
-// name the file and map as jobs/errors.h says (no space: kDiskFull; anything else: kIo).
+// fsyncs and renames it over the final name, then fsyncs the directory (so that the rename survives a crash).
+// If commit() is not reached (error, exception, early return) the destructor removes the temporary: a failed
+// run never leaves a partial file under the final name. The temporary is registered in jobs/cleanup.h while
+// it lives, so that SIGINT and SIGTERM remove it too.
+//
+// The target: a symlink is written through, to its final target (the temporary goes next to that file, and
+// the rename replaces that file; the link stays a link). An existing FIFO, character or block device or
+// socket is refused (kInvalidArgument, exit 1): renaming over it would replace it, and writing into it would
+// not be all-or-nothing. An existing directory is kIo. System errors name the file and map as jobs/errors.h
+// says (no space or a file-size limit: kDiskFull; anything else: kIo).
 #pragma once
 
 #include <cstdint>
@@ -34,12 +41,20 @@ class AtomicFile : public ByteSink {
   uint64_t size() const { return size_; }
 
  private:
-  AtomicFile(int fd, std::string path, std::string temp) : fd_(fd), path_(std::move(path)), temp_(std::move(temp)) {}
+  AtomicFile(int fd, std::string path, std::string target, std::string temp, uint64_t tracked)
+      : fd_(fd),
+        path_(std::move(path)),
+        target_(std::move(target)),
+        temp_(std::move(temp)),
+        tracked_(tracked) {}
   Status flushBuffer();
   Status writeError(const std::string& what) const;
 
   int fd_;
-  std::string path_, temp_;
+  std::string path_;    // as given (for messages)
+  std::string target_;  // path_ with symlinks followed: what the rename replaces
+  std::string temp_;
+  uint64_t tracked_;  // the temporary's registration in jobs/cleanup.h
   std::vector<uint8_t> buffer_;
   uint64_t size_ = 0;
   bool committed_ = false;
@@ -47,6 +62,21 @@ class AtomicFile : public ByteSink {
 
 // Writes `bytes` to `path` all-or-nothing.
 Status writeFileAtomically(const std::string& path, std::span<const uint8_t> bytes);
+
+// Whether two paths name one file: the same device and inode when both exist (hard links, symlinks, `./x` and
+// `x`), else the same absolute path once normalized and with the symlinks of its existing part resolved.
+bool sameFile(const std::string& a, const std::string& b);
+
+// Refuses an output that would destroy something, before any work: one of `inputs` (sameFile;
+// kInvalidArgument), an existing FIFO, device or socket (after following symlinks; kInvalidArgument), a
+// directory (kIo). `what` names the output in the message (e.g. "output", "report").
+Status checkOutputPath(const std::string& output, const std::vector<std::string>& inputs,
+                       const std::string& what = "output");
+
+// Removes the temporaries of dead runs in `dir`: files named `.NAME.tmp-PID-N` whose PID is no live process
+// (a run killed with SIGKILL, or a machine that crashed, leaves them). Returns how many were removed. A PID
+// that is alive (even if reused by another program) keeps its files: they may belong to a run in progress.
+size_t removeStaleTemporaries(const std::string& dir);
 
 // Read-only random access.
 class RandomAccessFile {

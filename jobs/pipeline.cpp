@@ -627,6 +627,8 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
     return makeError(ErrorCode::kInvalidArgument, "normal bits must be in [4, 16]");
   for (const StageSpec& st : s.stages)
     if (!findStage(st.kind)) return makeError(ErrorCode::kInvalidArgument, "unknown stage");
+  SP_RETURN_IF_ERROR(
+      checkOutputPath(s.output, {s.input}));  // before reading: `encode X X` must not replace X
   ScanEncoder encoder(s, *codec, progress, std::move(device), hooks);
   SP_RETURN_IF_ERROR(encoder.survey());
   SP_RETURN_IF_ERROR(encoder.checkDrops());

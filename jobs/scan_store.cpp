@@ -8,6 +8,7 @@
 #include <cerrno>
 #include <filesystem>
 
+#include "jobs/cleanup.h"
 #include "jobs/errors.h"
 
 namespace scanpress {
@@ -16,9 +17,16 @@ Result<ScratchDir> ScratchDir::create(const std::string& parent) {
   std::error_code ec;
   const std::string base = parent.empty() ? std::filesystem::temp_directory_path(ec).string() : parent;
   std::string templ = base + "/scanpress-scratch-XXXXXX";
-  if (!::mkdtemp(templ.data())) return errnoStatus(errno, templ, "cannot create scratch directory");
+  int err = 0;
+  const uint64_t tracked = createTracked(TrackedKind::kDirectory, [&]() -> std::string {
+    const bool made = ::mkdtemp(templ.data()) != nullptr;
+    err = errno;
+    return made ? templ : std::string();
+  });
+  if (tracked == 0) return errnoStatus(err, templ, "cannot create scratch directory");
   ScratchDir d;
   d.path_ = templ;
+  d.tracked_ = tracked;
   return d;
 }
 
@@ -26,6 +34,7 @@ ScratchDir::~ScratchDir() {
   if (path_.empty()) return;
   std::error_code ec;
   std::filesystem::remove_all(path_, ec);
+  untrack(tracked_);
 }
 
 ScratchFile::~ScratchFile() {
@@ -34,8 +43,14 @@ ScratchFile::~ScratchFile() {
 
 Status ScratchFile::open(const std::string& path) {
   path_ = path;
-  fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
-  if (fd_ < 0) return errnoStatus(errno, path, "cannot create scratch file");
+  int err = 0;
+  // Under the cleanup registry's lock: a scratch file never appears after a signal's cleanup removed its
+  // directory.
+  underRegistryLock([&] {
+    fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    err = errno;
+  });
+  if (fd_ < 0) return errnoStatus(err, path, "cannot create scratch file");
   return Status::ok();
 }
 

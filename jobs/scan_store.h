@@ -17,12 +17,16 @@
 
 namespace scanpress {
 
-// A scratch directory, removed with its contents when the object dies (on success and on failure).
+// A scratch directory, removed with its contents when the object dies (on success and on failure), and
+// registered in jobs/cleanup.h while it lives (SIGINT and SIGTERM remove it too).
 class ScratchDir {
  public:
   static Result<ScratchDir> create(const std::string& parent);  // parent empty: the system temp directory
   ScratchDir() = default;
-  ScratchDir(ScratchDir&& o) noexcept : path_(std::move(o.path_)) { o.path_.clear(); }
+  ScratchDir(ScratchDir&& o) noexcept : path_(std::move(o.path_)), tracked_(o.tracked_) {
+    o.path_.clear();
+    o.tracked_ = 0;
+  }
   ScratchDir& operator=(ScratchDir&&) = delete;
   ~ScratchDir();
   std::string file(const std::string& name) const { return path_ + "/" + name; }
@@ -30,6 +34,7 @@ class ScratchDir {
 
  private:
   std::string path_;
+  uint64_t tracked_ = 0;  // the registration in jobs/cleanup.h
 };
 
 // Raw positional file I/O that maps errors to kIo / kDiskFull.

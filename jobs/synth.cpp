@@ -94,6 +94,8 @@ class Writer {
 Result<SynthResult> synthesize(const SynthSettings& s) {
   if (s.triangles == 0 || s.triangles > (uint64_t(1) << 31) - 1)
     return makeError(ErrorCode::kInvalidArgument, "--triangles must be in [1, 2^31-1]");
+  SP_RETURN_IF_ERROR(
+      checkOutputPath(s.output, s.from.empty() ? std::vector<std::string>{} : std::vector{s.from}));
   Mesh base;
   if (s.from.empty()) {
     base = bumpyIcosphere(4, s.seed);

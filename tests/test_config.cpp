@@ -54,6 +54,18 @@ TEST(JobConfig, InvalidFilesNameThePointerExitOneWriteNothing) {
       {"normals_not_bool", "{" + in + ", \"codec\": {\"normals\": \"yes\"}}", "/codec/normals: must be true or false"},
       {"output_not_object", "{\"inputs\": [\"" + bunny + "\"], \"output\": \"out\"}", "/output: must be an object"},
       {"output_name_slash", "{" + in.substr(0, in.size() - 1) + ", \"name\": \"a/{stem}.spz\"}}", "/output/name"},
+      // Every name is a file inside the output directory; `../` would write outside it.
+      {"report_dotdot", "{" + in.substr(0, in.size() - 1) + ", \"report\": \"../{stem}.json\"}}",
+       "/output/report"},
+      {"summary_dotdot", "{" + in.substr(0, in.size() - 1) + ", \"summary\": \"../summary.json\"}}",
+       "/output/summary"},
+      {"report_is_name", "{" + in.substr(0, in.size() - 1) + ", \"report\": \"{stem}.spz\"}}",
+       "/output/report"},
+      // A NUL byte in a path would cut it short silently ("out\u0000x" would write into "out").
+      {"nul_in_directory", "{\"inputs\": [\"" + bunny + "\"], \"output\": {\"directory\": \"out\\u0000x\"}}",
+       "/output/directory: must not contain a NUL byte"},
+      {"nul_in_input", "{\"inputs\": [\"" + bunny + "\\u0000.txt\"], \"output\": {\"directory\": \"out\"}}",
+       "/inputs/0: must not contain a NUL byte"},
       {"output_name_placeholder", "{" + in.substr(0, in.size() - 1) + ", \"name\": \"{foo}.spz\"}}", "/output/name"},
       {"tile_target_small", "{" + in + ", \"tiling\": {\"target_triangles\": 10}}", "/tiling/target_triangles"},
       {"threads_negative", "{" + in + ", \"threads\": -1}", "/threads"},

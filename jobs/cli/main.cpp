@@ -1,5 +1,7 @@
 // The scanpress command line. Exit codes: 0 ok, 1 usage or config error, 2 bad input data, 3 environment (I/O,
-// disk full), 4 internal error.
+// disk full), 4 internal error; 128 + the signal when SIGINT, SIGTERM or SIGHUP ended it (jobs/cleanup.h).
+#include <signal.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -12,6 +14,7 @@
 #include "engine/codecs/codec.h"
 #include "engine/quantize.h"
 #include "jobs/batch.h"
+#include "jobs/cleanup.h"
 #include "jobs/commands.h"
 #include "jobs/config.h"
 #include "jobs/container_file.h"
@@ -45,7 +48,8 @@ commands:
   synth    write a deterministic scan-like mesh of N triangles (for tests and benchmarks)
 
 'scanpress <command> --help' shows a command's options.
-exit codes: 0 ok, 1 usage or config error, 2 bad input data, 3 environment (I/O, disk full), 4 internal error
+exit codes: 0 ok, 1 usage or config error, 2 bad input data, 3 environment (I/O, disk full), 4 internal error;
+  130 (Ctrl-C), 143 (SIGTERM), 129 (SIGHUP): interrupted, temporary files removed
 )";
 
 constexpr const char* kEncodeHelp = R"(usage: scanpress encode IN OUT.spz [options]
@@ -289,6 +293,11 @@ int runEncode(int argc, char** argv) {
   s.measure.enabled = args.has("--measure");
   if (!numberOption(args, "--samples-per-triangle", 1e-6, 1e6, s.measure.samples_per_triangle, error))
     return usage(error, "encode");
+  if (const auto* report = args.get("--report")) {
+    // The report must not replace the input nor the container it describes.
+    Status ok = checkOutputPath(*report, {s.input, s.output}, "report");
+    if (!ok.isOk()) return fail(ok);
+  }
   TerminalProgress progress(args.has("--quiet"));
   if (progress.enabled()) progress.file(0, 1, s.input);
   auto result = encodeFile(s, progress.enabled() ? &progress : nullptr);
@@ -441,6 +450,9 @@ int runRender(int argc, char** argv) {
     s.width = static_cast<int>((*size)[0]);
     s.height = static_cast<int>((*size)[1]);
   }
+  std::vector<std::string> inputs = {args.positional[0]};
+  if (const auto* a = args.get("--against")) inputs.push_back(*a);
+  if (Status ok = checkOutputPath(args.positional[1], inputs); !ok.isOk()) return fail(ok);
   auto mesh = readMeshFile(args.positional[0]);
   if (!mesh.isOk()) return fail(mesh.status());
   std::optional<Mesh> original;
@@ -523,6 +535,11 @@ static int finish(int code) {
 }
 
 int main(int argc, char** argv) {
+  // A file-size limit (ulimit -f) must fail the write with EFBIG (exit 3, temporaries removed), not kill the
+  // process with SIGXFSZ; and SIGINT/SIGTERM/SIGHUP remove the temporaries before exiting (jobs/cleanup.h).
+  // Both before any thread starts, so that every thread inherits them.
+  ::signal(SIGXFSZ, SIG_IGN);
+  scanpress::installInterruptCleanup();
   try {
     return finish(scanpress::run(argc, argv));
   } catch (const std::bad_alloc&) {
