@@ -35,8 +35,9 @@ inline Vec3d closestPointOnSegment(const Vec3d& p, const Vec3d& a, const Vec3d& 
 // region tests below): the nearest of its three edges and, if its plane is well enough defined, of the
 // projection of p onto that plane when it falls inside. The normal is the cross product of the two shortest
 // edges (the most precise of the three); below a sine of 1e-8 at their corner the triangle is taken as its edges
-// (they are then within 1e-8 of its longest edge of every point of it).
-inline Vec3d closestPointOnThinTriangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+// (they are then within 1e-8 of its longest edge of every point of it). Rare: kept out of line (cold), so that
+// closestPointOnTriangle stays small where it is inlined (closestMany's loop).
+[[gnu::cold, gnu::noinline]] inline Vec3d closestPointOnThinTriangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
   const Vec3d* v[3] = {&a, &b, &c};
   Vec3d best = a;
   double best2 = std::numeric_limits<double>::infinity();
