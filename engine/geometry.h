@@ -31,13 +31,14 @@ inline Vec3d closestPointOnSegment(const Vec3d& p, const Vec3d& a, const Vec3d& 
   return t <= 0 ? a : t >= 1 ? b : vadd(a, vmul(ab, t));
 }
 
-// Closest point to p on a thin triangle abc (one whose angles cannot be told apart from 0 or 180 degrees in the
-// region tests below): the nearest of its three edges and, if its plane is well enough defined, of the
+// Closest point to p on a thin triangle abc (one whose angles cannot be told apart from 0 or 180 degrees in
+// the region tests below): the nearest of its three edges and, if its plane is well enough defined, of the
 // projection of p onto that plane when it falls inside. The normal is the cross product of the two shortest
-// edges (the most precise of the three); below a sine of 1e-8 at their corner the triangle is taken as its edges
-// (they are then within 1e-8 of its longest edge of every point of it). Rare: kept out of line (cold), so that
-// closestPointOnTriangle stays small where it is inlined (closestMany's loop).
-[[gnu::cold, gnu::noinline]] inline Vec3d closestPointOnThinTriangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+// edges (the most precise of the three); below a sine of 1e-8 at their corner the triangle is taken as its
+// edges (every point of it is then within 1e-8 times its longest edge of an edge). Rare: kept out of line
+// (cold), so that closestPointOnTriangle stays small where it is inlined (closestMany's loop).
+[[gnu::cold, gnu::noinline]] inline Vec3d closestPointOnThinTriangle(const Vec3d& p, const Vec3d& a,
+                                                                     const Vec3d& b, const Vec3d& c) {
   const Vec3d* v[3] = {&a, &b, &c};
   Vec3d best = a;
   double best2 = std::numeric_limits<double>::infinity();
@@ -52,7 +53,8 @@ inline Vec3d closestPointOnSegment(const Vec3d& p, const Vec3d& a, const Vec3d& 
     const double l2 = vdot(vsub(t, s), vsub(t, s));
     if (l2 > longest2) longest2 = l2, longest = e;
   }
-  // The corner opposite the longest edge (s, t), and its edges in the order that keeps the orientation of abc.
+  // The corner opposite the longest edge (s, t), and its edges in the order that keeps the orientation of
+  // abc.
   const Vec3d& o = *v[(longest + 2) % 3];
   const Vec3d e1 = vsub(*v[longest], o), e2 = vsub(*v[(longest + 1) % 3], o);
   const Vec3d n = vcross(e1, e2);
@@ -65,11 +67,11 @@ inline Vec3d closestPointOnSegment(const Vec3d& p, const Vec3d& a, const Vec3d& 
 }
 
 // Closest point to p on triangle abc (Ericson, Real-Time Collision Detection, 5.1.5): Voronoi regions of the
-// vertices and edges, then the face. Degenerate triangles are their segments or their point: a zero-length edge
-// never takes its edge branch (its division would be 0/0), and a triangle that reaches the face branch while
-// too thin for the face's barycentric coordinates to be accurate (twice its area below 1e-2 times its longest
-// edge squared: their rounding error grows as the inverse square of that ratio; collinear corners give
-// anything) is solved by closestPointOnThinTriangle.
+// vertices and edges, then the face. Degenerate triangles are their segments or their point: a zero-length
+// edge never takes its edge branch (its division would be 0/0), and a triangle that reaches the face branch
+// while too thin for the face's barycentric coordinates to be accurate (twice its area below 1e-2 times its
+// longest edge squared: their rounding error grows as the inverse square of that ratio; collinear corners
+// give anything) is solved by closestPointOnThinTriangle.
 inline Vec3d closestPointOnTriangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
   const Vec3d ab = vsub(b, a), ac = vsub(c, a), ap = vsub(p, a);
   const double d1 = vdot(ab, ap), d2 = vdot(ac, ap);
@@ -95,8 +97,8 @@ inline Vec3d closestPointOnTriangle(const Vec3d& p, const Vec3d& a, const Vec3d&
     const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
     return vadd(b, vmul(vsub(c, b), w));
   }
-  // denom is |ab x ac|^2 = (2 area)^2 up to rounding: below 1e-4 times the longest edge^4, the triangle is thin
-  // (and if p is not finite, the thin path gives a non-finite point, as the face would).
+  // denom is |ab x ac|^2 = (2 area)^2 up to rounding: below 1e-4 times the longest edge^4, the triangle is
+  // thin (and if p is not finite, the thin path gives a non-finite point, as the face would).
   const double denom = va + vb + vc;
   const Vec3d bc = vsub(c, b);
   const double longest2 = std::max({vdot(ab, ab), vdot(ac, ac), vdot(bc, bc)});

@@ -40,8 +40,8 @@ struct MeasureResult {
 // Samples per unit area for a surface of `triangles` triangles and `area` (settings: per triangle or total).
 double samplingDensity(const MeasureSettings& s, uint64_t triangles, double area);
 
-// Distances from `samples` to the surface, accumulated in sample order (parallel queries). The first `averaged`
-// samples (area samples) enter the count, mean and RMS; the rest (vertex samples) the max only.
+// Distances from `samples` to the surface, accumulated in sample order (parallel queries). The first
+// `averaged` samples (area samples) enter the count, mean and RMS; the rest (vertex samples) the max only.
 ErrorAccumulator distancesTo(const SurfaceIndex& surface, std::span<const Vec3d> samples,
                              size_t averaged = SIZE_MAX);
 

@@ -18,12 +18,13 @@ namespace {
 // radii, which keeps big triangles apart (the value: bench/RESULTS.md).
 constexpr double kClusterRadii = 4.0;
 
-// The plane record of a triangle with corners w (absolute; the record is relative to `origin`): unit normal and
-// offset, then each edge's outward in-plane unit normal and offset. Directions come from differences of the
-// absolute corners (exact but for one rounding, even for corners a few ulps apart), offsets from the corners
-// relative to the origin. A triangle with coincident corners is its segment or point: its record bounds the
-// distance to that (segmentRecord). All zeros (a bound of 0, never rejected) for any other degenerate or
-// needle-thin triangle (sine of its angle at w[0] below 1e-6), whose normal's direction is too imprecise.
+// The plane record of a triangle with corners w (absolute; the record is relative to `origin`): unit normal
+// and offset, then each edge's outward in-plane unit normal and offset. Directions come from differences of
+// the absolute corners (exact but for one rounding, even for corners a few ulps apart), offsets from the
+// corners relative to the origin. A triangle with coincident corners is its segment or point: its record
+// bounds the distance to that (segmentRecord). All zeros (a bound of 0, never rejected) for any other
+// degenerate or needle-thin triangle (sine of its angle at w[0] below 1e-6), whose normal's direction is too
+// imprecise.
 void segmentRecord(const Vec3d& a, const Vec3d& b, const Vec3d& origin, float out[16]);
 
 void planeRecord(const Vec3d w[3], const Vec3d& origin, float out[16]) {
@@ -49,10 +50,10 @@ void planeRecord(const Vec3d w[3], const Vec3d& origin, float out[16]) {
   }
 }
 
-// The record of segment ab (a point if a == b), in the plane record's form: a unit n perpendicular to the segment
-// as the "plane" (|n.(x - a)| is the distance along n), and its direction m as two "edges" (m.(x - b) beyond b,
-// m.(a - x) behind a): the squared distance to the segment is at least the sum of the squares of those, as n and
-// m are orthonormal.
+// The record of segment ab (a point if a == b), in the plane record's form: a unit n perpendicular to the
+// segment as the "plane" (|n.(x - a)| is the distance along n), and its direction m as two "edges" (m.(x - b)
+// beyond b, m.(a - x) behind a): the squared distance to the segment is at least the sum of the squares of
+// those, as n and m are orthonormal.
 void segmentRecord(const Vec3d& a, const Vec3d& b, const Vec3d& origin, float out[16]) {
   Vec3d m = vsub(b, a);
   const double ml = vlen(m);

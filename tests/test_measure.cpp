@@ -167,8 +167,8 @@ size_t degenerateCount(const Mesh& m) {
 
 // Independent reference: the distance from p to the nearest triangle, each taken as the union of its face (if
 // its projection falls inside, by the 2x2 normal equations in long double) and its edge segments (a point if
-// the edge has zero length). Triangles whose bounding sphere is farther than the nearest sphere's far side are
-// skipped (they cannot be nearer).
+// the edge has zero length). Triangles whose bounding sphere is farther than the nearest sphere's far side
+// are skipped (they cannot be nearer).
 long double triangleDistance(const Vec3d& pd, const Mesh& m, const Triangle& tri) {
   using L = long double;
   auto dot = [](const L* u, const L* v) { return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]; };
@@ -223,12 +223,16 @@ class BruteForce {
   std::vector<std::pair<Vec3d, double>> spheres_;
 };
 
-// measureMeshes' statistics for one direction recomputed by brute force over the same samples (area samples in
-// the mean and RMS, vertex samples in the max).
+// measureMeshes' statistics for one direction recomputed by brute force over the same samples (area samples
+// in the mean and RMS, vertex samples in the max).
 ErrorStats bruteForceStats(const Mesh& from, const Mesh& to, const MeasureSettings& s, double density,
                            uint64_t stream) {
   SampleOptions opt;
-  opt.density = density, opt.seed = s.seed, opt.stratified = s.stratified, opt.vertices = false, opt.stream = stream;
+  opt.density = density;
+  opt.seed = s.seed;
+  opt.stratified = s.stratified;
+  opt.vertices = false;
+  opt.stream = stream;
   std::vector<Vec3d> samples;
   sampleSurface(from.positions, from.triangles, opt, samples);
   const BruteForce exact(to);
@@ -242,8 +246,8 @@ ErrorStats bruteForceStats(const Mesh& from, const Mesh& to, const MeasureSettin
 
 TEST(Measure, DegenerateTrianglesMatchBruteForceBothWays) {
   // An icosphere snapped to a coarse grid: a third of its triangles have coincident corners (some all three),
-  // others are collinear. Both directions (the degenerate mesh as target, then as source) against brute force,
-  // at a density where distancesTo uses closest() and at one where it uses closestMany().
+  // others are collinear. Both directions (the degenerate mesh as target, then as source) against brute
+  // force, at a density where distancesTo uses closest() and at one where it uses closestMany().
   const Mesh sphere = icosphere(3), lossy = snapped(sphere, 12);
   ASSERT_GT(degenerateCount(lossy), lossy.triangles.size() / 10);
   for (double per_triangle : {2.0, 8.0}) {
@@ -251,9 +255,12 @@ TEST(Measure, DegenerateTrianglesMatchBruteForceBothWays) {
     s.samples_per_triangle = per_triangle;
     auto r = measureMeshes(sphere, lossy, s, device());
     ASSERT_TRUE(r.isOk());
-    const double density = samplingDensity(s, sphere.triangles.size(), surfaceArea(sphere.positions, sphere.triangles));
-    const ErrorStats f = bruteForceStats(sphere, lossy, s, density, 0), b = bruteForceStats(lossy, sphere, s, density, 1);
-    for (auto [got, ref, name] : {std::tuple{r->forward, f, "forward"}, std::tuple{r->backward, b, "backward"}}) {
+    const double density =
+        samplingDensity(s, sphere.triangles.size(), surfaceArea(sphere.positions, sphere.triangles));
+    const ErrorStats f = bruteForceStats(sphere, lossy, s, density, 0),
+                     b = bruteForceStats(lossy, sphere, s, density, 1);
+    for (auto [got, ref, name] :
+         {std::tuple{r->forward, f, "forward"}, std::tuple{r->backward, b, "backward"}}) {
       SCOPED_TRACE(std::string(name) + " at " + std::to_string(per_triangle) + " samples per triangle");
       ASSERT_TRUE(std::isfinite(got.mean) && std::isfinite(got.rms) && std::isfinite(got.max));
       EXPECT_EQ(got.samples, ref.samples);
@@ -265,17 +272,14 @@ TEST(Measure, DegenerateTrianglesMatchBruteForceBothWays) {
 }
 
 TEST(Measure, DegenerateTrianglesOnTheSurfaceAddNothing) {
-  // Coincident-corner and collinear triangles laid on a surface's own edges and vertices do not change it: the
-  // distance between the two is zero both ways.
+  // Coincident-corner and collinear triangles laid on a surface's own edges and vertices do not change it:
+  // the distance between the two is zero both ways.
   const Mesh sphere = icosphere(3);
   Mesh with = sphere;
   for (size_t k = 0; k < sphere.triangles.size(); ++k) {
     const Triangle& t = sphere.triangles[k];
-    switch (k % 3) {
-      case 0: with.triangles.push_back({t[0], t[0], t[1]}); break;
-      case 1: with.triangles.push_back({t[1], t[2], t[2]}); break;
-      default: with.triangles.push_back({t[2], t[2], t[2]}); break;
-    }
+    const Triangle kinds[3] = {{t[0], t[0], t[1]}, {t[1], t[2], t[2]}, {t[2], t[2], t[2]}};
+    with.triangles.push_back(kinds[k % 3]);
   }
   MeasureSettings s;
   for (double per_triangle : {2.0, 8.0}) {
@@ -290,8 +294,8 @@ TEST(Measure, DegenerateTrianglesOnTheSurfaceAddNothing) {
 }
 
 TEST(Measure, CliOnADegenerateTarget) {
-  // The CLI on files: a sphere against itself plus coincident-corner triangles on its edges (the NaN case: the
-  // JSON had "mean": null), both ways.
+  // The CLI on files: a sphere against itself plus coincident-corner triangles on its edges (the NaN case:
+  // the JSON had "mean": null), both ways.
   testing::TempDir dir;
   const Mesh sphere = icosphere(3);
   Mesh with = sphere;
@@ -301,18 +305,19 @@ TEST(Measure, CliOnADegenerateTarget) {
   ASSERT_TRUE(writeMeshFile(dir.file("b.ply"), with).isOk());
   for (auto [from, to] : {std::pair{"a.ply", "b.ply"}, std::pair{"b.ply", "a.ply"}}) {
     std::string text;
-    ASSERT_EQ(testing::runScanpress("measure '" + dir.file(from) + "' '" + dir.file(to) + "' --json", &text), 0)
-        << text;
+    const std::string args = "measure '" + dir.file(from) + "' '" + dir.file(to) + "' --json";
+    ASSERT_EQ(testing::runScanpress(args, &text), 0) << text;
     EXPECT_EQ(text.find("null"), std::string::npos) << text;
     EXPECT_EQ(text.find("nan"), std::string::npos) << text;
     const nlohmann::json j = nlohmann::json::parse(text);
     for (const char* way : {"forward", "backward"})
-      for (const char* stat : {"mean", "rms", "max"}) EXPECT_LT(j[way][stat].get<double>(), 1e-14) << way << stat;
+      for (const char* stat : {"mean", "rms", "max"})
+        EXPECT_LT(j[way][stat].get<double>(), 1e-14) << way << stat;
   }
 }
 
-// An independent estimate of the area-weighted mean and RMS distance from `from` to `to`: `n` points uniform over
-// the surface (a triangle by area, then uniform barycentric coordinates), plain Monte-Carlo.
+// An independent estimate of the area-weighted mean and RMS distance from `from` to `to`: `n` points uniform
+// over the surface (a triangle by area, then uniform barycentric coordinates), plain Monte-Carlo.
 std::pair<double, double> areaAverage(const Mesh& from, const Mesh& to, size_t n, uint32_t seed) {
   std::vector<double> cdf;
   double area = 0;
@@ -335,9 +340,9 @@ std::pair<double, double> areaAverage(const Mesh& from, const Mesh& to, size_t n
 }
 
 TEST(Measure, MeanAndRmsEstimateTheAreaAverageAtTheDefaultDensity) {
-  // A sphere whose vertices are pushed in or out by 1% at random: the error is largest at the vertices. At the
-  // default density, mean and RMS both ways must agree within 3% with an independent area-sampled estimate
-  // (400,000 points: its own noise is about 0.1%); vertex samples would bias them up.
+  // A sphere whose vertices are pushed in or out by 1% at random: the error is largest at the vertices. At
+  // the default density, mean and RMS both ways must agree within 3% with an independent area-sampled
+  // estimate (400,000 points: its own noise is about 0.1%); vertex samples would bias them up.
   const Mesh sphere = icosphere(4);
   Mesh noisy = sphere;
   std::mt19937 rng(5);
@@ -355,9 +360,9 @@ TEST(Measure, MeanAndRmsEstimateTheAreaAverageAtTheDefaultDensity) {
 }
 
 TEST(Measure, IgeaAgainstItsEightBitSnapAtTheDefaultDensity) {
-  // igea snapped to 255 steps over its largest extent (what Draco -qp 8 makes of positions; the case used
-  // a real Draco decode, which adds reordering): many triangles with coincident corners. Finite numbers, and mean
-  // and RMS within 3% of an independent area-sampled estimate both ways.
+  // igea snapped to 255 steps over its largest extent (what Draco -qp 8 makes of positions; the case
+  // used a real Draco decode, which adds reordering): many triangles with coincident corners. Finite numbers,
+  // and mean and RMS within 3% of an independent area-sampled estimate both ways.
   const std::string path = testing::sharedDataDir() + "/igea.ply.zst";
   if (!std::filesystem::exists(path)) GTEST_SKIP() << "shared data not found: " << path;
   auto igea = readMeshFile(path);

@@ -229,9 +229,9 @@ TEST(Measure, ManyQueriesSpanningTheWholeDoubleRange) {
   for (size_t i = 0; i < points.size(); ++i) EXPECT_EQ(many[i].distance, index->closest(points[i]).distance) << i;
 }
 
-// Degenerate and thin triangles (issue 18): an independent reference in long double that takes a triangle as the
-// union of its face (solving the 2x2 normal equations, only if their determinant is clearly nonzero) and its three
-// edge segments (a zero-length one is a point).
+// Degenerate and thin triangles (issue 18): an independent reference in long double that takes a triangle as
+// the union of its face (solving the 2x2 normal equations, only if their determinant is clearly nonzero) and
+// its three edge segments (a zero-length one is a point).
 long double exactDistance(const Vec3d& pd, const Vec3d& ad, const Vec3d& bd, const Vec3d& cd) {
   using L = long double;
   const L p[3] = {pd[0], pd[1], pd[2]}, a[3] = {ad[0], ad[1], ad[2]}, b[3] = {bd[0], bd[1], bd[2]},
@@ -267,9 +267,9 @@ double exactDistance(const Mesh& m, const Vec3d& p) {
 }
 
 // A 10x10 grid over [0,1]^2 (z = 0) plus degenerate triangles of every kind, off the grid (z = 0.2 .. 0.3, so
-// that they are the nearest surface of some points) and on it (reusing the grid's vertices: they add nothing to
-// the surface, and points on the grid must stay at distance 0): (i,i,j), (i,j,j), (i,j,i), (i,i,i), collinear,
-// nearly collinear and needles.
+// that they are the nearest surface of some points) and on it (reusing the grid's vertices: they add nothing
+// to the surface, and points on the grid must stay at distance 0): (i,i,j), (i,j,j), (i,j,i), (i,i,i),
+// collinear, nearly collinear and needles.
 Mesh gridWithDegenerateTriangles(std::mt19937& rng) {
   Mesh m = grid(10, 0.0);
   std::uniform_real_distribution<double> u(0, 1);
@@ -282,27 +282,23 @@ Mesh gridWithDegenerateTriangles(std::mt19937& rng) {
     const Vec3d a{u(rng), u(rng), 0.2 + 0.1 * u(rng)};
     const Vec3d b{a[0] + 0.2 * (u(rng) - 0.5), a[1] + 0.2 * (u(rng) - 0.5), a[2] + 0.05 * (u(rng) - 0.5)};
     const uint32_t i = add(a), j = add(b);
-    switch (k % 8) {
-      case 0: m.triangles.push_back({i, i, j}); break;
-      case 1: m.triangles.push_back({i, j, j}); break;
-      case 2: m.triangles.push_back({i, j, i}); break;
-      case 3: m.triangles.push_back({i, i, i}); break;
-      case 4: m.triangles.push_back({i, j, add(vadd(a, vmul(vsub(b, a), 0.37)))}); break;  // collinear, inside
-      case 5: m.triangles.push_back({i, add(vadd(a, vmul(vsub(b, a), 1.6))), j}); break;  // collinear, beyond
-      case 6: m.triangles.push_back({i, j, add(vadd(vadd(a, vmul(vsub(b, a), 0.5)), {0, 0, 1e-12}))}); break;
-      default: m.triangles.push_back({i, j, add(vadd(b, {1e-9, -2e-9, 1e-9}))}); break;  // needle
-    }
+    // (i,i,j), (i,j,j), (i,j,i), (i,i,i); collinear with the third corner inside, then beyond; nearly
+    // collinear (1e-12 off); a needle (its third corner 2.4e-9 from j).
+    const int kind = k % 8;
+    const uint32_t third = kind == 4   ? add(vadd(a, vmul(vsub(b, a), 0.37)))
+                           : kind == 5 ? add(vadd(a, vmul(vsub(b, a), 1.6)))
+                           : kind == 6 ? add(vadd(vadd(a, vmul(vsub(b, a), 0.5)), {0, 0, 1e-12}))
+                                       : add(vadd(b, {1e-9, -2e-9, 1e-9}));
+    const Triangle kinds[8] = {{i, i, j}, {i, j, j}, {i, j, i}, {i, i, i},
+                               {i, j, third}, {i, third, j}, {i, j, third}, {i, j, third}};
+    m.triangles.push_back(kinds[kind]);
   }
-  // On the grid: a repeated corner of a grid triangle, and a triangle through three collinear grid vertices.
-  for (int k = 0; k < 200; ++k) {
+  for (int k = 0; k < 200; ++k) {  // on the grid
     const Triangle& t = m.triangles[k % 200];
     const uint32_t x = vertex(rng);
-    switch (k % 4) {
-      case 0: m.triangles.push_back({t[0], t[0], t[1]}); break;
-      case 1: m.triangles.push_back({t[1], t[2], t[2]}); break;
-      case 2: m.triangles.push_back({x, x, x}); break;
-      default: m.triangles.push_back({0, 5, 10}); break;  // the grid's first row
-    }
+    // A repeated corner of a grid triangle (either side), a point, three collinear vertices (the first row).
+    const Triangle kinds[4] = {{t[0], t[0], t[1]}, {t[1], t[2], t[2]}, {x, x, x}, {0, 5, 10}};
+    m.triangles.push_back(kinds[k % 4]);
   }
   return m;
 }
@@ -316,18 +312,20 @@ TEST(Measure, DegenerateTrianglesAreTheirSegmentsOrPoints) {
     const Vec3d &a = m.positions[t[0]], &b = m.positions[t[1]], &c = m.positions[t[2]];
     for (int k = 0; k < 200; ++k) {
       const double spread = k % 3 == 0 ? 1e-3 : k % 3 == 1 ? 0.05 : 0.5;
-      const Vec3d on = vadd(a, vadd(vmul(vsub(b, a), 0.5 + 0.7 * u(rng)), vmul(vsub(c, a), 0.5 + 0.7 * u(rng))));
+      const Vec3d on =
+          vadd(a, vadd(vmul(vsub(b, a), 0.5 + 0.7 * u(rng)), vmul(vsub(c, a), 0.5 + 0.7 * u(rng))));
       const Vec3d p{on[0] + spread * u(rng), on[1] + spread * u(rng), on[2] + spread * u(rng)};
       const Vec3d q = closestPointOnTriangle(p, a, b, c);
       const double ref = double(exactDistance(p, a, b, c));
-      ASSERT_NEAR(vlen(vsub(q, p)), ref, 1e-12) << "triangle (" << t[0] << "," << t[1] << "," << t[2] << ") " << k;
+      ASSERT_NEAR(vlen(vsub(q, p)), ref, 1e-12)
+          << "triangle (" << t[0] << "," << t[1] << "," << t[2] << ") " << k;
     }
   }
 }
 
 TEST(Measure, ClosestWithDegenerateTrianglesMatchesTheReference) {
-  // Both closest() and closestMany() against the reference, for points near the degenerate triangles, points on
-  // the grid (distance 0 whatever the degenerate triangles on it) and points around it.
+  // Both closest() and closestMany() against the reference, for points near the degenerate triangles, points
+  // on the grid (distance 0 whatever the degenerate triangles on it) and points around it.
   std::mt19937 rng(1818);
   const Mesh m = gridWithDegenerateTriangles(rng);
   std::uniform_real_distribution<double> u(-1, 1), unit(0, 1);

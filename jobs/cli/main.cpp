@@ -90,9 +90,9 @@ constexpr const char* kMeasureHelp = R"(usage: scanpress measure A B [options]
 
 Surface distance between mesh A (the original) and mesh B (e.g. a decoded scan): area-weighted samples on each
 surface (stratified, seeded; plus the vertices, for the max only), exact closest-point distances to the other
-surface, both directions. Reports mean and RMS (area-weighted averages) and max (Hausdorff) in absolute units and
-relative to A's bounding-box diagonal, one-sided (forward A->B, backward B->A) and symmetric (the larger of the
-two). Same numbers at any thread count.
+surface, both directions. Reports mean and RMS (area-weighted averages) and max (Hausdorff) in absolute units
+and relative to A's bounding-box diagonal, one-sided (forward A->B, backward B->A) and symmetric (the larger
+of the two). Same numbers at any thread count.
 
 options:
   --samples N               about N samples per direction (default: 2 per triangle of A)
