@@ -63,13 +63,15 @@ void sampleSurface(std::span<const Vec3d> p, std::span<const Triangle> tris, con
       out.push_back(onTriangle(a, b, c, u, v));
     }
   }
-  if (opt.vertices) {
-    std::vector<uint8_t> used(p.size(), 0);
-    for (const auto& tri : tris)
-      for (uint32_t v : tri) used[v] = 1;
-    for (size_t v = 0; v < p.size(); ++v)
-      if (used[v]) out.push_back(p[v]);
-  }
+  if (opt.vertices) sampleVertices(p, tris, out);
+}
+
+void sampleVertices(std::span<const Vec3d> p, std::span<const Triangle> tris, std::vector<Vec3d>& out) {
+  std::vector<uint8_t> used(p.size(), 0);
+  for (const auto& tri : tris)
+    for (uint32_t v : tri) used[v] = 1;
+  for (size_t v = 0; v < p.size(); ++v)
+    if (used[v]) out.push_back(p[v]);
 }
 
 }  // namespace scanpress

@@ -2,6 +2,7 @@
 
 #include <oneapi/tbb/parallel_for.h>
 
+#include <algorithm>
 #include <vector>
 
 #include "engine/quantize.h"
@@ -15,7 +16,7 @@ double samplingDensity(const MeasureSettings& s, uint64_t triangles, double area
   return s.samples_per_triangle * double(triangles) / area;
 }
 
-ErrorAccumulator distancesTo(const SurfaceIndex& surface, std::span<const Vec3d> samples) {
+ErrorAccumulator distancesTo(const SurfaceIndex& surface, std::span<const Vec3d> samples, size_t averaged) {
   std::vector<double> d(samples.size());
   // Several samples per triangle of the surface (a simplified or remeshed result): blocks of nearby samples share
   // Embree gathers (closestMany). About one or two per triangle (lossless codecs, the way back): one query per
@@ -39,7 +40,9 @@ ErrorAccumulator distancesTo(const SurfaceIndex& surface, std::span<const Vec3d>
     }
   });
   ErrorAccumulator acc;
-  for (double x : d) acc.add(x);
+  averaged = std::min(averaged, d.size());
+  for (size_t i = 0; i < averaged; ++i) acc.add(d[i]);
+  for (size_t i = averaged; i < d.size(); ++i) acc.addToMax(d[i]);
   return acc;
 }
 
@@ -53,15 +56,19 @@ Status measureSurfaces(std::span<const Vec3d> original_positions, std::span<cons
   opt.density = density;
   opt.seed = s.seed;
   opt.stratified = s.stratified;
-  opt.vertices = s.vertices;
+  opt.vertices = false;  // appended apart: vertex samples count for the max only (ErrorAccumulator::addToMax)
   opt.stream = stream;
   std::vector<Vec3d> samples;
   sampleSurface(original_positions, original_triangles, opt, samples);
-  forward = distancesTo(to_decoded, samples);
+  size_t area_samples = samples.size();
+  if (s.vertices) sampleVertices(original_positions, original_triangles, samples);
+  forward = distancesTo(to_decoded, samples, area_samples);
   samples.clear();
   opt.stream = stream + 1;
   sampleSurface(decoded_positions, decoded_triangles, opt, samples);
-  backward = distancesTo(to_original, samples);
+  area_samples = samples.size();
+  if (s.vertices) sampleVertices(decoded_positions, decoded_triangles, samples);
+  backward = distancesTo(to_original, samples, area_samples);
   return Status::ok();
 }
 

@@ -3,6 +3,7 @@
 // sample order, so the numbers are the same at any thread count.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <span>
 #include <string>
@@ -22,7 +23,7 @@ struct MeasureSettings {
   uint64_t samples = 0;             // if > 0: about this many samples per direction instead
   uint64_t seed = 1;
   bool stratified = true;  // stratified within each triangle (else Monte-Carlo)
-  bool vertices = true;    // vertices are samples too
+  bool vertices = true;    // vertices are samples too (for the max; mean and RMS are of the area samples)
   // Pictures (jobs): a render of the decoded scan colored by distance to the original.
   bool render = false;
   int render_width = 800, render_height = 600;
@@ -39,8 +40,10 @@ struct MeasureResult {
 // Samples per unit area for a surface of `triangles` triangles and `area` (settings: per triangle or total).
 double samplingDensity(const MeasureSettings& s, uint64_t triangles, double area);
 
-// Distances from `samples` to the surface, accumulated in sample order (parallel queries).
-ErrorAccumulator distancesTo(const SurfaceIndex& surface, std::span<const Vec3d> samples);
+// Distances from `samples` to the surface, accumulated in sample order (parallel queries). The first
+// `averaged` samples (area samples) enter the count, mean and RMS; the rest (vertex samples) the max only.
+ErrorAccumulator distancesTo(const SurfaceIndex& surface, std::span<const Vec3d> samples,
+                             size_t averaged = SIZE_MAX);
 
 // The core of every measurement: samples on the original (stream `stream`) queried against the decoded surface,
 // and samples on the decoded surface (stream `stream + 1`) against the original, at `density` samples per unit

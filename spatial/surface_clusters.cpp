@@ -18,28 +18,63 @@ namespace {
 // radii, which keeps big triangles apart (the value: bench/RESULTS.md).
 constexpr double kClusterRadii = 4.0;
 
-// The plane record of a triangle (corners relative to the origin): unit normal and offset, then each edge's
-// outward in-plane unit normal and offset. All zeros (a bound of 0, never rejected) for a degenerate or
-// needle-thin triangle (sine of its angle below 1e-6), whose normal's direction is too imprecise.
-void planeRecord(const Vec3d v[3], float out[16]) {
+// The plane record of a triangle with corners w (absolute; the record is relative to `origin`): unit normal
+// and offset, then each edge's outward in-plane unit normal and offset. Directions come from differences of
+// the absolute corners (exact but for one rounding, even for corners a few ulps apart), offsets from the
+// corners relative to the origin. A triangle with coincident corners is its segment or point: its record
+// bounds the distance to that (segmentRecord). All zeros (a bound of 0, never rejected) for any other
+// degenerate or needle-thin triangle (sine of its angle at w[0] below 1e-6), whose normal's direction is too
+// imprecise.
+void segmentRecord(const Vec3d& a, const Vec3d& b, const Vec3d& origin, float out[16]);
+
+void planeRecord(const Vec3d w[3], const Vec3d& origin, float out[16]) {
   std::fill_n(out, 16, 0.f);
-  const Vec3d e1 = vsub(v[1], v[0]), e2 = vsub(v[2], v[0]);
+  if (w[0] == w[1] || w[1] == w[2] || w[2] == w[0])
+    return segmentRecord(w[0], w[0] == w[1] ? w[2] : w[1], origin, out);
+  const Vec3d e1 = vsub(w[1], w[0]), e2 = vsub(w[2], w[0]);
   Vec3d n = vcross(e1, e2);
   const double len = vlen(n);
   if (!(len > 1e-6 * vlen(e1) * vlen(e2))) return;
   n = vmul(n, 1.0 / len);
   for (int a = 0; a < 3; ++a) out[a] = static_cast<float>(n[a]);
-  out[3] = static_cast<float>(vdot(n, v[0]));
+  out[3] = static_cast<float>(vdot(n, vsub(w[0], origin)));
   for (int e = 0; e < 3; ++e) {
-    const Vec3d& a = v[e];
-    const Vec3d& b = v[(e + 1) % 3];
+    const Vec3d& a = w[e];
+    const Vec3d& b = w[(e + 1) % 3];
     Vec3d mo = vcross(vsub(b, a), n);  // in the plane, perpendicular to the edge, away from the third vertex
     const double ml = vlen(mo);
     if (!(ml > 0)) continue;
     mo = vmul(mo, 1.0 / ml);
     for (int k = 0; k < 3; ++k) out[4 + 4 * e + k] = static_cast<float>(mo[k]);
-    out[4 + 4 * e + 3] = static_cast<float>(vdot(mo, a));
+    out[4 + 4 * e + 3] = static_cast<float>(vdot(mo, vsub(a, origin)));
   }
+}
+
+// The record of segment ab (a point if a == b), in the plane record's form: a unit n perpendicular to the
+// segment as the "plane" (|n.(x - a)| is the distance along n), and its direction m as two "edges" (m.(x - b)
+// beyond b, m.(a - x) behind a): the squared distance to the segment is at least the sum of the squares of
+// those, as n and m are orthonormal.
+void segmentRecord(const Vec3d& a, const Vec3d& b, const Vec3d& origin, float out[16]) {
+  Vec3d m = vsub(b, a);
+  const double ml = vlen(m);
+  m = ml > 0 ? vmul(m, 1.0 / ml) : Vec3d{1, 0, 0};
+  // n: m crossed with the axis least along it, normalized.
+  int least = 0;
+  for (int k = 1; k < 3; ++k)
+    if (std::fabs(m[k]) < std::fabs(m[least])) least = k;
+  Vec3d axis{0, 0, 0};
+  axis[least] = 1;
+  Vec3d n = vcross(m, axis);
+  n = vmul(n, 1.0 / vlen(n));
+  const Vec3d ar = vsub(a, origin), br = vsub(b, origin);
+  for (int k = 0; k < 3; ++k) {
+    out[k] = static_cast<float>(n[k]);
+    out[4 + k] = static_cast<float>(m[k]);
+    out[8 + k] = static_cast<float>(-m[k]);
+  }
+  out[3] = static_cast<float>(vdot(n, ar));
+  out[7] = static_cast<float>(vdot(m, br));
+  out[11] = static_cast<float>(-vdot(m, ar));
 }
 
 float roundDown(double x) {
@@ -138,10 +173,10 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m) {
     for (uint32_t k = b; k < e; ++k) {
       const uint32_t t = items[k].t;
       const size_t slot = block * kLanes + (k - b);
-      Vec3d v[3];
-      for (int c = 0; c < 3; ++c) v[c] = vsub(m.positions[m.triangles[t][c]], m.origin);
+      Vec3d w[3];
+      for (int c = 0; c < 3; ++c) w[c] = m.positions[m.triangles[t][c]];
       float record[16];
-      planeRecord(v, record);
+      planeRecord(w, m.origin, record);
       float* dst = laneOf(set->rows.data(), slot);
       for (size_t a = 0; a < 16; ++a) dst[a * kLanes] = record[a];
       set->ids[slot] = t;

@@ -229,5 +229,134 @@ TEST(Measure, ManyQueriesSpanningTheWholeDoubleRange) {
   for (size_t i = 0; i < points.size(); ++i) EXPECT_EQ(many[i].distance, index->closest(points[i]).distance) << i;
 }
 
+// Degenerate and thin triangles (issue 18): an independent reference in long double that takes a triangle as
+// the union of its face (solving the 2x2 normal equations, only if their determinant is clearly nonzero) and
+// its three edge segments (a zero-length one is a point).
+long double exactDistance(const Vec3d& pd, const Vec3d& ad, const Vec3d& bd, const Vec3d& cd) {
+  using L = long double;
+  const L p[3] = {pd[0], pd[1], pd[2]}, a[3] = {ad[0], ad[1], ad[2]}, b[3] = {bd[0], bd[1], bd[2]},
+          c[3] = {cd[0], cd[1], cd[2]};
+  auto dot = [](const L* u, const L* v) { return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]; };
+  auto segment = [&](const L* s, const L* e) {
+    const L d[3] = {e[0] - s[0], e[1] - s[1], e[2] - s[2]}, sp[3] = {p[0] - s[0], p[1] - s[1], p[2] - s[2]};
+    const L len2 = dot(d, d);
+    const L t = len2 > 0 ? std::clamp(dot(sp, d) / len2, L(0), L(1)) : L(0);
+    const L r[3] = {sp[0] - t * d[0], sp[1] - t * d[1], sp[2] - t * d[2]};
+    return std::sqrt(dot(r, r));
+  };
+  L best = std::min({segment(a, b), segment(b, c), segment(c, a)});
+  const L u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]},
+          w[3] = {p[0] - a[0], p[1] - a[1], p[2] - a[2]};
+  const L uu = dot(u, u), uv = dot(u, v), vv = dot(v, v), uw = dot(u, w), vw = dot(v, w);
+  const L det = uu * vv - uv * uv;
+  if (det > 1e-12L * uu * vv) {
+    const L s = (vv * uw - uv * vw) / det, t = (uu * vw - uv * uw) / det;
+    if (s >= 0 && t >= 0 && s + t <= 1) {
+      const L r[3] = {w[0] - s * u[0] - t * v[0], w[1] - s * u[1] - t * v[1], w[2] - s * u[2] - t * v[2]};
+      best = std::min(best, std::sqrt(dot(r, r)));
+    }
+  }
+  return best;
+}
+
+double exactDistance(const Mesh& m, const Vec3d& p) {
+  long double best = std::numeric_limits<long double>::infinity();
+  for (const auto& t : m.triangles)
+    best = std::min(best, exactDistance(p, m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]));
+  return double(best);
+}
+
+// A 10x10 grid over [0,1]^2 (z = 0) plus degenerate triangles of every kind, off the grid (z = 0.2 .. 0.3, so
+// that they are the nearest surface of some points) and on it (reusing the grid's vertices: they add nothing
+// to the surface, and points on the grid must stay at distance 0): (i,i,j), (i,j,j), (i,j,i), (i,i,i),
+// collinear, nearly collinear and needles.
+Mesh gridWithDegenerateTriangles(std::mt19937& rng) {
+  Mesh m = grid(10, 0.0);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::uniform_int_distribution<uint32_t> vertex(0, uint32_t(m.positions.size()) - 1);
+  auto add = [&m](const Vec3d& p) {
+    m.positions.push_back(p);
+    return uint32_t(m.positions.size() - 1);
+  };
+  for (int k = 0; k < 40; ++k) {
+    const Vec3d a{u(rng), u(rng), 0.2 + 0.1 * u(rng)};
+    const Vec3d b{a[0] + 0.2 * (u(rng) - 0.5), a[1] + 0.2 * (u(rng) - 0.5), a[2] + 0.05 * (u(rng) - 0.5)};
+    const uint32_t i = add(a), j = add(b);
+    // (i,i,j), (i,j,j), (i,j,i), (i,i,i); collinear with the third corner inside, then beyond; nearly
+    // collinear (1e-12 off); a needle (its third corner 2.4e-9 from j).
+    const int kind = k % 8;
+    const uint32_t third = kind == 4   ? add(vadd(a, vmul(vsub(b, a), 0.37)))
+                           : kind == 5 ? add(vadd(a, vmul(vsub(b, a), 1.6)))
+                           : kind == 6 ? add(vadd(vadd(a, vmul(vsub(b, a), 0.5)), {0, 0, 1e-12}))
+                                       : add(vadd(b, {1e-9, -2e-9, 1e-9}));
+    const Triangle kinds[8] = {{i, i, j}, {i, j, j}, {i, j, i}, {i, i, i},
+                               {i, j, third}, {i, third, j}, {i, j, third}, {i, j, third}};
+    m.triangles.push_back(kinds[kind]);
+  }
+  for (int k = 0; k < 200; ++k) {  // on the grid
+    const Triangle& t = m.triangles[k % 200];
+    const uint32_t x = vertex(rng);
+    // A repeated corner of a grid triangle (either side), a point, three collinear vertices (the first row).
+    const Triangle kinds[4] = {{t[0], t[0], t[1]}, {t[1], t[2], t[2]}, {x, x, x}, {0, 5, 10}};
+    m.triangles.push_back(kinds[k % 4]);
+  }
+  return m;
+}
+
+TEST(Measure, DegenerateTrianglesAreTheirSegmentsOrPoints) {
+  // closestPointOnTriangle against the reference, triangle by triangle, for points all around each.
+  std::mt19937 rng(18);
+  const Mesh m = gridWithDegenerateTriangles(rng);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (const auto& t : m.triangles) {
+    const Vec3d &a = m.positions[t[0]], &b = m.positions[t[1]], &c = m.positions[t[2]];
+    for (int k = 0; k < 200; ++k) {
+      const double spread = k % 3 == 0 ? 1e-3 : k % 3 == 1 ? 0.05 : 0.5;
+      const Vec3d on =
+          vadd(a, vadd(vmul(vsub(b, a), 0.5 + 0.7 * u(rng)), vmul(vsub(c, a), 0.5 + 0.7 * u(rng))));
+      const Vec3d p{on[0] + spread * u(rng), on[1] + spread * u(rng), on[2] + spread * u(rng)};
+      const Vec3d q = closestPointOnTriangle(p, a, b, c);
+      const double ref = double(exactDistance(p, a, b, c));
+      ASSERT_NEAR(vlen(vsub(q, p)), ref, 1e-12)
+          << "triangle (" << t[0] << "," << t[1] << "," << t[2] << ") " << k;
+    }
+  }
+}
+
+TEST(Measure, ClosestWithDegenerateTrianglesMatchesTheReference) {
+  // Both closest() and closestMany() against the reference, for points near the degenerate triangles, points
+  // on the grid (distance 0 whatever the degenerate triangles on it) and points around it.
+  std::mt19937 rng(1818);
+  const Mesh m = gridWithDegenerateTriangles(rng);
+  std::uniform_real_distribution<double> u(-1, 1), unit(0, 1);
+  std::vector<Vec3d> points, on_grid;
+  for (size_t t = 200; t < 240; ++t) {  // the off-grid degenerate ones
+    const Vec3d& a = m.positions[m.triangles[t][0]];
+    const Vec3d& b = m.positions[m.triangles[t][2]];
+    for (int k = 0; k < 25; ++k) {
+      const Vec3d on = vadd(a, vmul(vsub(b, a), 1.2 * unit(rng) - 0.1));
+      const double spread = k % 2 ? 1e-3 : 0.03;
+      points.push_back({on[0] + spread * u(rng), on[1] + spread * u(rng), on[2] + spread * u(rng)});
+    }
+  }
+  for (int k = 0; k < 2000; ++k) on_grid.push_back({unit(rng), unit(rng), 0.0});
+  for (int k = 0; k < 1000; ++k) points.push_back({0.5 + u(rng), 0.5 + u(rng), 0.3 * u(rng)});
+  points.insert(points.end(), on_grid.begin(), on_grid.end());
+  auto index = SurfaceIndex::build(device(), m.positions, m.triangles);
+  ASSERT_TRUE(index.isOk());
+  std::vector<SurfaceIndex::Closest> many(points.size());
+  index->closestMany(points, many);
+  uint32_t hint = UINT32_MAX;
+  for (size_t i = 0; i < points.size(); ++i) {
+    const double ref = exactDistance(m, points[i]);
+    const auto one = index->closest(points[i]), hinted = index->closest(points[i], hint);
+    hint = one.triangle;
+    ASSERT_NEAR(one.distance, ref, 1e-12) << "point " << i;
+    ASSERT_NEAR(hinted.distance, ref, 1e-12) << "point " << i;
+    ASSERT_NEAR(many[i].distance, ref, 1e-12) << "point " << i;
+  }
+  expectSameAsOneByOne(*index, m, points);
+}
+
 }  // namespace
 }  // namespace scanpress

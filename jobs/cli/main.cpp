@@ -99,9 +99,10 @@ exit codes: 0 all ok, 1 invalid job file, else the most severe failure (2 bad da
 constexpr const char* kMeasureHelp = R"(usage: scanpress measure A B [options]
 
 Surface distance between mesh A (the original) and mesh B (e.g. a decoded scan): area-weighted samples on each
-surface (stratified, seeded; plus the vertices), exact closest-point distances to the other surface, both
-directions. Reports mean, RMS and max (Hausdorff) in absolute units and relative to A's bounding-box diagonal,
-one-sided (forward A->B, backward B->A) and symmetric (the larger of the two). Same numbers at any thread count.
+surface (stratified, seeded; plus the vertices, for the max only), exact closest-point distances to the other
+surface, both directions. Reports mean and RMS (area-weighted averages) and max (Hausdorff) in absolute units
+and relative to A's bounding-box diagonal, one-sided (forward A->B, backward B->A) and symmetric (the larger
+of the two). Same numbers at any thread count.
 
 options:
   --samples N               about N samples per direction (default: 2 per triangle of A)
