@@ -28,28 +28,14 @@
 #include "jobs/mesh_io/mesh_reader.h"
 #include "jobs/mesh_io/mesh_writer.h"
 #include "spatial/surface_index.h"
+#include "spatial_util.h"
 #include "jobs_util.h"
 
 namespace scanpress {
 namespace {
 
-std::shared_ptr<EmbreeDevice> device() {
-  static auto d = *EmbreeDevice::create();
-  return d;
-}
-
-Mesh grid(int n, double z, double size = 1.0) {
-  Mesh m;
-  for (int y = 0; y <= n; ++y)
-    for (int x = 0; x <= n; ++x) m.positions.push_back({size * x / n, size * y / n, z});
-  for (int y = 0; y < n; ++y)
-    for (int x = 0; x < n; ++x) {
-      const uint32_t a = y * (n + 1) + x;
-      m.triangles.push_back({a, a + 1, a + n + 2});
-      m.triangles.push_back({a, a + n + 2, a + n + 1});
-    }
-  return m;
-}
+using testing::device;
+using testing::grid;
 
 TEST(Measure, IdenticalMeshesGiveZero) {
   const Mesh m = icosphere(3);

@@ -315,12 +315,18 @@ TEST(Outputs, InterruptRemovesTemporariesAndScratch) {
   }
 }
 
-TEST(Outputs, ResumeRemovesTemporariesOfDeadRuns) {
-  testing::TempDir dir;
+// A job over a scans/ folder holding the bunny, writing to out/: returns the job file.
+std::string bunnyJob(testing::TempDir& dir) {
   fs::create_directories(dir.file("scans"));
   fs::copy_file(kBunny, dir.file("scans/bunny.ply.zst"));
   const std::string job = dir.file("job.json");
   testing::writeBytes(job, R"({"inputs": ["scans"], "output": {"directory": "out"}})");
+  return job;
+}
+
+TEST(Outputs, ResumeRemovesTemporariesOfDeadRuns) {
+  testing::TempDir dir;
+  const std::string job = bunnyJob(dir);
   std::string out;
   ASSERT_EQ(run("run " + quoted(job) + " --quiet", &out), 0) << out;
   // What kill -9 leaves: a partial temporary named with a PID that no longer runs. One of a live PID (this
@@ -338,10 +344,7 @@ TEST(Outputs, ResumeRemovesTemporariesOfDeadRuns) {
 
 TEST(Outputs, ResumeRedoesAContainerThatFailsItsChecksums) {
   testing::TempDir dir;
-  fs::create_directories(dir.file("scans"));
-  fs::copy_file(kBunny, dir.file("scans/bunny.ply.zst"));
-  const std::string job = dir.file("job.json");
-  testing::writeBytes(job, R"({"inputs": ["scans"], "output": {"directory": "out"}})");
+  const std::string job = bunnyJob(dir);
   std::string out;
   ASSERT_EQ(run("run " + quoted(job) + " --quiet", &out), 0) << out;
   const std::string container = dir.file("out/bunny.spz");
