@@ -1,6 +1,6 @@
-// The malformation sweep's inputs (issue 18, "Hardening that stays"): small valid containers of every codec, with
-// and without normals and colors, and the deterministic, seeded mutations made from them. Used by the engine
-// sweep (test_malformation_sweep.cpp, every mutation decoded in process) and by the CLI sample of it
+// The malformation sweep's inputs (issue 18, "Hardening that stays"): small valid containers of every codec,
+// with and without normals and colors, and the deterministic, seeded mutations made from them. Used by the
+// engine sweep (test_malformation_sweep.cpp, every mutation decoded in process) and by the CLI sample of it
 // (test_sweep_cli.cpp, exit codes). Standard library and the engine only.
 #pragma once
 
@@ -47,8 +47,8 @@ inline QuantizedMesh everyNthTriangle(const QuantizedMesh& m, size_t step, size_
   return out;
 }
 
-// Three tiles (an icosphere of 80 triangles and two smaller pieces of it) at 10 grid bits, for every codec, without
-// attributes and with 8-bit normals and RGBA colors: 6 containers of a few hundred bytes each.
+// Three tiles (an icosphere of 80 triangles and two smaller pieces of it) at 10 grid bits, for every codec,
+// without attributes and with 8-bit normals and RGBA colors: 6 containers of a few hundred bytes each.
 inline std::vector<SweepContainer> sweepContainers() {
   Mesh m = icosphere(1);
   for (size_t i = 0; i < m.positions.size(); ++i) {
@@ -73,42 +73,52 @@ inline std::vector<SweepContainer> sweepContainers() {
   return out;
 }
 
-// The mutation families. "Repaired" ones recompute every checksum afterwards (fuzzing::repairChecksums), so that
-// the edit reaches the parser's and decoders' logic; the others must all be refused (a checksum, a magic or a
-// size catches them).
+// The mutation families. "Repaired" ones recompute every checksum afterwards (fuzzing::repairChecksums), so
+// that the edit reaches the parser's and decoders' logic; the others must all be refused (a checksum, a magic
+// or a size catches them).
 enum class Family {
-  kTruncation,          // every prefix
-  kBitFlip,             // every bit of every byte
-  kBitFlipRepaired,     // every bit of every byte, checksums repaired
-  kOverwrite,           // every byte set to a seeded random value
-  kOverwriteRepaired,   // every byte set to 0x00, 0xFF, 0x80 and a seeded random value, checksums repaired
-  kTrailing,            // 1..64 seeded random bytes appended, and a second footer appended
-  kHeaderEdit,          // header fields set to edge values, checksums repaired
-  kIndexEdit,           // a tile's counts, codec, version or bounds changed in its index entry and chunk header
-                        // alike (totals adjusted), checksums repaired
-  kPayloadEdit,         // 1..8 seeded random bytes overwritten inside one tile's payload, checksums repaired
+  kTruncation,         // every prefix
+  kBitFlip,            // every bit of every byte
+  kBitFlipRepaired,    // every bit of every byte, checksums repaired
+  kOverwrite,          // every byte set to a seeded random value
+  kOverwriteRepaired,  // every byte set to 0x00, 0xFF, 0x80 and a seeded random value, checksums repaired
+  kTrailing,           // 1..64 seeded random bytes appended, and a second footer appended
+  kHeaderEdit,         // header fields set to edge values, checksums repaired
+  kIndexEdit,    // a tile's counts, codec, version or bounds changed in its index entry and chunk header
+                 // alike (totals adjusted), checksums repaired
+  kPayloadEdit,  // 1..8 seeded random bytes overwritten inside one tile's payload, checksums repaired
 };
-constexpr Family kFamilies[] = {Family::kTruncation,        Family::kBitFlip,    Family::kBitFlipRepaired,
-                                Family::kOverwrite,         Family::kOverwriteRepaired, Family::kTrailing,
-                                Family::kHeaderEdit,        Family::kIndexEdit,  Family::kPayloadEdit};
+constexpr Family kFamilies[] = {Family::kTruncation, Family::kBitFlip,           Family::kBitFlipRepaired,
+                                Family::kOverwrite,  Family::kOverwriteRepaired, Family::kTrailing,
+                                Family::kHeaderEdit, Family::kIndexEdit,         Family::kPayloadEdit};
 
 inline const char* familyName(Family f) {
   switch (f) {
-    case Family::kTruncation: return "truncation";
-    case Family::kBitFlip: return "bit flip";
-    case Family::kBitFlipRepaired: return "bit flip, CRC repaired";
-    case Family::kOverwrite: return "byte overwrite";
-    case Family::kOverwriteRepaired: return "byte overwrite, CRC repaired";
-    case Family::kTrailing: return "trailing bytes";
-    case Family::kHeaderEdit: return "header edit, CRC repaired";
-    case Family::kIndexEdit: return "index+chunk edit, CRC repaired";
-    case Family::kPayloadEdit: return "payload edit, CRC repaired";
+    case Family::kTruncation:
+      return "truncation";
+    case Family::kBitFlip:
+      return "bit flip";
+    case Family::kBitFlipRepaired:
+      return "bit flip, CRC repaired";
+    case Family::kOverwrite:
+      return "byte overwrite";
+    case Family::kOverwriteRepaired:
+      return "byte overwrite, CRC repaired";
+    case Family::kTrailing:
+      return "trailing bytes";
+    case Family::kHeaderEdit:
+      return "header edit, CRC repaired";
+    case Family::kIndexEdit:
+      return "index+chunk edit, CRC repaired";
+    case Family::kPayloadEdit:
+      return "payload edit, CRC repaired";
   }
   return "?";
 }
 // Whether every mutation of the family must be refused (no repair: a checksum or the layout catches it).
 inline bool mustBeRefused(Family f) {
-  return f == Family::kTruncation || f == Family::kBitFlip || f == Family::kOverwrite || f == Family::kTrailing;
+  return f == Family::kTruncation || f == Family::kBitFlip || f == Family::kOverwrite ||
+         f == Family::kTrailing;
 }
 
 template <typename T>
@@ -122,8 +132,8 @@ T get(const std::vector<uint8_t>& b, uint64_t at) {
   return v;
 }
 
-// Calls `visit` with every mutation of `family` made from the valid container `base`, in a fixed order; `seed`
-// (with the family) seeds the random values. `payload_edits` is the number of kPayloadEdit mutations.
+// Calls `visit` with every mutation of `family` made from the valid container `base`, in a fixed order;
+// `seed` (with the family) seeds the random values. `payload_edits` is the number of kPayloadEdit mutations.
 inline void forEachMutation(const std::vector<uint8_t>& base, Family family, uint64_t seed, int payload_edits,
                             const std::function<void(const std::vector<uint8_t>&)>& visit) {
   std::mt19937_64 rng(seed * 131 + static_cast<uint64_t>(family));
@@ -170,7 +180,8 @@ inline void forEachMutation(const std::vector<uint8_t>& base, Family family, uin
       visit(b);
       return;
     case Family::kHeaderEdit: {
-      const double inf = std::numeric_limits<double>::infinity(), nan = std::numeric_limits<double>::quiet_NaN();
+      const double inf = std::numeric_limits<double>::infinity(),
+                   nan = std::numeric_limits<double>::quiet_NaN();
       auto edit = [&](auto change) {
         b = base;
         change(b);
@@ -179,7 +190,8 @@ inline void forEachMutation(const std::vector<uint8_t>& base, Family family, uin
       };
       for (uint32_t v : {0u, 2u, 0xFFFFFFFFu}) edit([&](auto& x) { put<uint32_t>(x, 8, v); });
       for (uint32_t v : {0u, 79u, 81u, 0xFFFFFFFFu}) edit([&](auto& x) { put<uint32_t>(x, 12, v); });
-      const double doubles[] = {0.0, -0.0, -1.0, 5e-324, 1e-308, 1e-300, 1e300, 1e308, -1e308, inf, -inf, nan};
+      const double doubles[] = {0.0,   -0.0,  -1.0,   5e-324, 1e-308, 1e-300,
+                                1e300, 1e308, -1e308, inf,    -inf,   nan};
       for (uint64_t at : {16, 24, 32, 40})
         for (double v : doubles) edit([&](auto& x) { put<double>(x, at, v); });
       for (uint64_t at : {48, 49, 50, 51})
@@ -245,7 +257,8 @@ inline void forEachMutation(const std::vector<uint8_t>& base, Family family, uin
         if (payload == 0) continue;
         b = base;
         const int bytes = 1 + static_cast<int>(rng() % 8);
-        for (int i = 0; i < bytes; ++i) b[e.offset + kChunkHeaderSize + rng() % payload] = static_cast<uint8_t>(rng());
+        for (int i = 0; i < bytes; ++i)
+          b[e.offset + kChunkHeaderSize + rng() % payload] = static_cast<uint8_t>(rng());
         fuzzing::repairChecksums(b);
         visit(b);
       }

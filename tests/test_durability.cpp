@@ -1,8 +1,8 @@
 // Durability (issue 18, "Hardening that stays"): a batch (`scanpress run` over a few `scanpress synth` scans)
-// killed with SIGKILL at 20 seeded random moments, and resumed each time, ends with outputs byte-identical to an
-// uninterrupted run, and never leaves a file under a final name that does not verify (`info --verify`). A run that
-// finishes before its kill moment is checked against the uninterrupted run too, and the batch starts over, so that
-// the kills keep landing inside the work.
+// killed with SIGKILL at 20 seeded random moments, and resumed each time, ends with outputs byte-identical to
+// an uninterrupted run, and never leaves a file under a final name that does not verify (`info --verify`). A
+// run that finishes before its kill moment is checked against the uninterrupted run too, and the batch starts
+// over, so that the kills keep landing inside the work.
 #include <gtest/gtest.h>
 
 #include <fcntl.h>
@@ -31,8 +31,8 @@ std::string readAll(const fs::path& p) {
   return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
 }
 
-// Starts `scanpress run JOB --quiet` in its own process group (so that a kill reaches whatever it starts), output
-// discarded.
+// Starts `scanpress run JOB --quiet` in its own process group (so that a kill reaches whatever it starts),
+// output discarded.
 pid_t startRun(const std::string& job) {
   const pid_t pid = fork();
   if (pid == 0) {
@@ -53,8 +53,9 @@ int waitExit(pid_t pid) {
 }
 
 void writeJob(const fs::path& job, const fs::path& inputs, const fs::path& out) {
-  std::ofstream(job) << R"({"inputs": [")" << (inputs / "*.ply").string() << R"("], "output": {"directory": ")"
-                     << out.string() << R"("}, "codec": {"name": "kdtree", "bits": 14}, "tiling": )"
+  std::ofstream(job) << R"({"inputs": [")" << (inputs / "*.ply").string()
+                     << R"("], "output": {"directory": ")" << out.string()
+                     << R"("}, "codec": {"name": "kdtree", "bits": 14}, "tiling": )"
                      << R"({"target_triangles": 2048}, "threads": 2})";
 }
 
@@ -68,8 +69,10 @@ DirState listDir(const fs::path& dir) {
   if (!fs::exists(dir)) return s;
   for (const auto& e : fs::directory_iterator(dir)) {
     const std::string name = e.path().filename().string();
-    if (name.find(".tmp-") != std::string::npos) s.temps.push_back(e.path());
-    else if (name[0] != '.') s.finals.push_back(e.path());
+    if (name.find(".tmp-") != std::string::npos)
+      s.temps.push_back(e.path());
+    else if (name[0] != '.')
+      s.finals.push_back(e.path());
   }
   std::sort(s.finals.begin(), s.finals.end());
   return s;
@@ -105,7 +108,8 @@ TEST(Durability, KilledAndResumedBatchMatchesAnUninterruptedRun) {
     for (const auto& ref_path : ref_containers) {
       const fs::path p = dir / "out" / ref_path.filename();
       ASSERT_TRUE(fs::exists(p)) << when << ": " << p;
-      EXPECT_TRUE(readAll(p) == readAll(ref_path)) << when << ": " << p << " differs from the uninterrupted run's";
+      EXPECT_TRUE(readAll(p) == readAll(ref_path))
+          << when << ": " << p << " differs from the uninterrupted run's";
     }
   };
   int killed_mid_run = 0, completed = 0, temps_seen = 0, finals_checked = 0;
@@ -136,12 +140,13 @@ TEST(Durability, KilledAndResumedBatchMatchesAnUninterruptedRun) {
   ASSERT_EQ(waitExit(startRun((dir / "kill.json").string())), 0);
   const DirState done = listDir(dir / "out");
   expectSameContainers("the final resumed run");
-  // Temporary files of killed runs: counted, not asserted. Removing stale temp files of dead runs on resume is
-  // issue 18 item 6 (another branch); assert `done.temps.empty()` here once that behaviour is on main.
-  std::printf("durability: uninterrupted run %.2f s; of 20 runs, %d killed before finishing and %d finished first "
-              "(identical, batch started over); %d containers under final names verified after kills; temp files "
-              "seen after kills %d, left at the end %zu\n",
-              ref_seconds, killed_mid_run, completed, finals_checked, temps_seen, done.temps.size());
+  // Temporary files of killed runs: counted, not asserted. Removing stale temp files of dead runs on resume
+  // is issue 18 item 6 (another branch); assert `done.temps.empty()` here once that behaviour is on main.
+  std::printf(
+      "durability: uninterrupted run %.2f s; of 20 runs, %d killed before finishing and %d finished first "
+      "(identical, batch started over); %d containers under final names verified after kills; temp files "
+      "seen after kills %d, left at the end %zu\n",
+      ref_seconds, killed_mid_run, completed, finals_checked, temps_seen, done.temps.size());
   EXPECT_GE(killed_mid_run, 5) << "the kill moments should mostly fall inside a run";
   fs::remove_all(dir);
 }

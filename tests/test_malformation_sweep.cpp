@@ -1,10 +1,11 @@
 // The malformation sweep (issue 18, "Hardening that stays"): every truncation, bit flip and byte overwrite,
-// trailing bytes, and checksum-repaired header, index and payload edits of small containers of every codec (with
-// and without normals and colors, three tiles each), each decoded as `scanpress decode` would (every tile whole and
-// every level, within the index's limits). Deterministic (seeded). Each (container, family) runs in a forked child
-// so that a crash is counted as a signal (and named) instead of ending the sweep; the child counts outcomes and its
-// peak memory in shared memory. Must hold: no signal, every outcome ok or a clean error (a Status), mutations that
-// are not checksum-repaired always refused, and no more than 256 MiB of peak memory or any single allocation.
+// trailing bytes, and checksum-repaired header, index and payload edits of small containers of every codec
+// (with and without normals and colors, three tiles each), each decoded as `scanpress decode` would (every
+// tile whole and every level, within the index's limits). Deterministic (seeded). Each (container, family)
+// runs in a forked child so that a crash is counted as a signal (and named) instead of ending the sweep; the
+// child counts outcomes and its peak memory in shared memory. Must hold: no signal, every outcome ok or a
+// clean error (a Status), mutations that are not checksum-repaired always refused, and no more than 256 MiB
+// of peak memory or any single allocation.
 #include <gtest/gtest.h>
 
 #include <sys/mman.h>
@@ -33,7 +34,8 @@
 
 #if !defined(SCANPRESS_SWEEP_ASAN)
 #if defined(__GNUC__) && !defined(__clang__)
-// GCC pairs its own operator new with free() at inlined call sites and warns; here both sides are malloc/free.
+// GCC pairs its own operator new with free() at inlined call sites and warns; here both sides are
+// malloc/free.
 #pragma GCC diagnostic ignored "-Wmismatched-new-delete"
 #endif
 // The largest single allocation since the last reset, through a replaced global operator new (not under ASan,
@@ -55,26 +57,43 @@ void* operator new[](size_t n) {
   if (void* p = countedAllocation(n)) return p;
   throw std::bad_alloc();
 }
-void* operator new(size_t n, const std::nothrow_t&) noexcept { return countedAllocation(n); }
-void* operator new[](size_t n, const std::nothrow_t&) noexcept { return countedAllocation(n); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, size_t) noexcept { std::free(p); }
-void operator delete[](void* p, size_t) noexcept { std::free(p); }
-void operator delete(void* p, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete[](void* p, const std::nothrow_t&) noexcept { std::free(p); }
+void* operator new(size_t n, const std::nothrow_t&) noexcept {
+  return countedAllocation(n);
+}
+void* operator new[](size_t n, const std::nothrow_t&) noexcept {
+  return countedAllocation(n);
+}
+void operator delete(void* p) noexcept {
+  std::free(p);
+}
+void operator delete[](void* p) noexcept {
+  std::free(p);
+}
+void operator delete(void* p, size_t) noexcept {
+  std::free(p);
+}
+void operator delete[](void* p, size_t) noexcept {
+  std::free(p);
+}
+void operator delete(void* p, const std::nothrow_t&) noexcept {
+  std::free(p);
+}
+void operator delete[](void* p, const std::nothrow_t&) noexcept {
+  std::free(p);
+}
 #endif
 
 namespace scanpress {
 namespace {
 
 constexpr uint64_t kMaxPeakBytes = uint64_t{256} << 20;
+// The checksum-repaired mutations of the progressive codecs (kdtree, octree) reach their decoders, which
+// decode every level of a tile (about 1 ms per tile in Release): each such family is an evenly spaced sample
+// of at most kProgressiveRepairedCap mutations (all of them for store, and for the mutations that checksums
+// refuse). ASan (the Debug build of the SANITIZE=1 lane) samples fewer, to stay within the time budget; its
+// RSS includes shadow memory and the quarantine of freed blocks, so peak memory is printed but only the
+// Release lane asserts it.
 #if defined(SCANPRESS_SWEEP_ASAN)
-// The checksum-repaired mutations of the progressive codecs (kdtree, octree) reach their decoders, which decode
-// every level of a tile (about 1 ms per tile in Release): each such family is an evenly spaced sample of at most
-// kProgressiveRepairedCap mutations (all of them for store, and for the mutations that checksums refuse). ASan
-// (the Debug build of the SANITIZE=1 lane) samples fewer, to stay within the time budget; its RSS includes shadow memory and the quarantine of freed blocks, so peak memory is
-// printed but only the Release lane asserts it.
 constexpr bool kAsan = true;
 constexpr int kPayloadEdits = 2500;
 constexpr uint64_t kProgressiveRepairedCap = 150;
@@ -118,7 +137,8 @@ void runFamily(const sweep::SweepContainer& c, sweep::Family family, uint64_t se
   uint64_t stride = 1;
   if (c.progressive && !sweep::mustBeRefused(family)) {
     uint64_t count = 0;
-    sweep::forEachMutation(c.bytes, family, seed, kPayloadEdits, [&](const std::vector<uint8_t>&) { ++count; });
+    sweep::forEachMutation(c.bytes, family, seed, kPayloadEdits,
+                           [&](const std::vector<uint8_t>&) { ++count; });
     stride = (count + kProgressiveRepairedCap - 1) / kProgressiveRepairedCap;
   }
   std::unordered_map<uint64_t, Status> seen;
@@ -174,8 +194,8 @@ TEST(MalformationSweep, EveryCodecEveryFamilyFailsCleanly) {
                       << " ended the process (" << (WIFSIGNALED(status) ? "signal " : "exit ")
                       << (WIFSIGNALED(status) ? WTERMSIG(status) : WEXITSTATUS(status)) << ")";
       }
-      EXPECT_EQ(r.refused_accepted, 0u) << c.name << ", " << sweep::familyName(family)
-                                        << ": mutations that must be refused decoded ok";
+      EXPECT_EQ(r.refused_accepted, 0u)
+          << c.name << ", " << sweep::familyName(family) << ": mutations that must be refused decoded ok";
       mutations += r.mutations;
       ok += r.containers_ok;
       refused_accepted += r.refused_accepted;
@@ -209,12 +229,13 @@ TEST(MalformationSweep, EveryCodecEveryFamilyFailsCleanly) {
     if (by_code[i])
       std::printf(" %s %llu;", errorCodeName(static_cast<ErrorCode>(i)),
                   static_cast<unsigned long long>(by_code[i]));
-  std::printf("\ndecoder calls (tiles whole and every level): %llu (%llu ok, %llu clean errors) in %llu parsed "
-              "containers; %llu tiles not decoded again (same bytes as a tile decoded before)\n",
-              static_cast<unsigned long long>(decodes.decodes), static_cast<unsigned long long>(decodes.decodes_ok),
-              static_cast<unsigned long long>(decodes.decode_errors),
-              static_cast<unsigned long long>(decodes.containers_parsed),
-              static_cast<unsigned long long>(decodes.decodes_skipped));
+  std::printf(
+      "\ndecoder calls (tiles whole and every level): %llu (%llu ok, %llu clean errors) in %llu parsed "
+      "containers; %llu tiles not decoded again (same bytes as a tile decoded before)\n",
+      static_cast<unsigned long long>(decodes.decodes), static_cast<unsigned long long>(decodes.decodes_ok),
+      static_cast<unsigned long long>(decodes.decode_errors),
+      static_cast<unsigned long long>(decodes.containers_parsed),
+      static_cast<unsigned long long>(decodes.decodes_skipped));
   std::printf("peak memory: VmHWM +%llu KiB over a child's start%s; largest single allocation %s\n",
               static_cast<unsigned long long>(peak_kb), hwm_reset ? "" : " (VmHWM reset unavailable)",
               kAsan ? "not tracked under ASan" : (std::to_string(largest_allocation) + " bytes").c_str());
@@ -222,11 +243,12 @@ TEST(MalformationSweep, EveryCodecEveryFamilyFailsCleanly) {
   EXPECT_EQ(signals, 0u);
   EXPECT_EQ(refused_accepted, 0u);
   EXPECT_GE(mutations, kMinMutations);
-  EXPECT_EQ(mutations, ok + [&] {
-    uint64_t errors = 0;
-    for (uint64_t n : by_code) errors += n;
-    return errors;
-  }());
+  EXPECT_EQ(
+      mutations, ok + [&] {
+        uint64_t errors = 0;
+        for (uint64_t n : by_code) errors += n;
+        return errors;
+      }());
   if (!kAsan) {
     EXPECT_LT(largest_allocation, kMaxPeakBytes);
     if (hwm_reset) {

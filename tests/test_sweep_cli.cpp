@@ -1,6 +1,6 @@
-// A sample of the malformation sweep (test_malformation_sweep.cpp) through the CLI: a few mutations of every family
-// and container written to files and decoded by `scanpress decode`, whose exit code must be 0 (ok) or 2 (a data
-// error), never a signal, an internal error (4) or anything else.
+// A sample of the malformation sweep (test_malformation_sweep.cpp) through the CLI: a few mutations of every
+// family and container written to files and decoded by `scanpress decode`, whose exit code must be 0 (ok) or
+// 2 (a data error), never a signal, an internal error (4) or anything else.
 #include <gtest/gtest.h>
 
 #include <unistd.h>
@@ -41,8 +41,8 @@ TEST(MalformationSweepCli, DecodeExitsWithZeroOrTwo) {
         if (i++ != next || taken == kPerFamily) return;
         ++taken;
         next = taken * count / kPerFamily;
-        std::ofstream(file, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()),
-                                                    static_cast<std::streamsize>(bytes.size()));
+        std::ofstream(file, std::ios::binary)
+            .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
         std::string text;
         const int code = testing::runScanpress("decode '" + file + "' '" + out + "' --quiet", &text);
         ++exits[code];

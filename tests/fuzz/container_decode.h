@@ -1,7 +1,7 @@
-// What the container fuzz target and the malformation sweep do with a (possibly malformed) container in memory:
-// repair its checksums after a mutation, so that a mutated file reaches the decoders instead of stopping at a
-// checksum, and decode everything in it (every tile whole, every level of every progressive tile) within the
-// index's limits, as `scanpress decode` and `decode --level/--bytes` would.
+// What the container fuzz target and the malformation sweep do with a (possibly malformed) container in
+// memory: repair its checksums after a mutation, so that a mutated file reaches the decoders instead of
+// stopping at a checksum, and decode everything in it (every tile whole, every level of every progressive
+// tile) within the index's limits, as `scanpress decode` and `decode --level/--bytes` would.
 #pragma once
 
 #include <algorithm>
@@ -26,9 +26,9 @@ inline void storeCrc(std::vector<uint8_t>& b, uint64_t at, std::span<const uint8
   std::memcpy(b.data() + at, &crc, 4);
 }
 
-// Recomputes every CRC-32C that FORMAT.md places where this file's own fields say: the header's, the footer's,
-// each chunk's (walking the chunks from offset 80 by their payload lengths, up to the index) and the index's.
-// Fields that point outside the file are left alone (the parser must refuse them).
+// Recomputes every CRC-32C that FORMAT.md places where this file's own fields say: the header's, the
+// footer's, each chunk's (walking the chunks from offset 80 by their payload lengths, up to the index) and
+// the index's. Fields that point outside the file are left alone (the parser must refuse them).
 inline void repairChecksums(std::vector<uint8_t>& b) {
   const uint64_t n = b.size();
   const std::span<const uint8_t> all(b);
@@ -55,17 +55,19 @@ struct DecodeCounts {
   uint64_t containers_parsed = 0;  // header, footer and index accepted
   uint64_t decodes = 0;            // decoder calls: whole tiles and levels
   uint64_t decodes_ok = 0;
-  uint64_t decode_errors = 0;  // a clean error: a Status, not a crash
+  uint64_t decode_errors = 0;    // a clean error: a Status, not a crash
   uint64_t decodes_skipped = 0;  // repeats of a decode already done (DecodeOptions::seen)
 };
 
 struct DecodeOptions {
   // Check every chunk (its checksums and fields) before decoding any tile, and stop at the first bad one, as
-  // `info --verify` does; otherwise decode every tile whose chunk is good (the fuzz target: more decoder coverage).
+  // `info --verify` does; otherwise decode every tile whose chunk is good (the fuzz target: more decoder
+  // coverage).
   bool verify_first = false;
   // When set: the hashes of the (header, chunk header, payload) triples decoded so far, with the first error
   // their decodes gave. A tile that was already decoded with the same bytes is not decoded again (decoding is
-  // deterministic; its outcome is taken from here): a mutation of one tile then costs that tile's decodes only.
+  // deterministic; its outcome is taken from here): a mutation of one tile then costs that tile's decodes
+  // only.
   std::unordered_map<uint64_t, Status>* seen = nullptr;
 };
 
@@ -75,8 +77,8 @@ inline uint64_t fnv1a(std::span<const uint8_t> bytes, uint64_t h = 0xcbf29ce4842
   return h;
 }
 
-// One tile: whole, then every level (cut at its end) and one past the last. `decoded` takes each decoder call's
-// status, `note` any other error.
+// One tile: whole, then every level (cut at its end) and one past the last. `decoded` takes each decoder
+// call's status, `note` any other error.
 template <typename Decoded, typename Note>
 void decodeTile(const ContainerHeader& header, const TileEntry& e, std::span<const uint8_t> payload,
                 Decoded& decoded, Note& note) {
@@ -90,12 +92,14 @@ void decodeTile(const ContainerHeader& header, const TileEntry& e, std::span<con
     const auto cut = payload.first(std::min<uint64_t>(level.end_bytes, payload.size()));
     decoded(decodeTilePayload(header, e, cut, "fuzz", level.level).status());
   }
-  if (!levels->empty()) decoded(decodeTilePayload(header, e, payload, "fuzz", levels->back().level + 1).status());
+  if (!levels->empty())
+    decoded(decodeTilePayload(header, e, payload, "fuzz", levels->back().level + 1).status());
 }
 
 // Parses the container and decodes every tile whole and, for progressive codecs, every level from the payload
-// cut at the level's end (as `decode --bytes` does) and one level past the last. Keeps going after a failing tile
-// so that one mutation reaches every decoder it can. Returns the first error (ok when everything decoded).
+// cut at the level's end (as `decode --bytes` does) and one level past the last. Keeps going after a failing
+// tile so that one mutation reaches every decoder it can. Returns the first error (ok when everything
+// decoded).
 inline Status decodeEverything(std::span<const uint8_t> file, DecodeCounts& counts,
                                const DecodeOptions& options = {}) {
   auto parsed = parseContainer(file, "fuzz");

@@ -1,5 +1,6 @@
-// Fuzz target: the job-file parser (JSON syntax, every key's validation, stage lists). The input is the file's
-// text; nothing is read or written (parseJobConfig only resolves relative paths against the job file's name).
+// Fuzz target: the job-file parser (JSON syntax, every key's validation, stage lists). The input is the
+// file's text; nothing is read or written (parseJobConfig only resolves relative paths against the job file's
+// name).
 #include <cstddef>
 #include <cstdint>
 #include <string>

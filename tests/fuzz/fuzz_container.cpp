@@ -1,6 +1,7 @@
 // Fuzz target: a container decoded by every codec's decoder. The first input byte is a mode: bit 0 set means
-// "recompute every checksum after the mutation" (so that mutations reach the decoders' logic instead of failing
-// a CRC); the rest is the container. Every tile is decoded whole and at every level, within the index's limits.
+// "recompute every checksum after the mutation" (so that mutations reach the decoders' logic instead of
+// failing a CRC); the rest is the container. Every tile is decoded whole and at every level, within the
+// index's limits.
 #include <cstddef>
 #include <cstdint>
 #include <vector>

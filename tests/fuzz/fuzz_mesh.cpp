@@ -1,5 +1,5 @@
-// Fuzz target: the mesh readers. The first input byte chooses the reader (0 PLY, 1 OBJ, 2 STL, 3 OFF, modulo 4)
-// and the rest is the file, read from memory through the same Scanner the file readers use, into a
+// Fuzz target: the mesh readers. The first input byte chooses the reader (0 PLY, 1 OBJ, 2 STL, 3 OFF, modulo
+// 4) and the rest is the file, read from memory through the same Scanner the file readers use, into a
 // MeshCollector. Chunks are small so that the readers' chunked delivery is exercised too.
 #include <algorithm>
 #include <cstddef>

@@ -1,6 +1,7 @@
-// A main for the fuzz targets without libFuzzer (GCC builds, the Release and ASan test lanes): runs the target
-// once on every file named on the command line, or every regular file under a directory named there, in sorted
-// order, and prints how many. A crash or a sanitizer report ends the process, as it does under libFuzzer.
+// A main for the fuzz targets without libFuzzer (GCC builds, the Release and ASan test lanes): runs the
+// target once on every file named on the command line, or every regular file under a directory named there,
+// in sorted order, and prints how many. A crash or a sanitizer report ends the process, as it does under
+// libFuzzer.
 #include <algorithm>
 #include <cstdint>
 #include <cstdio>
