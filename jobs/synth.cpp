@@ -257,7 +257,8 @@ Result<SynthResult> synthesize(const SynthSettings& s) {
   for (size_t v = 0; v < V; ++v)
     if (vertex_used[v]) SP_RETURN_IF_ERROR(emit(displaced(base.positions[v], normals[v])));
   for (uint32_t e = 0; e < edges.size(); ++e) {
-    auto [a, b] = edges[e];
+    // Not a structured binding: clang 14 (the fuzz build) cannot capture one in a lambda.
+    const auto a = edges[e].first, b = edges[e].second;
     auto point = [&](uint32_t sp) -> Status {
       Vec3d p, n;
       lerpPoint(a, b, double(sp) / m, p, n);
