@@ -111,7 +111,8 @@ void BM_Tiling(benchmark::State& state, std::string scan) {
 
 // Where a progressive codec's bits go on every scan: connectivity and geometry per vertex (kdtree's paper, Table 2)
 // and connectivity per triangle (EMC's paper, Table 1).
-using StatsEncoder = std::function<Status(const TileContext&, const QuantizedMesh&, std::vector<uint8_t>&, CodecStats*)>;
+using StatsEncoder =
+    std::function<Status(const TileContext&, const QuantizedMesh&, std::vector<uint8_t>&, CodecStats*)>;
 void BM_Bits(benchmark::State& state, StatsEncoder encode, std::string scan, int bits) {
   const Prepared& p = prepared(scan, bits);
   std::vector<uint8_t> out;
@@ -132,33 +133,41 @@ void BM_Bits(benchmark::State& state, StatsEncoder encode, std::string scan, int
     state.counters["expansion_%"] = 100.0 * double(stats.edge_expansions) / std::max<double>(1, double(stats.splits));
 }
 
-const char* kAllScans[] = {"aneurysm_data.stl.zst", "armadillo.obj.zst", "bun_zipper.ply.zst", "bunny.stl.zst",
-                           "decimated-max.obj", "fandisk.obj", "gargo.ply.zst", "horse.ply.zst", "igea.ply.zst",
-                           "lato000.ply.zst", "lucy.ply.zst", "parasaurolophus_low_normals2.ply.zst",
-                           "rs1_normals.ply.zst", "screwdriver.ply", "turbineblade.ply.zst"};
+const char* kAllScans[] = {"aneurysm_data.stl.zst", "armadillo.obj.zst", "bun_zipper.ply.zst",
+                           "bunny.stl.zst",         "decimated-max.obj", "fandisk.obj",
+                           "gargo.ply.zst",         "horse.ply.zst",     "igea.ply.zst",
+                           "lato000.ply.zst",       "lucy.ply.zst",      "parasaurolophus_low_normals2.ply.zst",
+                           "rs1_normals.ply.zst",   "screwdriver.ply",   "turbineblade.ply.zst"};
 
 const char* kScans[] = {"igea.ply.zst", "bun_zipper.ply.zst", "rs1_normals.ply.zst", "gargo.ply.zst"};
 
 int registerAll() {
   benchmark::RegisterBenchmark("Tiling/igea.ply.zst", BM_Tiling, std::string("igea.ply.zst"))
-      ->Arg(16384)->Arg(131072)->Unit(benchmark::kMillisecond);
+      ->Arg(16384)
+      ->Arg(131072)
+      ->Unit(benchmark::kMillisecond);
   const StatsEncoder kdtree = &kdtreeEncodeWithStats;
   const StatsEncoder octree = [](const TileContext& c, const QuantizedMesh& m, std::vector<uint8_t>& o,
                                  CodecStats* s) { return octreeEncodeWithStats(c, m, o, s, OctreeOptions{true}); };
   // Without contexts (one adaptive model per symbol kind): what the contexts gain. Not decodable.
-  const StatsEncoder octree_flat = [](const TileContext& c, const QuantizedMesh& m, std::vector<uint8_t>& o,
-                                      CodecStats* s) { return octreeEncodeWithStats(c, m, o, s, OctreeOptions{false}); };
+  const StatsEncoder octree_flat =
+      [](const TileContext& c, const QuantizedMesh& m, std::vector<uint8_t>& o, CodecStats* s) {
+    return octreeEncodeWithStats(c, m, o, s, OctreeOptions{false});
+  };
   for (const char* scan : kAllScans) {
     benchmark::RegisterBenchmark((std::string("KdtreeBits/") + scan + "/12").c_str(), BM_Bits, kdtree,
                                  std::string(scan), 12)
-        ->Iterations(1)->Unit(benchmark::kMillisecond);
+        ->Iterations(1)
+        ->Unit(benchmark::kMillisecond);
     for (int bits : {12, 24}) {
       const std::string suffix = std::string(scan) + "/" + std::to_string(bits);
       benchmark::RegisterBenchmark(("OctreeBits/" + suffix).c_str(), BM_Bits, octree, std::string(scan), bits)
-          ->Iterations(1)->Unit(benchmark::kMillisecond);
-      benchmark::RegisterBenchmark(("OctreeBitsNoContexts/" + suffix).c_str(), BM_Bits, octree_flat,
-                                   std::string(scan), bits)
-          ->Iterations(1)->Unit(benchmark::kMillisecond);
+          ->Iterations(1)
+          ->Unit(benchmark::kMillisecond);
+      benchmark::RegisterBenchmark(("OctreeBitsNoContexts/" + suffix).c_str(), BM_Bits, octree_flat, std::string(scan),
+                                   bits)
+          ->Iterations(1)
+          ->Unit(benchmark::kMillisecond);
     }
   }
   for (const char* scan : kScans) {

@@ -46,8 +46,8 @@ const Fixture& fixture() {
     std::vector<unsigned> idx;
     for (const auto& t : x.full.triangles) idx.insert(idx.end(), t.begin(), t.end());
     std::vector<unsigned> out(idx.size());
-    const size_t n = meshopt_simplify(out.data(), idx.data(), idx.size(), pos.data(), x.full.positions.size(),
-                                      12, idx.size() / 10, 1e-2f, 0, nullptr);
+    const size_t n = meshopt_simplify(out.data(), idx.data(), idx.size(), pos.data(), x.full.positions.size(), 12,
+                                      idx.size() / 10, 1e-2f, 0, nullptr);
     x.reduced.positions = x.full.positions;
     for (size_t i = 0; i + 2 < n; i += 3) x.reduced.triangles.push_back({out[i], out[i + 1], out[i + 2]});
     SampleOptions opt;
@@ -109,7 +109,9 @@ void BM_CgalClosest(benchmark::State& state, bool to_reduced) {
   const Mesh& target = to_reduced ? f.reduced : f.full;
   const auto& queries = to_reduced ? f.on_full : f.on_reduced;
   std::vector<CgalTriangle> tris;
-  auto pt = [&](uint32_t v) { return K::Point_3(target.positions[v][0], target.positions[v][1], target.positions[v][2]); };
+  auto pt = [&](uint32_t v) {
+    return K::Point_3(target.positions[v][0], target.positions[v][1], target.positions[v][2]);
+  };
   for (const auto& t : target.triangles) tris.emplace_back(pt(t[0]), pt(t[1]), pt(t[2]));
   Tree tree(tris.begin(), tris.end());
   tree.accelerate_distance_queries();

@@ -119,14 +119,16 @@ void BM_BitPack(benchmark::State& state) {
     for (size_t i = 0; i < kCount; ++i) sum += r.get(17);
     benchmark::DoNotOptimize(sum);
   }
-  state.counters["MB/s"] = benchmark::Counter(double(out.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["MB/s"] =
+      benchmark::Counter(double(out.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_BitPack)->Unit(benchmark::kMillisecond);
 
 void BM_Crc32c(benchmark::State& state) {
   std::vector<uint8_t> data(16 << 20, 0x5A);
   for (auto _ : state) benchmark::DoNotOptimize(crc32c(data));
-  state.counters["MB/s"] = benchmark::Counter(double(data.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["MB/s"] =
+      benchmark::Counter(double(data.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_Crc32c)->Unit(benchmark::kMillisecond);
 

@@ -128,24 +128,42 @@ int registerAll() {
   for (int threads : {1, 2}) {
     benchmark::RegisterBenchmark(("Pipeline/igea/threads:" + std::to_string(threads)).c_str(), BM_Pipeline, &igea,
                                  threads, uint64_t(0))
-        ->UseManualTime()->Unit(benchmark::kMillisecond)->Iterations(5);
+        ->UseManualTime()
+        ->Unit(benchmark::kMillisecond)
+        ->Iterations(5);
     benchmark::RegisterBenchmark(("Pipeline/synth20M/threads:" + std::to_string(threads)).c_str(), BM_Pipeline,
                                  &synth20m, threads, uint64_t(0))
-        ->UseManualTime()->Unit(benchmark::kMillisecond)->Iterations(2);
+        ->UseManualTime()
+        ->Unit(benchmark::kMillisecond)
+        ->Iterations(2);
   }
   benchmark::RegisterBenchmark("Pipeline/synth20M/threads:2/budget:256M", BM_Pipeline, &synth20m, 2,
                                uint64_t(256) << 20)
-      ->UseManualTime()->Unit(benchmark::kMillisecond)->Iterations(2);
+      ->UseManualTime()
+      ->Unit(benchmark::kMillisecond)
+      ->Iterations(2);
   // Scale: cost per triangle should stay flat with size; with a budget, so should memory.
-  for (auto [name, fn] : {std::pair<const char*, std::string (*)()>{"1M", &synth1m}, {"10M", &synth10m}, {"50M", &synth50m}}) {
-    benchmark::RegisterBenchmark((std::string("Scale/synth") + name + "/threads:2").c_str(), BM_Pipeline, fn, 2, uint64_t(0))
-        ->UseManualTime()->Unit(benchmark::kMillisecond)->Iterations(1);
-    benchmark::RegisterBenchmark((std::string("Scale/synth") + name + "/threads:2/budget:512M").c_str(), BM_Pipeline, fn, 2,
-                                 uint64_t(512) << 20)
-        ->UseManualTime()->Unit(benchmark::kMillisecond)->Iterations(1);
+  for (auto [name, fn] :
+       {std::pair<const char*, std::string (*)()>{"1M", &synth1m}, {"10M", &synth10m}, {"50M", &synth50m}}) {
+    benchmark::RegisterBenchmark((std::string("Scale/synth") + name + "/threads:2").c_str(), BM_Pipeline, fn, 2,
+                                 uint64_t(0))
+        ->UseManualTime()
+        ->Unit(benchmark::kMillisecond)
+        ->Iterations(1);
+    benchmark::RegisterBenchmark((std::string("Scale/synth") + name + "/threads:2/budget:512M").c_str(), BM_Pipeline,
+                                 fn, 2, uint64_t(512) << 20)
+        ->UseManualTime()
+        ->Unit(benchmark::kMillisecond)
+        ->Iterations(1);
   }
-  benchmark::RegisterBenchmark("Speedup/igea", BM_Speedup, &igea)->UseManualTime()->Unit(benchmark::kMillisecond)->Iterations(5);
-  benchmark::RegisterBenchmark("Speedup/synth20M", BM_Speedup, &synth20m)->UseManualTime()->Unit(benchmark::kMillisecond)->Iterations(2);
+  benchmark::RegisterBenchmark("Speedup/igea", BM_Speedup, &igea)
+      ->UseManualTime()
+      ->Unit(benchmark::kMillisecond)
+      ->Iterations(5);
+  benchmark::RegisterBenchmark("Speedup/synth20M", BM_Speedup, &synth20m)
+      ->UseManualTime()
+      ->Unit(benchmark::kMillisecond)
+      ->Iterations(2);
   return 0;
 }
 const int kRegistered = registerAll();

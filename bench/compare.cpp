@@ -90,8 +90,8 @@ void timeCodec(int runs, size_t triangles, Enc&& encode, Dec&& decode, Row& row)
 }
 
 // Symmetric error of a decoded result (quantized positions, triangles) against the original scan.
-void measureRow(const Mesh& original, const Grid& grid, const std::vector<Vec3u>& pos, const std::vector<Triangle>& tris,
-                const Options& opt, Row& row) {
+void measureRow(const Mesh& original, const Grid& grid, const std::vector<Vec3u>& pos,
+                const std::vector<Triangle>& tris, const Options& opt, Row& row) {
   if (!opt.rd) return;
   Mesh decoded;
   for (const auto& p : pos) decoded.positions.push_back(grid.dequantize(p));
@@ -131,14 +131,18 @@ void runScan(const std::string& path, int bits, const Options& opt, std::vector<
     const TileContext ctx{bits, {}};
     EncodedTile encoded;
     QuantizedMesh out;
-    timeCodec(runs, q.triangles.size(), [&] {
+    timeCodec(
+        runs, q.triangles.size(),
+        [&] {
       auto e = encodeMesh(codec, ctx, q);
       if (e.isOk()) encoded = std::move(e).value();
       return encoded.payload.size();
-    }, [&] {
+        },
+        [&] {
       auto r = codec.decode(ctx, codec.version, encoded.payload, limitsOf(encoded.decoded));
       if (r.isOk()) out = std::move(r).value();
-    }, row);
+    },
+        row);
     row.lossless = canonical(out.positions, out.triangles) == want;
     measureRow(*mesh, grid, out.positions, out.triangles, opt, row);
     rows.push_back(row);
@@ -161,7 +165,9 @@ void runScan(const std::string& path, int bits, const Options& opt, std::vector<
     Row row = base("draco -cl " + std::to_string(cl));
     draco::EncoderBuffer buffer;
     std::unique_ptr<draco::Mesh> decoded;
-    timeCodec(runs, q.triangles.size(), [&] {
+    timeCodec(
+        runs, q.triangles.size(),
+        [&] {
       draco::Encoder enc;
       enc.SetAttributeQuantization(draco::GeometryAttribute::POSITION, bits);
       enc.SetSpeedOptions(10 - cl, 10 - cl);
@@ -169,13 +175,15 @@ void runScan(const std::string& path, int bits, const Options& opt, std::vector<
       buffer.Clear();
       if (!enc.EncodeMeshToBuffer(dm, &buffer).ok()) return size_t(0);
       return buffer.size();
-    }, [&] {
+        },
+        [&] {
       draco::DecoderBuffer in;
       in.Init(buffer.data(), buffer.size());
       draco::Decoder dec;
       auto r = dec.DecodeMeshFromBuffer(&in);
       if (r.ok()) decoded = std::move(r).value();
-    }, row);
+    },
+        row);
     if (decoded) {
       const draco::PointAttribute* pa = decoded->GetNamedAttribute(draco::GeometryAttribute::POSITION);
       std::vector<Vec3u> pos(decoded->num_points());
@@ -208,7 +216,9 @@ void runScan(const std::string& path, int bits, const Options& opt, std::vector<
       std::vector<uint32_t> out_idx(idx.size());
       std::vector<std::array<uint16_t, 4>> out_verts(verts.size());
       size_t vcount = verts.size();
-      timeCodec(runs, q.triangles.size(), [&] {
+      timeCodec(
+          runs, q.triangles.size(),
+          [&] {
         std::vector<uint32_t> opt(idx.size());
         meshopt_optimizeVertexCache(opt.data(), idx.data(), idx.size(), verts.size());
         std::vector<std::array<uint16_t, 4>> ordered(verts.size());
@@ -223,7 +233,8 @@ void runScan(const std::string& path, int bits, const Options& opt, std::vector<
         packed.resize(ZSTD_compressBound(both.size()));
         packed.resize(ZSTD_compress(packed.data(), packed.size(), both.data(), both.size(), 19));
         return packed.size();
-      }, [&] {
+          },
+          [&] {
         if (zstd) {
           std::vector<uint8_t> both(ib.size() + vb.size());
           ZSTD_decompress(both.data(), both.size(), packed.data(), packed.size());
@@ -231,7 +242,8 @@ void runScan(const std::string& path, int bits, const Options& opt, std::vector<
         meshopt_decodeIndexBuffer(out_idx.data(), out_idx.size(), 4, ib.data(), ib.size());
         out_verts.resize(vcount);
         meshopt_decodeVertexBuffer(out_verts.data(), vcount, 8, vb.data(), vb.size());
-      }, row);
+      },
+          row);
       std::vector<Vec3u> pos(vcount);
       for (size_t i = 0; i < vcount; ++i) pos[i] = {out_verts[i][0], out_verts[i][1], out_verts[i][2]};
       std::vector<Triangle> tris(out_idx.size() / 3);
@@ -269,9 +281,10 @@ int main(int argc, char** argv) {
         p = c + 1;
       }
     } else {
-      std::fprintf(stderr,
-                   "usage: scanpress-compare [--data DIR] [--bits 12,14] [--runs 5] [--json F] [--markdown F]\n"
-                   "                         [--rd [--plots DIR]]   rate-distortion: error per result, bpv-error plots\n");
+      std::fprintf(
+          stderr,
+          "usage: scanpress-compare [--data DIR] [--bits 12,14] [--runs 5] [--json F] [--markdown F]\n"
+          "                         [--rd [--plots DIR]]   rate-distortion: error per result, bpv-error plots\n");
       return 1;
     }
   }
@@ -298,10 +311,18 @@ int main(int argc, char** argv) {
     }
   nlohmann::json j = nlohmann::json::array();
   for (const auto& r : rows)
-    j.push_back({{"scan", r.scan}, {"codec", r.codec}, {"bits", r.bits}, {"vertices", r.vertices},
-                 {"triangles", r.triangles}, {"bytes", r.bytes}, {"bpv", 8.0 * r.bytes / r.vertices},
-                 {"encode_mtri_s", r.encode_mtri}, {"decode_mtri_s", r.decode_mtri}, {"lossless", r.lossless},
-                 {"symmetric_rms_relative", r.rms_rel}, {"symmetric_max_relative", r.max_rel}});
+    j.push_back({{"scan", r.scan},
+                 {"codec", r.codec},
+                 {"bits", r.bits},
+                 {"vertices", r.vertices},
+                 {"triangles", r.triangles},
+                 {"bytes", r.bytes},
+                 {"bpv", 8.0 * r.bytes / r.vertices},
+                 {"encode_mtri_s", r.encode_mtri},
+                 {"decode_mtri_s", r.decode_mtri},
+                 {"lossless", r.lossless},
+                 {"symmetric_rms_relative", r.rms_rel},
+                 {"symmetric_max_relative", r.max_rel}});
   std::ofstream(json_path) << j.dump(2) << "\n";
   std::ofstream md(md_path);
   md << "| scan | bits | codec | bytes | bpv | encode Mtri/s | decode Mtri/s | lossless |\n|---|---:|---|---:|---:|---:|---:|---|\n";
@@ -319,7 +340,9 @@ int main(int argc, char** argv) {
   for (const auto& [key, v] : by) {
     std::vector<double> bpv, enc, dec;
     bool all = true;
-    for (const Row* r : v) bpv.push_back(8.0 * r->bytes / r->vertices), enc.push_back(r->encode_mtri), dec.push_back(r->decode_mtri), all &= r->lossless;
+    for (const Row* r : v)
+      bpv.push_back(8.0 * r->bytes / r->vertices), enc.push_back(r->encode_mtri), dec.push_back(r->decode_mtri),
+          all &= r->lossless;
     std::snprintf(line, sizeof line, "| %s | %d | %.2f | %.2f | %.2f | %s |\n", key.first.c_str(), key.second,
                   median(bpv), median(enc), median(dec), all ? "yes" : "NO");
     md << line;
@@ -327,8 +350,8 @@ int main(int argc, char** argv) {
   if (opt.rd) {  // RD columns, and one bpv-vs-error plot per scan (gnuplot, when installed)
     md << "\n| scan | codec | bits | bpv | symmetric RMS / diagonal | symmetric max / diagonal |\n|---|---|---:|---:|---:|---:|\n";
     for (const auto& r : rows) {
-      std::snprintf(line, sizeof line, "| %s | %s | %d | %.2f | %.3e | %.3e |\n", r.scan.c_str(), r.codec.c_str(), r.bits,
-                    8.0 * r.bytes / r.vertices, r.rms_rel, r.max_rel);
+      std::snprintf(line, sizeof line, "| %s | %s | %d | %.2f | %.3e | %.3e |\n", r.scan.c_str(), r.codec.c_str(),
+                    r.bits, 8.0 * r.bytes / r.vertices, r.rms_rel, r.max_rel);
       md << line;
     }
     if (!plot_dir.empty()) {
@@ -343,7 +366,8 @@ int main(int argc, char** argv) {
            << "bounding-box diagonal'\nset ylabel 'bits per vertex'\nset key outside right\nset grid\nplot ";
         bool first = true;
         for (const auto& [codec, pts] : codecs) {
-          const std::string dat = plot_dir + "/" + scan + "." + std::to_string(std::hash<std::string>()(codec)) + ".dat";
+          const std::string dat = plot_dir + "/" + scan + "." + std::to_string(std::hash<std::string>()(codec)) +
+                                  ".dat";
           std::ofstream d(dat);
           for (const Row* r : pts) d << r->rms_rel << " " << 8.0 * r->bytes / r->vertices << "\n";
           gp << (first ? "" : ", ") << "'" << dat << "' with linespoints title '" << codec << "'";

@@ -37,8 +37,8 @@ inline Vec3d closestPointOnSegment(const Vec3d& p, const Vec3d& a, const Vec3d& 
 // edges (the most precise of the three); below a sine of 1e-8 at their corner the triangle is taken as its
 // edges (every point of it is then within 1e-8 times its longest edge of an edge). Rare: kept out of line
 // (cold), so that closestPointOnTriangle stays small where it is inlined (closestMany's loop).
-[[gnu::cold, gnu::noinline]] inline Vec3d closestPointOnThinTriangle(const Vec3d& p, const Vec3d& a,
-                                                                     const Vec3d& b, const Vec3d& c) {
+[[gnu::cold, gnu::noinline]] inline Vec3d closestPointOnThinTriangle(const Vec3d& p, const Vec3d& a, const Vec3d& b,
+                                                                     const Vec3d& c) {
   const Vec3d* v[3] = {&a, &b, &c};
   Vec3d best = a;
   double best2 = std::numeric_limits<double>::infinity();

@@ -25,7 +25,7 @@
 namespace scanpress {
 
 struct SampleOptions {
-  double density = 0;     // samples per unit area
+  double density = 0;  // samples per unit area
   uint64_t seed = 1;
   bool stratified = true;
   bool vertices = true;  // also sample every vertex used by a triangle (appended after the area samples)
@@ -37,8 +37,7 @@ void sampleSurface(std::span<const Vec3d> positions, std::span<const Triangle> t
                    std::vector<Vec3d>& out);
 
 // Appends every vertex used by a triangle, in index order (what sampleSurface appends with opt.vertices).
-void sampleVertices(std::span<const Vec3d> positions, std::span<const Triangle> triangles,
-                    std::vector<Vec3d>& out);
+void sampleVertices(std::span<const Vec3d> positions, std::span<const Triangle> triangles, std::vector<Vec3d>& out);
 
 double surfaceArea(std::span<const Vec3d> positions, std::span<const Triangle> triangles);
 

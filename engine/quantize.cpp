@@ -36,8 +36,7 @@ Result<Grid> makeGrid(const BoundingBox& box, int bits) {
                                                       std::to_string(bits));
   if (box.empty()) return makeError(ErrorCode::kMalformed, "mesh has no vertices: no bounding box for the grid");
   const double extent = box.maxExtent();
-  if (!std::isfinite(extent) || !std::isfinite(box.lo[0]) || !std::isfinite(box.lo[1]) ||
-      !std::isfinite(box.lo[2]))
+  if (!std::isfinite(extent) || !std::isfinite(box.lo[0]) || !std::isfinite(box.lo[1]) || !std::isfinite(box.lo[2]))
     return makeError(ErrorCode::kUnsupported, "bounding box is not finite");
   Grid grid;
   grid.bits = bits;

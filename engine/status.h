@@ -59,7 +59,7 @@ inline Status makeError(ErrorCode code, std::string message) { return Status(cod
 template <typename T>
 class [[nodiscard]] Result {
  public:
-  Result(T value) : data_(std::move(value)) {}  // NOLINT(google-explicit-constructor)
+  Result(T value) : data_(std::move(value)) {}         // NOLINT(google-explicit-constructor)
   Result(Status status) : data_(std::move(status)) {}  // NOLINT(google-explicit-constructor)
 
   bool isOk() const { return std::holds_alternative<T>(data_); }
@@ -85,10 +85,10 @@ class [[nodiscard]] Result {
 #define SP_CONCAT_INNER(a, b) a##b
 #define SP_CONCAT(a, b) SP_CONCAT_INNER(a, b)
 
-#define SP_RETURN_IF_ERROR(expr)                           \
-  do {                                                     \
-    ::scanpress::Status sp_status_ = (expr);               \
-    if (!sp_status_.isOk()) return sp_status_;             \
+#define SP_RETURN_IF_ERROR(expr)               \
+  do {                                         \
+    ::scanpress::Status sp_status_ = (expr);   \
+    if (!sp_status_.isOk()) return sp_status_; \
   } while (0)
 
 #define SP_ASSIGN_OR_RETURN_IMPL(tmp, lhs, expr) \

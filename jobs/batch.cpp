@@ -80,9 +80,8 @@ Status checkJobOutputs(const JobSettings& job, const std::vector<std::string>& i
     if (input.empty() && ::stat(path.c_str(), &st) == 0)
       if (auto it = input_ids.find({st.st_dev, st.st_ino}); it != input_ids.end()) input = it->second;
     if (!input.empty())
-      return makeError(ErrorCode::kInvalidArgument, where + pointer + ": the output '" + path +
-                                                        "' is the input '" + input +
-                                                        "'; refusing to overwrite it");
+      return makeError(ErrorCode::kInvalidArgument, where + pointer + ": the output '" + path + "' is the input '" +
+                                                        input + "'; refusing to overwrite it");
     if (auto [it, fresh] = written.emplace(c, pointer); !fresh)
       return makeError(ErrorCode::kInvalidArgument,
                        where + pointer + ": " +
@@ -100,8 +99,7 @@ Status checkJobOutputs(const JobSettings& job, const std::vector<std::string>& i
     if (job.encode.measure.enabled && job.encode.measure.render)
       SP_RETURN_IF_ERROR(plan((dir / outputName(kErrorPictureName, in)).string(), "/measure/render"));
   }
-  if (!job.summary_name.empty())
-    SP_RETURN_IF_ERROR(plan((dir / job.summary_name).string(), "/output/summary"));
+  if (!job.summary_name.empty()) SP_RETURN_IF_ERROR(plan((dir / job.summary_name).string(), "/output/summary"));
   return Status::ok();
 }
 
@@ -201,7 +199,7 @@ std::string settingsFingerprint(const EncodeSettings& s) {
   // Allowing degenerate triangles turns a failure into an output; written only when set, so the fingerprints of
   // earlier runs stay valid.
   if (s.allow_degenerate) key += "|allow_degenerate=1";
-  if (s.strict) key += "|strict";  // a complete output made without it may have dropped what strict refuses
+  if (s.strict) key += "|strict";         // a complete output made without it may have dropped what strict refuses
   for (const StageSpec& st : s.stages) {  // every option of every stage changes the bytes
     key += "|stage=" + std::string(findStage(st.kind)->name);
     if (st.kind == StageKind::kSmooth) {
@@ -234,8 +232,7 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
   if (ec) return makeError(ErrorCode::kIo, job.output_directory + ": cannot create output directory: " + ec.message());
   // Temporaries of runs that died without cleaning up (SIGKILL, a crash): their PID is no live process.
   if (const size_t stale = removeStaleTemporaries(job.output_directory); stale > 0 && !options.quiet)
-    std::printf("%s: removed %zu temporary file(s) of runs that did not finish\n",
-                job.output_directory.c_str(), stale);
+    std::printf("%s: removed %zu temporary file(s) of runs that did not finish\n", job.output_directory.c_str(), stale);
 
   BatchResult batch;
   TerminalProgress progress(options.quiet);
@@ -255,8 +252,8 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
     if (options.threads >= 0) s.threads = options.threads;
     const std::string fingerprint = settingsFingerprint(s);
     const auto start = std::chrono::steady_clock::now();
-    if (job.resume && !options.force && !f.report.empty() &&
-        completeReportFingerprint(f.report) == fingerprint && verifiedContainer(f.output)) {
+    if (job.resume && !options.force && !f.report.empty() && completeReportFingerprint(f.report) == fingerprint &&
+        verifiedContainer(f.output)) {
       f.state = FileOutcome::State::kSkipped;
       batch.files.push_back(std::move(f));
       continue;
@@ -275,8 +272,9 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
             break;
           }
       if (s.measure.render && f.state == FileOutcome::State::kOk) {
-        Status w = renderErrorPicture(
-            s, (fs::path(job.output_directory) / outputName(kErrorPictureName, f.input)).string(), device);
+        Status w =
+            renderErrorPicture(s, (fs::path(job.output_directory) / outputName(kErrorPictureName, f.input)).string(),
+                               device);
         if (!w.isOk()) f.state = FileOutcome::State::kFailed, f.error = w;
       }
       if (!f.report.empty()) {
@@ -291,10 +289,10 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
     progress.clear();
     if (!options.quiet) {
       if (f.has_result && !f.result.read.dropped.empty())
-        std::fprintf(stderr,
-                     "scanpress: warning: %s: dropped %s (not kept by scanpress; /strict fails instead)\n",
+        std::fprintf(stderr, "scanpress: warning: %s: dropped %s (not kept by scanpress; /strict fails instead)\n",
                      f.input.c_str(), describeDropped(f.result.read.dropped).c_str());
-      if (f.state == FileOutcome::State::kFailed) std::fprintf(stderr, "scanpress: error: %s\n", f.error.toString().c_str());
+      if (f.state == FileOutcome::State::kFailed)
+        std::fprintf(stderr, "scanpress: error: %s\n", f.error.toString().c_str());
       else
         std::printf("%s -> %s: %llu triangles, %llu bytes, %.3f bpv, %zu tiles, %.2f s\n", f.input.c_str(),
                     f.output.c_str(), static_cast<unsigned long long>(f.result.faces),

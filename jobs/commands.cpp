@@ -14,15 +14,14 @@ namespace scanpress {
 namespace {
 
 Result<std::vector<const TileEntry*>> chooseTiles(const ContainerFile& file, const std::string& path,
-                                                 const std::optional<std::vector<uint32_t>>& tiles) {
+                                                  const std::optional<std::vector<uint32_t>>& tiles) {
   std::vector<const TileEntry*> chosen;
   if (tiles) {
     // A tile named twice would be decoded twice and welded with itself: refused rather than guessed at.
     std::vector<uint32_t> sorted = *tiles;
     std::sort(sorted.begin(), sorted.end());
     if (auto dup = std::adjacent_find(sorted.begin(), sorted.end()); dup != sorted.end())
-      return makeError(ErrorCode::kInvalidArgument,
-                       path + ": tile " + std::to_string(*dup) + " is named twice");
+      return makeError(ErrorCode::kInvalidArgument, path + ": tile " + std::to_string(*dup) + " is named twice");
     for (uint32_t id : *tiles) {
       const TileEntry* e = file.findTile(id);
       if (!e) return makeError(ErrorCode::kInvalidArgument, path + ": no tile with id " + std::to_string(id));
@@ -71,8 +70,8 @@ Result<QuantizedMesh> decodeChosen(const ContainerFile& file, const std::vector<
       if (m.isOk()) decoded[i] = std::move(m).value();
       else errors[i] = m.status();
     } catch (const std::exception& e) {
-      errors[i] = makeError(ErrorCode::kInternal, file.path() + ": tile " + std::to_string(chosen[i]->tile_id) +
-                                                      ": " + e.what());
+      errors[i] = makeError(ErrorCode::kInternal,
+                            file.path() + ": tile " + std::to_string(chosen[i]->tile_id) + ": " + e.what());
     }
   });
   for (const Status& e : errors) SP_RETURN_IF_ERROR(e);
@@ -108,8 +107,7 @@ bool floatPositionsSuffice(const QuantizedMesh& mesh, const Grid& grid) {
 
 Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   if (settings.level && settings.bytes)  // one would silently win over the other
-    return makeError(ErrorCode::kInvalidArgument,
-                     "--level and --bytes choose the level two ways: give one of them");
+    return makeError(ErrorCode::kInvalidArgument, "--level and --bytes choose the level two ways: give one of them");
   SP_RETURN_IF_ERROR(checkOutputPath(settings.output, {settings.input}));  // `decode X X` must not replace X
   SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(settings.input));
   SP_ASSIGN_OR_RETURN(auto chosen, chooseTiles(file, settings.input, settings.tiles));
@@ -120,13 +118,12 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     SP_ASSIGN_OR_RETURN(auto bytes, levelBytes(file, chosen));
     if (level && *level >= bytes.size())
       return makeError(ErrorCode::kInvalidArgument, settings.input + ": level " + std::to_string(*level) +
-                                                        " is past the last (" + std::to_string(bytes.size() - 1) +
-                                                        ")");
+                                                        " is past the last (" + std::to_string(bytes.size() - 1) + ")");
     if (settings.bytes) {
       if (bytes[0] > *settings.bytes)
-        return makeError(ErrorCode::kInvalidArgument,
-                         settings.input + ": --bytes " + std::to_string(*settings.bytes) +
-                             " is below the coarsest level, which needs " + std::to_string(bytes[0]) + " bytes");
+        return makeError(ErrorCode::kInvalidArgument, settings.input + ": --bytes " + std::to_string(*settings.bytes) +
+                                                          " is below the coarsest level, which needs " +
+                                                          std::to_string(bytes[0]) + " bytes");
       uint32_t l = 0;
       while (l + 1 < bytes.size() && bytes[l + 1] <= *settings.bytes) ++l;
       if (!level || l < *level) level = l;

@@ -116,8 +116,7 @@ class ObjectReader {
     if (!v->is_array() || v->size() != 2)
       return fail(path(key), std::string("must be an array of two values, each ") + kind);
     T* out[2] = {&a, &b};
-    for (size_t i = 0; i < 2; ++i)
-      numberAt(&(*v)[i], path(key) + "/" + std::to_string(i), kind, *out[i], parse);
+    for (size_t i = 0; i < 2; ++i) numberAt(&(*v)[i], path(key) + "/" + std::to_string(i), kind, *out[i], parse);
   }
   void fail(const Status& status) {
     if (error_.isOk()) error_ = status.withContext(file_);
@@ -172,8 +171,9 @@ void readStage(const json& j, const std::string& pointer, const std::string& fil
   r.finish();
   if (!error.isOk()) return;
   const Status valid = validateStage(spec);
-  if (!valid.isOk()) r.fail(pointer + "/" + valid.message().substr(0, valid.message().find(':')),
-                            valid.message().substr(valid.message().find(':') + 2));
+  if (!valid.isOk())
+    r.fail(pointer + "/" + valid.message().substr(0, valid.message().find(':')),
+           valid.message().substr(valid.message().find(':') + 2));
 }
 
 // /stages: an array of stage objects.
@@ -183,7 +183,8 @@ void readStages(const json& j, const std::string& file, Status& error, std::vect
     return;
   }
   out.assign(j.size(), StageSpec{});
-  for (size_t i = 0; i < j.size() && error.isOk(); ++i) readStage(j[i], "/stages/" + std::to_string(i), file, error, out[i]);
+  for (size_t i = 0; i < j.size() && error.isOk(); ++i)
+    readStage(j[i], "/stages/" + std::to_string(i), file, error, out[i]);
 }
 
 bool validPattern(const std::string& p) {
@@ -201,12 +202,34 @@ bool validPattern(const std::string& p) {
 }  // namespace
 
 std::vector<std::string> knownConfigKeys() {
-  return {"/inputs",          "/recursive",          "/output/directory", "/output/name",
-          "/output/report",   "/output/summary",     "/codec/name",       "/codec/bits",
-          "/codec/normal_bits", "/codec/normals",    "/codec/colors",     "/codec/allow_degenerate", "/stages",
-          "/tiling/target_triangles", "/strict", "/threads", "/memory_budget_mb", "/scratch_directory", "/resume",
-          "/measure/enabled", "/measure/samples_per_triangle", "/measure/samples", "/measure/seed",
-          "/measure/stratified", "/measure/vertices", "/measure/render", "/measure/render_size", "/measure/view"};
+  return {"/inputs",
+          "/recursive",
+          "/output/directory",
+          "/output/name",
+          "/output/report",
+          "/output/summary",
+          "/codec/name",
+          "/codec/bits",
+          "/codec/normal_bits",
+          "/codec/normals",
+          "/codec/colors",
+          "/codec/allow_degenerate",
+          "/stages",
+          "/tiling/target_triangles",
+          "/strict",
+          "/threads",
+          "/memory_budget_mb",
+          "/scratch_directory",
+          "/resume",
+          "/measure/enabled",
+          "/measure/samples_per_triangle",
+          "/measure/samples",
+          "/measure/seed",
+          "/measure/stratified",
+          "/measure/vertices",
+          "/measure/render",
+          "/measure/render_size",
+          "/measure/view"};
 }
 
 Result<JobSettings> parseJobConfig(const std::string& text, const std::string& config_path) {
@@ -232,8 +255,10 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     o.string("report", s.report_name);
     o.string("summary", s.summary_name);
     o.finish();
-    if (error.isOk() && !validPattern(s.output_name)) o.fail("/output/name", "unknown placeholder (use {stem} or {name})");
-    if (error.isOk() && !validPattern(s.report_name)) o.fail("/output/report", "unknown placeholder (use {stem} or {name})");
+    if (error.isOk() && !validPattern(s.output_name))
+      o.fail("/output/name", "unknown placeholder (use {stem} or {name})");
+    if (error.isOk() && !validPattern(s.report_name))
+      o.fail("/output/report", "unknown placeholder (use {stem} or {name})");
     // Names of files inside the output directory: no '/', so none escapes it (`../x`) or names a directory.
     for (auto [pointer, name] : {std::pair<const char*, const std::string*>{"/output/name", &s.output_name},
                                  {"/output/report", &s.report_name},

@@ -15,14 +15,14 @@
 namespace scanpress {
 
 struct JobSettings {
-  std::string config_path;           // the job file ("" when built from the command line)
-  std::vector<std::string> inputs;   // files, directories and globs (`*`, `?` in the last path component)
-  bool recursive = false;            // directories: descend into subdirectories
+  std::string config_path;          // the job file ("" when built from the command line)
+  std::vector<std::string> inputs;  // files, directories and globs (`*`, `?` in the last path component)
+  bool recursive = false;           // directories: descend into subdirectories
   std::string output_directory = ".";
-  std::string output_name = "{stem}.spz";           // {stem}: file name without mesh extensions; {name}: file name
+  std::string output_name = "{stem}.spz";          // {stem}: file name without mesh extensions; {name}: file name
   std::string report_name = "{stem}.report.json";  // "" for no per-file report (then resume is off)
   std::string summary_name = "summary.json";       // batch summary in the output directory; "" for none
-  bool resume = true;  // skip inputs whose output is complete and was made with the same settings
+  bool resume = true;     // skip inputs whose output is complete and was made with the same settings
   EncodeSettings encode;  // input and output are filled in per file
 };
 

@@ -171,13 +171,11 @@ bool sameFile(const std::string& a, const std::string& b) {
   if (::stat(a.c_str(), &sa) == 0 && ::stat(b.c_str(), &sb) == 0)
     return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
   std::error_code ea, eb;
-  const fs::path ca = fs::weakly_canonical(fs::absolute(a, ea), ea),
-                 cb = fs::weakly_canonical(fs::absolute(b, eb), eb);
+  const fs::path ca = fs::weakly_canonical(fs::absolute(a, ea), ea), cb = fs::weakly_canonical(fs::absolute(b, eb), eb);
   return !ea && !eb && ca == cb;
 }
 
-Status checkOutputPath(const std::string& output, const std::vector<std::string>& inputs,
-                       const std::string& what) {
+Status checkOutputPath(const std::string& output, const std::vector<std::string>& inputs, const std::string& what) {
   for (const std::string& in : inputs)
     if (sameFile(output, in))
       return makeError(ErrorCode::kInvalidArgument,
@@ -198,8 +196,7 @@ size_t removeStaleTemporaries(const std::string& dir) {
     auto digits = [](const std::string& t) {
       return !t.empty() && t.size() <= 12 && t.find_first_not_of("0123456789") == std::string::npos;
     };
-    if (dash == std::string::npos || !digits(tail.substr(0, dash)) || !digits(tail.substr(dash + 1)))
-      continue;
+    if (dash == std::string::npos || !digits(tail.substr(0, dash)) || !digits(tail.substr(dash + 1))) continue;
     const long long pid = std::stoll(tail.substr(0, dash));
     if (pid <= 0 || pid == ::getpid()) continue;
     if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // alive (or not ours to judge)

@@ -42,11 +42,7 @@ class AtomicFile : public ByteSink {
 
  private:
   AtomicFile(int fd, std::string path, std::string target, std::string temp, uint64_t tracked)
-      : fd_(fd),
-        path_(std::move(path)),
-        target_(std::move(target)),
-        temp_(std::move(temp)),
-        tracked_(tracked) {}
+      : fd_(fd), path_(std::move(path)), target_(std::move(target)), temp_(std::move(temp)), tracked_(tracked) {}
   Status flushBuffer();
   Status writeError(const std::string& what) const;
 

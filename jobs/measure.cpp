@@ -48,8 +48,8 @@ ErrorAccumulator distancesTo(const SurfaceIndex& surface, std::span<const Vec3d>
 
 Status measureSurfaces(std::span<const Vec3d> original_positions, std::span<const Triangle> original_triangles,
                        std::span<const Vec3d> decoded_positions, std::span<const Triangle> decoded_triangles,
-                       const MeasureSettings& s, double density, uint64_t stream,
-                       std::shared_ptr<EmbreeDevice> device, ErrorAccumulator& forward, ErrorAccumulator& backward) {
+                       const MeasureSettings& s, double density, uint64_t stream, std::shared_ptr<EmbreeDevice> device,
+                       ErrorAccumulator& forward, ErrorAccumulator& backward) {
   SP_ASSIGN_OR_RETURN(SurfaceIndex to_original, SurfaceIndex::build(device, original_positions, original_triangles));
   SP_ASSIGN_OR_RETURN(SurfaceIndex to_decoded, SurfaceIndex::build(device, decoded_positions, decoded_triangles));
   SampleOptions opt;
@@ -75,8 +75,9 @@ Status measureSurfaces(std::span<const Vec3d> original_positions, std::span<cons
 Result<MeasureResult> measureMeshes(const Mesh& original, const Mesh& decoded, const MeasureSettings& s,
                                     std::shared_ptr<EmbreeDevice> device) {
   if (original.triangles.empty() || decoded.triangles.empty())
-    return makeError(ErrorCode::kUnsupported, "both meshes need triangles to measure a surface distance (a point "
-                                              "cloud has no surface; measure does not compare point sets)");
+    return makeError(ErrorCode::kUnsupported,
+                     "both meshes need triangles to measure a surface distance (a point "
+                     "cloud has no surface; measure does not compare point sets)");
   MeasureResult r;
   r.diagonal = usedBoundingBox(original).diagonal();  // as the encoder's: a stray vertex does not stretch it
   // One density for both directions, from the original, so both sample the surfaces alike.

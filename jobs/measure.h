@@ -42,8 +42,7 @@ double samplingDensity(const MeasureSettings& s, uint64_t triangles, double area
 
 // Distances from `samples` to the surface, accumulated in sample order (parallel queries). The first
 // `averaged` samples (area samples) enter the count, mean and RMS; the rest (vertex samples) the max only.
-ErrorAccumulator distancesTo(const SurfaceIndex& surface, std::span<const Vec3d> samples,
-                             size_t averaged = SIZE_MAX);
+ErrorAccumulator distancesTo(const SurfaceIndex& surface, std::span<const Vec3d> samples, size_t averaged = SIZE_MAX);
 
 // The core of every measurement: samples on the original (stream `stream`) queried against the decoded surface,
 // and samples on the decoded surface (stream `stream + 1`) against the original, at `density` samples per unit

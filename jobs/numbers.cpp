@@ -153,25 +153,21 @@ Result<uint64_t> parseSize(std::string_view text, std::string_view what) {
   const auto shift = unitShift(std::string(text.substr(split)));
   if (const auto d = scanDecimal(text.substr(0, split), false, false); d && shift) {
     unsigned __int128 bytes = static_cast<unsigned __int128>(d->digits) << *shift;  // < 2^104
-    for (int64_t e = d->exponent; e < 0; ++e)
-      bytes /= 10;  // rounds down once: floor(floor(a/10)/10) = floor(a/100)
+    for (int64_t e = d->exponent; e < 0; ++e) bytes /= 10;  // rounds down once: floor(floor(a/10)/10) = floor(a/100)
     if (bytes <= UINT64_MAX) return static_cast<uint64_t>(bytes);
   }
-  return invalid(
-      what, "a size below 2^64 bytes such as 512M, 2GiB or 1.5G (units K, M, G, T of 1024; no unit: MiB)",
-      text);
+  return invalid(what, "a size below 2^64 bytes such as 512M, 2GiB or 1.5G (units K, M, G, T of 1024; no unit: MiB)",
+                 text);
 }
 
 Result<std::vector<int64_t>> parseIntegerList(std::string_view text, int64_t lo, int64_t hi, size_t count,
                                               std::string_view what) {
-  return parseList<int64_t>(text, count, what,
-                            [&](std::string_view t) { return parseInteger(t, lo, hi, what); });
+  return parseList<int64_t>(text, count, what, [&](std::string_view t) { return parseInteger(t, lo, hi, what); });
 }
 
 Result<std::vector<double>> parseNumberList(std::string_view text, double lo, double hi, size_t count,
                                             std::string_view what) {
-  return parseList<double>(text, count, what,
-                           [&](std::string_view t) { return parseNumber(t, lo, hi, what); });
+  return parseList<double>(text, count, what, [&](std::string_view t) { return parseNumber(t, lo, hi, what); });
 }
 
 }  // namespace scanpress

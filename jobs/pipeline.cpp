@@ -173,8 +173,7 @@ class IngestSink : public MeshSink {
              TriangleSpill& spill, bool points)
       : grid_(grid), layout_(layout), store_(store), hist_(hist), spill_(spill), points_(points) {}
   static Vec3d originalOf(const VertexRecord& r) { return {r.original[0], r.original[1], r.original[2]}; }
-  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c,
-                  uint8_t) override {
+  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c, uint8_t) override {
     const OctNormal no_normal = encodeOctahedral({0, 0, 0}, layout_.hasNormals() ? layout_.normal_bits : 8);
     for (size_t i = 0; i < p.size(); ++i) {
       VertexRecord r;
@@ -216,14 +215,15 @@ class IngestSink : public MeshSink {
   Status vertexNormals(uint64_t first, std::span<const Vec3f> n) override {
     if (!layout_.hasNormals()) return Status::ok();
     for (size_t i = 0; i < n.size(); ++i)
-      if (!std::isnan(n[i][0])) SP_RETURN_IF_ERROR(store_.setNormal(first + i, encodeOctahedral(n[i], layout_.normal_bits)));
+      if (!std::isnan(n[i][0]))
+        SP_RETURN_IF_ERROR(store_.setNormal(first + i, encodeOctahedral(n[i], layout_.normal_bits)));
     return Status::ok();
   }
 
   QuantizeStats stats;
   uint64_t input_degenerate = 0;  // of the degenerate triangles, those with a repeated index (no grid keeps them)
-  uint64_t referenced = 0;  // vertices encoded: used by a kept triangle, or points
-  double area = 0;  // of the kept triangles, original positions
+  uint64_t referenced = 0;        // vertices encoded: used by a kept triangle, or points
+  double area = 0;                // of the kept triangles, original positions
 
  private:
   const Grid& grid_;
@@ -289,13 +289,16 @@ Status measureTile(const EncodeSettings& s, const CodecInfo& codec, const TileCo
                          2 * uint64_t(tm.tile_id), device, r.forward, r.backward);
 }
 
-
 // One scan's encode: the steps of jobs/pipeline.h as methods, sharing the scan's state.
 class ScanEncoder {
  public:
   ScanEncoder(const EncodeSettings& s, const CodecInfo& codec, ProgressListener* progress,
               std::shared_ptr<EmbreeDevice> device, const PipelineHooks* hooks)
-      : s_(s), codec_(codec), progress_(progress), device_(std::move(device)), hooks_(hooks),
+      : s_(s),
+        codec_(codec),
+        progress_(progress),
+        device_(std::move(device)),
+        hooks_(hooks),
         survey_(std::min(kKeepLimit, s.memory_budget == 0 ? UINT64_MAX : s.memory_budget / 3)) {
     result_.codec = codec.name;
     for (const StageSpec& st : s.stages) result_.stages.emplace_back(findStage(st.kind)->name);
@@ -342,8 +345,8 @@ class ScanEncoder {
     const uint64_t n_vertices = survey_.vertex_count, n_triangles = survey_.triangle_count;
     // A point cloud's points go through the spill and the bins as triangles (v, v, v) at their own positions.
     const uint64_t n_items = result_.point_cloud ? n_vertices : n_triangles;
-    const uint64_t in_memory_bytes =
-        n_vertices * sizeof(VertexRecord) + n_items * (sizeof(SpilledTriangle) + sizeof(Triangle));
+    const uint64_t in_memory_bytes = n_vertices * sizeof(VertexRecord) +
+                                     n_items * (sizeof(SpilledTriangle) + sizeof(Triangle));
     storage_budget_ = s_.memory_budget > 0 ? s_.memory_budget : kAutoStorageBudget;
     in_memory_ = in_memory_bytes <= storage_budget_ / 2;
     result_.out_of_core = !in_memory_;
@@ -489,8 +492,7 @@ class ScanEncoder {
       result_.dropped_on_request.push_back({"vertex colors", survey_.vertex_count});
     if (s_.strict && !result_.read.dropped.empty())
       return makeError(ErrorCode::kUnsupported,
-                       s_.input + ": strict: the container would not keep " +
-                           describeDropped(result_.read.dropped) +
+                       s_.input + ": strict: the container would not keep " + describeDropped(result_.read.dropped) +
                            " (scanpress keeps positions, triangles, normals and colors; encode without "
                            "--strict or /strict to drop them)");
     return Status::ok();
@@ -550,8 +552,7 @@ class ScanEncoder {
       std::vector<Triangle> triangles;
       r.status = bins_->read(tile, triangles);
       if (r.status.isOk())
-        r.status = buildTileMesh(tile, triangles, *store_, result_.layout, tm,
-                                 result_.measured ? &originals : nullptr);
+        r.status = buildTileMesh(tile, triangles, *store_, result_.layout, tm, result_.measured ? &originals : nullptr);
       // A point cloud's bins hold (v, v, v) per point: its vertices, in input order, without triangles.
       if (result_.point_cloud) tm.mesh.triangles.clear();
       r.input_vertices = static_cast<uint32_t>(tm.mesh.positions.size());
@@ -627,8 +628,7 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
     return makeError(ErrorCode::kInvalidArgument, "normal bits must be in [4, 16]");
   for (const StageSpec& st : s.stages)
     if (!findStage(st.kind)) return makeError(ErrorCode::kInvalidArgument, "unknown stage");
-  SP_RETURN_IF_ERROR(
-      checkOutputPath(s.output, {s.input}));  // before reading: `encode X X` must not replace X
+  SP_RETURN_IF_ERROR(checkOutputPath(s.output, {s.input}));  // before reading: `encode X X` must not replace X
   ScanEncoder encoder(s, *codec, progress, std::move(device), hooks);
   SP_RETURN_IF_ERROR(encoder.survey());
   SP_RETURN_IF_ERROR(encoder.checkDrops());

@@ -77,7 +77,8 @@ Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& s, std::
                                 const Mesh* against) {
   if (s.width < 16 || s.height < 16 || s.width > 8192 || s.height > 8192)
     return makeError(ErrorCode::kInvalidArgument, "picture size must be within 16..8192 pixels per side");
-  if (mesh.triangles.empty()) return makeError(ErrorCode::kInvalidArgument, "nothing to render: the mesh has no triangles");
+  if (mesh.triangles.empty())
+    return makeError(ErrorCode::kInvalidArgument, "nothing to render: the mesh has no triangles");
   SP_ASSIGN_OR_RETURN(SurfaceIndex scene, SurfaceIndex::build(device, mesh.positions, mesh.triangles));
   std::optional<SurfaceIndex> reference;
   RenderResult out;
@@ -145,7 +146,8 @@ Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& s, std::
     if (shade[i] < 0) continue;
     std::array<double, 3> c{0.85, 0.85, 0.85};
     if (reference) c = colormap(error[i] / out.scale_max);
-    for (int k = 0; k < 3; ++k) img.rgb[3 * i + k] = static_cast<uint8_t>(std::clamp(c[k] * shade[i], 0.0, 1.0) * 255 + 0.5);
+    for (int k = 0; k < 3; ++k)
+      img.rgb[3 * i + k] = static_cast<uint8_t>(std::clamp(c[k] * shade[i], 0.0, 1.0) * 255 + 0.5);
   }
   if (reference) {  // the scale bar with labels in units of the diagonal
     const int scale = std::max(1, s.height / 300);
@@ -153,7 +155,8 @@ Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& s, std::
     for (int y = y0; y <= y1; ++y) {
       const auto c = colormap(double(y1 - y) / (y1 - y0));
       for (int x = x0; x <= x1; ++x)
-        for (int k = 0; k < 3; ++k) img.rgb[3 * (size_t(y) * s.width + x) + k] = static_cast<uint8_t>(c[k] * 255 + 0.5);
+        for (int k = 0; k < 3; ++k)
+          img.rgb[3 * (size_t(y) * s.width + x) + k] = static_cast<uint8_t>(c[k] * 255 + 0.5);
     }
     char label[32];
     std::snprintf(label, sizeof label, "%.1e d", out.diagonal > 0 ? out.scale_max / out.diagonal : 0.0);
@@ -176,8 +179,8 @@ Result<std::vector<uint8_t>> encodePng(const Image& image) {
   png_set_write_fn(
       png, &out,
       [](png_structp p, png_bytep data, png_size_t n) {
-        auto* v = static_cast<std::vector<uint8_t>*>(png_get_io_ptr(p));
-        v->insert(v->end(), data, data + n);
+    auto* v = static_cast<std::vector<uint8_t>*>(png_get_io_ptr(p));
+    v->insert(v->end(), data, data + n);
       },
       nullptr);
   png_set_IHDR(png, info, static_cast<png_uint_32>(image.width), static_cast<png_uint_32>(image.height), 8,

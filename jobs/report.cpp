@@ -13,8 +13,7 @@ using nlohmann::json;
 
 // One level of a tile: its number, the payload bytes it needs, and what it means.
 json levelJson(const CodecLevel& lv) {
-  json j = {{"level", lv.level}, {"bytes", lv.end_bytes}, {"complete", lv.complete},
-            {"meaning", describeLevel(lv)}};
+  json j = {{"level", lv.level}, {"bytes", lv.end_bytes}, {"complete", lv.complete}, {"meaning", describeLevel(lv)}};
   switch (lv.kind) {
     case LevelKind::kCells:
       j["kind"] = "cells";
@@ -39,8 +38,12 @@ json gridJson(const Grid& g) {
 
 json errorSide(const ErrorStats& e, double diagonal) {
   const double d = diagonal > 0 ? diagonal : 1.0;
-  return {{"mean", e.mean},       {"rms", e.rms},           {"max", e.max},
-          {"samples", e.samples}, {"mean_relative", e.mean / d}, {"rms_relative", e.rms / d},
+  return {{"mean", e.mean},
+          {"rms", e.rms},
+          {"max", e.max},
+          {"samples", e.samples},
+          {"mean_relative", e.mean / d},
+          {"rms_relative", e.rms / d},
           {"max_relative", e.max / d}};
 }
 
@@ -61,10 +64,10 @@ const json kReportCounts = {
     {"bpv", "8 * bytes / vertices"},
     {"bpv_tile_vertices", "8 * bytes / tile_vertices: info's bpv"}};
 const json kInfoCounts = {
-    {"vertices",
-     "vertices summed over tiles (a border vertex once per tile): an encode report's tile_vertices"},
-    {"bpv", "8 * bytes / vertices (summed over tiles): an encode report's bpv_tile_vertices; its bpv divides "
-            "by the distinct vertices"}};
+    {"vertices", "vertices summed over tiles (a border vertex once per tile): an encode report's tile_vertices"},
+    {"bpv",
+     "8 * bytes / vertices (summed over tiles): an encode report's bpv_tile_vertices; its bpv divides "
+     "by the distinct vertices"}};
 
 json layoutJson(const AttributeLayout& l) {
   return {{"normals", l.hasNormals()}, {"normal_bits", l.normal_bits}, {"color_channels", l.color_channels}};
@@ -124,7 +127,8 @@ nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& 
   }
   json tiles = json::array();
   for (const auto& t : r.tiles) {
-    json e = {{"id", t.id},   {"vertices", t.vertices}, {"faces", t.faces}, {"border_vertices", t.border_vertices},
+    json e = {{"id", t.id},       {"vertices", t.vertices},
+              {"faces", t.faces}, {"border_vertices", t.border_vertices},
               {"bytes", t.bytes}, {"status", t.status.isOk() ? "ok" : "failed"}};
     if (!t.status.isOk()) e["failure"] = t.status.toString();
     else if (r.measured) e["error"] = errorJson(t.forward, t.backward, r.diagonal);
@@ -176,8 +180,13 @@ std::string batchSummaryJson(const std::string& config_path, const BatchResult& 
     files.push_back(std::move(e));
   }
   j["files"] = std::move(files);
-  j["totals"] = {{"files", batch.files.size()}, {"ok", ok}, {"skipped", skipped}, {"failed", failed},
-                 {"bytes", bytes}, {"vertices", vertices}, {"bpv", vertices ? 8.0 * bytes / vertices : 0.0},
+  j["totals"] = {{"files", batch.files.size()},
+                 {"ok", ok},
+                 {"skipped", skipped},
+                 {"failed", failed},
+                 {"bytes", bytes},
+                 {"vertices", vertices},
+                 {"bpv", vertices ? 8.0 * bytes / vertices : 0.0},
                  {"seconds", seconds}};
   j["exit_code"] = batch.exitCode();
   return j.dump(2) + "\n";
@@ -202,12 +211,8 @@ std::string containerInfoJson(const ContainerFile& file) {
   uint32_t last_level = 0;
   bool all_progressive = !file.tiles().empty();
   for (const auto& t : file.tiles()) {
-    json e = {{"id", t.tile_id},
-              {"codec", codecName(t.codec)},
-              {"codec_version", t.codec_version},
-              {"bytes", t.chunk_bytes},
-              {"offset", t.offset},
-              {"vertices", t.vertices},
+    json e = {{"id", t.tile_id},        {"codec", codecName(t.codec)}, {"codec_version", t.codec_version},
+              {"bytes", t.chunk_bytes}, {"offset", t.offset},          {"vertices", t.vertices},
               {"faces", t.faces}};
     if (t.vertices > 0) e["bounds"] = {{t.lo[0], t.lo[1], t.lo[2]}, {t.hi[0], t.hi[1], t.hi[2]}};
     auto levels = file.tileLevels(t);

@@ -108,8 +108,8 @@ Result<VertexStore::Slot*> VertexStore::slotFor(uint64_t block, bool load) {
                            [](const Slot& a, const Slot& b) { return a.last_use < b.last_use; });
     if (s->dirty) {
       if (!file_.isOpen()) SP_RETURN_IF_ERROR(file_.open(path_));
-      SP_RETURN_IF_ERROR(
-          file_.writeAt(s->block * kBlockRecords * sizeof(VertexRecord), s->records.data(), kBlockRecords * sizeof(VertexRecord)));
+      SP_RETURN_IF_ERROR(file_.writeAt(s->block * kBlockRecords * sizeof(VertexRecord), s->records.data(),
+                                       kBlockRecords * sizeof(VertexRecord)));
     }
     slot_of_block_[s->block] = -1;
     if (s->block == last_block_) last_block_ = UINT64_MAX;
@@ -229,7 +229,8 @@ Status TriangleSpill::append(const SpilledTriangle& t) {
 Status TriangleSpill::finish() {
   if (in_memory_ || buffer_.empty()) return Status::ok();
   if (!file_.isOpen()) SP_RETURN_IF_ERROR(file_.open(path_));
-  SP_RETURN_IF_ERROR(file_.writeAt(written_ * sizeof(SpilledTriangle), buffer_.data(), buffer_.size() * sizeof(SpilledTriangle)));
+  SP_RETURN_IF_ERROR(file_.writeAt(written_ * sizeof(SpilledTriangle), buffer_.data(),
+                                   buffer_.size() * sizeof(SpilledTriangle)));
   written_ += buffer_.size();
   buffer_.clear();
   return Status::ok();
@@ -260,7 +261,8 @@ TileBins::TileBins(std::string path, bool in_memory, std::span<const uint64_t> c
     memory_.resize(begin_.back());
   } else {
     buffers_.resize(counts.size());
-    buffer_capacity_ = std::clamp<uint64_t>(buffer_bytes / sizeof(Triangle) / std::max<size_t>(1, counts.size()), 64, 16384);
+    buffer_capacity_ =
+        std::clamp<uint64_t>(buffer_bytes / sizeof(Triangle) / std::max<size_t>(1, counts.size()), 64, 16384);
   }
 }
 
@@ -292,7 +294,8 @@ Status TileBins::finish() {
     for (uint32_t t = 0; t < buffers_.size(); ++t) SP_RETURN_IF_ERROR(flushTile(t));
   buffers_ = {};
   for (size_t t = 0; t + 1 < begin_.size(); ++t)
-    if (cursor_[t] != begin_[t + 1]) return makeError(ErrorCode::kInternal, "tile bin " + std::to_string(t) + " incomplete");
+    if (cursor_[t] != begin_[t + 1])
+      return makeError(ErrorCode::kInternal, "tile bin " + std::to_string(t) + " incomplete");
   return Status::ok();
 }
 

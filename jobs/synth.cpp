@@ -94,8 +94,7 @@ class Writer {
 Result<SynthResult> synthesize(const SynthSettings& s) {
   if (s.triangles == 0 || s.triangles > (uint64_t(1) << 31) - 1)
     return makeError(ErrorCode::kInvalidArgument, "--triangles must be in [1, 2^31-1]");
-  SP_RETURN_IF_ERROR(
-      checkOutputPath(s.output, s.from.empty() ? std::vector<std::string>{} : std::vector{s.from}));
+  SP_RETURN_IF_ERROR(checkOutputPath(s.output, s.from.empty() ? std::vector<std::string>{} : std::vector{s.from}));
   Mesh base;
   if (s.from.empty()) {
     base = bumpyIcosphere(4, s.seed);
@@ -106,7 +105,8 @@ Result<SynthResult> synthesize(const SynthSettings& s) {
   std::vector<Triangle> faces;
   for (const auto& f : base.triangles)
     if (f[0] != f[1] && f[1] != f[2] && f[0] != f[2] &&
-        norm(cross(sub(base.positions[f[1]], base.positions[f[0]]), sub(base.positions[f[2]], base.positions[f[0]]))) > 0)
+        norm(cross(sub(base.positions[f[1]], base.positions[f[0]]), sub(base.positions[f[2]], base.positions[f[0]]))) >
+            0)
       faces.push_back(f);
   if (faces.empty()) return makeError(ErrorCode::kMalformed, s.from + ": no usable triangle to build from");
   const uint64_t F = faces.size();
@@ -116,7 +116,8 @@ Result<SynthResult> synthesize(const SynthSettings& s) {
   std::vector<Vec3d> normals(V, Vec3d{0, 0, 0});
   double edge_sum = 0;
   for (const auto& f : faces) {
-    const Vec3d n = cross(sub(base.positions[f[1]], base.positions[f[0]]), sub(base.positions[f[2]], base.positions[f[0]]));
+    const Vec3d n =
+        cross(sub(base.positions[f[1]], base.positions[f[0]]), sub(base.positions[f[2]], base.positions[f[0]]));
     for (uint32_t v : f) normals[v] = add(normals[v], n);
     for (int k = 0; k < 3; ++k) edge_sum += norm(sub(base.positions[f[(k + 1) % 3]], base.positions[f[k]]));
   }
@@ -222,7 +223,8 @@ Result<SynthResult> synthesize(const SynthSettings& s) {
   auto indexOf = [&](uint64_t f, uint32_t i, uint32_t j) -> uint32_t {
     const Point p = classify(f, i, j);
     if (p.kind == 0) return vertex_index[p.id];
-    if (p.kind == 1) return edge_full[p.id] ? static_cast<uint32_t>(edge_base[p.id] + p.s - 1) : partial_edge_index.at({p.id, p.s});
+    if (p.kind == 1)
+      return edge_full[p.id] ? static_cast<uint32_t>(edge_base[p.id] + p.s - 1) : partial_edge_index.at({p.id, p.s});
     if (f < full) return static_cast<uint32_t>(interior_base + f * interior_per_face + interiorOffset(i, j));
     return partial_interior_index.at({i, j});
   };
@@ -273,7 +275,8 @@ Result<SynthResult> synthesize(const SynthSettings& s) {
   auto interiorPoint = [&](uint64_t f, uint32_t i, uint32_t j) -> Status {
     const Triangle& t = faces[f];
     const double u = double(i) / m, v = double(j) / m, wgt = 1.0 - u - v;
-    const Vec3d p = add(add(mul(base.positions[t[0]], wgt), mul(base.positions[t[1]], u)), mul(base.positions[t[2]], v));
+    const Vec3d p =
+        add(add(mul(base.positions[t[0]], wgt), mul(base.positions[t[1]], u)), mul(base.positions[t[2]], v));
     const Vec3d n = normalized(add(add(mul(normals[t[0]], wgt), mul(normals[t[1]], u)), mul(normals[t[2]], v)));
     return emit(displaced(p, n));
   };

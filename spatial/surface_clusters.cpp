@@ -157,7 +157,8 @@ std::unique_ptr<ClusterSet> buildClusters(const SurfaceIndex::Impl& m) {
     for (int a = 1; a < 3; ++a)
       if (hi[a] - lo[a] > hi[axis] - lo[axis]) axis = a;
     const size_t half = n > kClusterSize ? kClusterSize * ((n + 2 * kClusterSize - 1) / (2 * kClusterSize))
-                                         : n > kLanes ? kLanes : n / 2;
+                        : n > kLanes     ? kLanes
+                                         : n / 2;
     std::nth_element(items.begin() + b, items.begin() + b + half, items.begin() + e,
                      [axis](const Item& x, const Item& y) { return x.c[axis] < y.c[axis]; });
     todo.push_back({uint32_t(b + half), e});  // the lower half first

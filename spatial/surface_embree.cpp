@@ -194,8 +194,8 @@ SurfaceIndex::Closest SurfaceIndex::closest(const Vec3d& p, uint32_t hint) const
     out.distance = std::numeric_limits<double>::infinity();
     return out;
   }
-  ClosestQuery q{impl_.get(), p, std::numeric_limits<double>::infinity(), p, UINT32_MAX, 0, 0, 0,
-                 std::numeric_limits<float>::infinity()};
+  ClosestQuery q{impl_.get(), p, std::numeric_limits<double>::infinity(), p, UINT32_MAX, 0,
+                 0,           0, std::numeric_limits<float>::infinity()};
   RTCPointQuery query;
   query.x = q.px = static_cast<float>(p[0] - impl_->origin[0]);
   query.y = q.py = static_cast<float>(p[1] - impl_->origin[1]);

@@ -83,9 +83,7 @@ constexpr size_t kDirectPoints = 8;
 void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest> out) const {
   const Impl& m = *impl_;
   if (!m.triangles.empty() && points.size() >= 2)
-    std::call_once(impl_->clusters_built, [this] {
-      impl_->clusters = surface::buildClusters(*impl_);
-    });
+    std::call_once(impl_->clusters_built, [this] { impl_->clusters = surface::buildClusters(*impl_); });
   const surface::ClusterSet* set = m.clusters.get();
   if (m.triangles.empty() || points.size() < 2 || !set) {
     for (size_t i = 0; i < points.size(); ++i) out[i] = closest(points[i]);
@@ -162,11 +160,10 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
     for (uint32_t k : current.clusters) gathered += (set->first[k + 1] - set->first[k]) * kLanes;
     if (slots.size() < gathered) slots.resize(gathered), rows.resize(gathered * 16), bounds.resize(gathered);
     blocks.clear();
-    const size_t count =
-        inPlace(runs[r]) ? candidatesInPlace(*set, current.clusters, blocks, slots.data())
-                         : candidatesCopiedOut(*set, current.clusters, current.cf,
-                                               current.reach_f * current.reach_f * (1 + 16 * kEps), rows.data(),
-                                               blocks, slots.data());
+    const size_t count = inPlace(runs[r]) ? candidatesInPlace(*set, current.clusters, blocks, slots.data())
+                                          : candidatesCopiedOut(*set, current.clusters, current.cf,
+                                                                current.reach_f * current.reach_f * (1 + 16 * kEps),
+                                                                rows.data(), blocks, slots.data());
     double farthest = 0;
     for (size_t k = i; k < j; ++k) {
       const Vec3d& p = points[at(k)];

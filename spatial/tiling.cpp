@@ -10,9 +10,9 @@
 namespace scanpress {
 namespace {
 
-constexpr int kMaxDepth = 21;         // octree depth limit: node coordinates fit 21 bits per axis
-constexpr int kRefineStep = 4;        // a refined cell splits 16 ways per axis
-constexpr int32_t kRefined = -2;      // index marker: look at the next level
+constexpr int kMaxDepth = 21;     // octree depth limit: node coordinates fit 21 bits per axis
+constexpr int kRefineStep = 4;    // a refined cell splits 16 ways per axis
+constexpr int32_t kRefined = -2;  // index marker: look at the next level
 constexpr int32_t kNoTile = -1;
 
 uint64_t packCoord(uint32_t x, uint32_t y, uint32_t z) { return (uint64_t(x) << 42) | (uint64_t(y) << 21) | z; }
@@ -28,7 +28,8 @@ openvdb::Coord cellOf(const Vec3u& c, int shift) {
 struct TileHistogram::Impl {
   struct Level {
     explicit Level(int s)
-        : shift(s), counts(openvdb::Int32Grid::create(0)),
+        : shift(s),
+          counts(openvdb::Int32Grid::create(0)),
           acc(std::make_unique<openvdb::Int32Grid::Accessor>(counts->getAccessor())) {}
     int shift;
     openvdb::Int32Grid::Ptr counts;
@@ -58,9 +59,7 @@ TileHistogram::~TileHistogram() = default;
 TileHistogram::TileHistogram(TileHistogram&&) noexcept = default;
 TileHistogram& TileHistogram::operator=(TileHistogram&&) noexcept = default;
 
-void TileHistogram::add(const Vec3u& c) {
-  Impl::bump(impl_->levels.front(), cellOf(c, shift_));
-}
+void TileHistogram::add(const Vec3u& c) { Impl::bump(impl_->levels.front(), cellOf(c, shift_)); }
 
 bool TileHistogram::beginRefinement() {
   Impl::Level& last = impl_->levels.back();

@@ -84,9 +84,9 @@ enum class Family {
   kOverwriteRepaired,  // every byte set to 0x00, 0xFF, 0x80 and a seeded random value, checksums repaired
   kTrailing,           // 1..64 seeded random bytes appended, and a second footer appended
   kHeaderEdit,         // header fields set to edge values, checksums repaired
-  kIndexEdit,    // a tile's counts, codec, version or bounds changed in its index entry and chunk header
-                 // alike (totals adjusted), checksums repaired
-  kPayloadEdit,  // 1..8 seeded random bytes overwritten inside one tile's payload, checksums repaired
+  kIndexEdit,          // a tile's counts, codec, version or bounds changed in its index entry and chunk header
+                       // alike (totals adjusted), checksums repaired
+  kPayloadEdit,        // 1..8 seeded random bytes overwritten inside one tile's payload, checksums repaired
 };
 constexpr Family kFamilies[] = {Family::kTruncation, Family::kBitFlip,           Family::kBitFlipRepaired,
                                 Family::kOverwrite,  Family::kOverwriteRepaired, Family::kTrailing,
@@ -94,31 +94,21 @@ constexpr Family kFamilies[] = {Family::kTruncation, Family::kBitFlip,          
 
 inline const char* familyName(Family f) {
   switch (f) {
-    case Family::kTruncation:
-      return "truncation";
-    case Family::kBitFlip:
-      return "bit flip";
-    case Family::kBitFlipRepaired:
-      return "bit flip, CRC repaired";
-    case Family::kOverwrite:
-      return "byte overwrite";
-    case Family::kOverwriteRepaired:
-      return "byte overwrite, CRC repaired";
-    case Family::kTrailing:
-      return "trailing bytes";
-    case Family::kHeaderEdit:
-      return "header edit, CRC repaired";
-    case Family::kIndexEdit:
-      return "index+chunk edit, CRC repaired";
-    case Family::kPayloadEdit:
-      return "payload edit, CRC repaired";
+    case Family::kTruncation: return "truncation";
+    case Family::kBitFlip: return "bit flip";
+    case Family::kBitFlipRepaired: return "bit flip, CRC repaired";
+    case Family::kOverwrite: return "byte overwrite";
+    case Family::kOverwriteRepaired: return "byte overwrite, CRC repaired";
+    case Family::kTrailing: return "trailing bytes";
+    case Family::kHeaderEdit: return "header edit, CRC repaired";
+    case Family::kIndexEdit: return "index+chunk edit, CRC repaired";
+    case Family::kPayloadEdit: return "payload edit, CRC repaired";
   }
   return "?";
 }
 // Whether every mutation of the family must be refused (no repair: a checksum or the layout catches it).
 inline bool mustBeRefused(Family f) {
-  return f == Family::kTruncation || f == Family::kBitFlip || f == Family::kOverwrite ||
-         f == Family::kTrailing;
+  return f == Family::kTruncation || f == Family::kBitFlip || f == Family::kOverwrite || f == Family::kTrailing;
 }
 
 template <typename T>
@@ -180,8 +170,7 @@ inline void forEachMutation(const std::vector<uint8_t>& base, Family family, uin
       visit(b);
       return;
     case Family::kHeaderEdit: {
-      const double inf = std::numeric_limits<double>::infinity(),
-                   nan = std::numeric_limits<double>::quiet_NaN();
+      const double inf = std::numeric_limits<double>::infinity(), nan = std::numeric_limits<double>::quiet_NaN();
       auto edit = [&](auto change) {
         b = base;
         change(b);
@@ -190,8 +179,7 @@ inline void forEachMutation(const std::vector<uint8_t>& base, Family family, uin
       };
       for (uint32_t v : {0u, 2u, 0xFFFFFFFFu}) edit([&](auto& x) { put<uint32_t>(x, 8, v); });
       for (uint32_t v : {0u, 79u, 81u, 0xFFFFFFFFu}) edit([&](auto& x) { put<uint32_t>(x, 12, v); });
-      const double doubles[] = {0.0,   -0.0,  -1.0,   5e-324, 1e-308, 1e-300,
-                                1e300, 1e308, -1e308, inf,    -inf,   nan};
+      const double doubles[] = {0.0, -0.0, -1.0, 5e-324, 1e-308, 1e-300, 1e300, 1e308, -1e308, inf, -inf, nan};
       for (uint64_t at : {16, 24, 32, 40})
         for (double v : doubles) edit([&](auto& x) { put<double>(x, at, v); });
       for (uint64_t at : {48, 49, 50, 51})
@@ -214,8 +202,8 @@ inline void forEachMutation(const std::vector<uint8_t>& base, Family family, uin
         const TileEntry& e = pc.tiles[t];
         const uint64_t entry = index_offset + 8 + t * kIndexEntrySize;
         // A count field: index entry offset, chunk header offset, header total offset.
-        auto editCount = [&](uint64_t entry_at, uint64_t chunk_at, uint64_t total_at, uint32_t old_value,
-                             uint32_t value) {
+        auto editCount =
+            [&](uint64_t entry_at, uint64_t chunk_at, uint64_t total_at, uint32_t old_value, uint32_t value) {
           b = base;
           put<uint32_t>(b, entry + entry_at, value);
           put<uint32_t>(b, e.offset + chunk_at, value);
@@ -225,8 +213,8 @@ inline void forEachMutation(const std::vector<uint8_t>& base, Family family, uin
         };
         for (const bool faces : {false, true}) {
           const uint32_t old_value = faces ? e.faces : e.vertices;
-          for (uint32_t v : {0u, 1u, 2u, 3u, old_value - 1, old_value + 1, 2 * old_value, old_value << 4,
-                             1u << 16, 1u << 20, 1u << 26, 0xFFFFFFFFu})
+          for (uint32_t v : {0u, 1u, 2u, 3u, old_value - 1, old_value + 1, 2 * old_value, old_value << 4, 1u << 16,
+                             1u << 20, 1u << 26, 0xFFFFFFFFu})
             editCount(faces ? 28 : 24, faces ? 16 : 12, faces ? 64 : 56, old_value, v);
         }
         for (uint16_t codec : {0, 1, 2, 3, 4, 0xFFFF})
@@ -257,8 +245,7 @@ inline void forEachMutation(const std::vector<uint8_t>& base, Family family, uin
         if (payload == 0) continue;
         b = base;
         const int bytes = 1 + static_cast<int>(rng() % 8);
-        for (int i = 0; i < bytes; ++i)
-          b[e.offset + kChunkHeaderSize + rng() % payload] = static_cast<uint8_t>(rng());
+        for (int i = 0; i < bytes; ++i) b[e.offset + kChunkHeaderSize + rng() % payload] = static_cast<uint8_t>(rng());
         fuzzing::repairChecksums(b);
         visit(b);
       }

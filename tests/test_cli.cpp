@@ -18,7 +18,8 @@ int run(const std::string& args, std::string* out = nullptr) { return testing::r
 // Files in `dir` whose names contain ".tmp-" (left-over temporaries).
 int temporaries(const std::string& dir) {
   int n = 0;
-  for (const auto& e : fs::directory_iterator(dir)) n += e.path().filename().string().find(".tmp-") != std::string::npos;
+  for (const auto& e : fs::directory_iterator(dir))
+    n += e.path().filename().string().find(".tmp-") != std::string::npos;
   return n;
 }
 
@@ -58,8 +59,7 @@ TEST(Cli, SeedsAreUnsigned64BitIntegersEverywhere) {
   const std::string a = dir.file("a.ply"), b = dir.file("b.ply");
   ASSERT_EQ(run("synth '" + a + "' --triangles 2e3 --seed 18446744073709551615 --quiet", &out), 0) << out;
   ASSERT_EQ(run("synth '" + b + "' --triangles 2000 --seed 1e19 --quiet", &out), 0) << out;
-  ASSERT_EQ(run("measure '" + a + "' '" + b + "' --seed 18446744073709551615 --samples 1e4 --json", &out), 0)
-      << out;
+  ASSERT_EQ(run("measure '" + a + "' '" + b + "' --seed 18446744073709551615 --samples 1e4 --json", &out), 0) << out;
   const auto high = nlohmann::json::parse(out);
   ASSERT_EQ(run("measure '" + a + "' '" + b + "' --seed 7 --samples 10000 --json", &out), 0) << out;
   EXPECT_NE(nlohmann::json::parse(out), high);  // the seed reaches the sampler whole
@@ -84,7 +84,8 @@ TEST(Cli, EncodeInfoDecodeWithReport) {
     EXPECT_TRUE(report.contains(key)) << key;
   EXPECT_EQ(report["unreferenced_vertices_dropped"], 1113);
   EXPECT_EQ(report["bytes"], fs::file_size(dir.file("b.spz")));
-  EXPECT_NEAR(report["bpv"].get<double>(), 8.0 * report["bytes"].get<double>() / report["vertices"].get<double>(), 1e-9);
+  EXPECT_NEAR(report["bpv"].get<double>(), 8.0 * report["bytes"].get<double>() / report["vertices"].get<double>(),
+              1e-9);
   for (const char* stage : {"read", "quantize", "encode", "write"}) EXPECT_TRUE(report["seconds"].contains(stage));
 
   ASSERT_EQ(run("info '" + dir.file("b.spz") + "' --json --verify", &out), 0) << out;
@@ -116,7 +117,8 @@ TEST(Cli, ProgressiveDecodeByLevelAndBytes) {
     SCOPED_TRACE(codec);
     const std::string spz = dir.file(std::string(codec) + ".spz");
     ASSERT_EQ(run("encode '" + in + "' '" + spz + "' --codec " + codec + " --bits 12 --tile-triangles 20000 --quiet",
-                  &out), 0)
+                  &out),
+              0)
         << out;
     ASSERT_EQ(run("info '" + spz + "' --json --verify", &out), 0) << out;
     const auto info = nlohmann::json::parse(out);
@@ -130,7 +132,8 @@ TEST(Cli, ProgressiveDecodeByLevelAndBytes) {
     ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("full.ply") + "'", &out), 0) << out;
     ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("l6.ply") + "' --level 6", &out), 0) << out;
     EXPECT_NE(out.find("level 6: " + std::to_string(levels[6]["bytes"].get<uint64_t>()) + " payload bytes"),
-              std::string::npos) << out;
+              std::string::npos)
+        << out;
     EXPECT_LT(fs::file_size(dir.file("l6.ply")), fs::file_size(dir.file("full.ply")));
     // The finest level within a budget: exactly level 8's bytes gives level 8.
     const uint64_t b8 = levels[8]["bytes"].get<uint64_t>();
@@ -153,8 +156,9 @@ TEST(Cli, ProgressiveDecodeByLevelAndBytes) {
 
 TEST(Cli, BadDataExitsTwoAndLeavesNoOutput) {
   testing::TempDir dir;
-  testing::writeBytes(dir.file("bad.ply"), "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n"
-                                            "property float y\nproperty float z\nend_header\n0 0 0\n1 nan 0\n");
+  testing::writeBytes(dir.file("bad.ply"),
+                      "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n"
+                      "property float y\nproperty float z\nend_header\n0 0 0\n1 nan 0\n");
   std::string out;
   EXPECT_EQ(run("encode '" + dir.file("bad.ply") + "' '" + dir.file("o.spz") + "'", &out), 2);
   EXPECT_NE(out.find("bad.ply:9"), std::string::npos) << out;
@@ -232,13 +236,17 @@ TEST(Cli, DroppedDataIsWarnedReportedAndFailsUnderStrict) {
 
   EXPECT_EQ(run("encode '" + in + "' '" + dir.file("s.spz") + "' --strict", &out), 2) << out;
   EXPECT_NE(out.find("quad.obj: strict: the container would not keep obj mtllib x 1, obj vt x 4, obj usemtl x 1"),
-            std::string::npos) << out;
+            std::string::npos)
+      << out;
   EXPECT_FALSE(fs::exists(dir.file("s.spz")));
 
   // Nothing unsupported: --strict encodes; --no-normals is listed as requested and warned about by nobody.
   testing::writeBytes(in, "v 0 0 0\nv 1 0 0\nv 1 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n");
   ASSERT_EQ(run("encode '" + in + "' '" + dir.file("s.spz") + "' --strict --no-normals --report '" +
-                    dir.file("r.json") + "'", &out), 0) << out;
+                    dir.file("r.json") + "'",
+                &out),
+            0)
+      << out;
   EXPECT_EQ(linesWith(out, "warning"), 0) << out;
   report = nlohmann::json::parse(std::ifstream(dir.file("r.json")));
   EXPECT_EQ(report["dropped"],
@@ -252,7 +260,8 @@ TEST(Cli, BundledScanDropsAreNamed) {
   ASSERT_EQ(run("encode '" + kBunny + "' '" + dir.file("b.spz") + "' --report '" + dir.file("r.json") + "'", &out), 0)
       << out;
   EXPECT_NE(out.find("scanpress: warning: dropped vertex.confidence x 35947, vertex.intensity x 35947"),
-            std::string::npos) << out;
+            std::string::npos)
+      << out;
   const auto report = nlohmann::json::parse(std::ifstream(dir.file("r.json")));
   ASSERT_EQ(report["dropped"].size(), 2u);
   EXPECT_EQ(report["dropped"][1]["name"], "vertex.intensity");
@@ -281,8 +290,11 @@ TEST(Cli, InfoAndReportSayWhichVertexCountTheyUse) {
   testing::TempDir dir;
   std::string out;
   const std::string spz = dir.file("b.spz");
-  ASSERT_EQ(run("encode '" + kBunny + "' '" + spz + "' --tile-triangles 8000 --quiet --report '" +
-                    dir.file("r.json") + "'", &out), 0) << out;
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + spz + "' --tile-triangles 8000 --quiet --report '" + dir.file("r.json") +
+                    "'",
+                &out),
+            0)
+      << out;
   const auto report = nlohmann::json::parse(std::ifstream(dir.file("r.json")));
   ASSERT_EQ(run("info '" + spz + "' --json", &out), 0) << out;
   const auto info = nlohmann::json::parse(out);
@@ -299,8 +311,11 @@ TEST(Cli, InfoAndReportSayWhichVertexCountTheyUse) {
 TEST(Cli, QuietIsQuietWithMoreThreadsThanCores) {
   testing::TempDir dir;
   std::string out;
-  ASSERT_EQ(run("encode '" + kBunny + "' '" + dir.file("b.spz") + "' --codec kdtree --bits 12 --tile-triangles 4000 "
-                "--threads 64 --quiet", &out), 0);
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + dir.file("b.spz") +
+                    "' --codec kdtree --bits 12 --tile-triangles 4000 "
+                    "--threads 64 --quiet",
+                &out),
+            0);
   EXPECT_EQ(out, "");
 }
 

@@ -42,7 +42,8 @@ TEST(JobConfig, InvalidFilesNameThePointerExitOneWriteNothing) {
       {"unknown_top_key", "{" + in + ", \"colour\": 1}", "/colour: unknown key"},
       {"missing_inputs", "{\"output\": {\"directory\": \"out\"}}", "/inputs"},
       {"inputs_type", "{\"inputs\": 5, \"output\": {\"directory\": \"out\"}}", "/inputs: must be"},
-      {"inputs_element_type", "{\"inputs\": [\"" + bunny + "\", 3], \"output\": {\"directory\": \"out\"}}", "/inputs/1"},
+      {"inputs_element_type", "{\"inputs\": [\"" + bunny + "\", 3], \"output\": {\"directory\": \"out\"}}",
+       "/inputs/1"},
       {"inputs_empty_string", "{\"inputs\": [\"\"], \"output\": {\"directory\": \"out\"}}", "/inputs/0"},
       {"bits_too_high", "{" + in + ", \"codec\": {\"bits\": 30}}",
        "/codec/bits: must be an integer in [8, 24], got '30'"},
@@ -55,12 +56,9 @@ TEST(JobConfig, InvalidFilesNameThePointerExitOneWriteNothing) {
       {"output_not_object", "{\"inputs\": [\"" + bunny + "\"], \"output\": \"out\"}", "/output: must be an object"},
       {"output_name_slash", "{" + in.substr(0, in.size() - 1) + ", \"name\": \"a/{stem}.spz\"}}", "/output/name"},
       // Every name is a file inside the output directory; `../` would write outside it.
-      {"report_dotdot", "{" + in.substr(0, in.size() - 1) + ", \"report\": \"../{stem}.json\"}}",
-       "/output/report"},
-      {"summary_dotdot", "{" + in.substr(0, in.size() - 1) + ", \"summary\": \"../summary.json\"}}",
-       "/output/summary"},
-      {"report_is_name", "{" + in.substr(0, in.size() - 1) + ", \"report\": \"{stem}.spz\"}}",
-       "/output/report"},
+      {"report_dotdot", "{" + in.substr(0, in.size() - 1) + ", \"report\": \"../{stem}.json\"}}", "/output/report"},
+      {"summary_dotdot", "{" + in.substr(0, in.size() - 1) + ", \"summary\": \"../summary.json\"}}", "/output/summary"},
+      {"report_is_name", "{" + in.substr(0, in.size() - 1) + ", \"report\": \"{stem}.spz\"}}", "/output/report"},
       // A NUL byte in a path would cut it short silently ("out\u0000x" would write into "out").
       {"nul_in_directory", "{\"inputs\": [\"" + bunny + "\"], \"output\": {\"directory\": \"out\\u0000x\"}}",
        "/output/directory: must not contain a NUL byte"},
@@ -70,17 +68,19 @@ TEST(JobConfig, InvalidFilesNameThePointerExitOneWriteNothing) {
       {"tile_target_small", "{" + in + ", \"tiling\": {\"target_triangles\": 10}}", "/tiling/target_triangles"},
       {"threads_negative", "{" + in + ", \"threads\": -1}", "/threads"},
       {"threads_overflow", "{" + in + ", \"threads\": 1e400}", "number overflow parsing '1e400'"},
-      {"threads_fraction", "{" + in + ", \"threads\": 2.5}",
-       "/threads: must be an integer in [0, 4096], got '2.5'"},
+      {"threads_fraction", "{" + in + ", \"threads\": 2.5}", "/threads: must be an integer in [0, 4096], got '2.5'"},
       {"tile_target_above_limit", "{" + in + ", \"tiling\": {\"target_triangles\": 2147483649}}",
        "/tiling/target_triangles: must be an integer in [1024, 2147483648]"},
       {"seed_negative", "{" + in + ", \"measure\": {\"seed\": -1}}", "/measure/seed"},
       {"seed_beyond_64_bits", "{" + in + ", \"measure\": {\"seed\": 18446744073709551616}}", "/measure/seed"},
       {"budget_too_small", "{" + in + ", \"memory_budget_mb\": 8}", "/memory_budget_mb"},
       {"resume_number", "{" + in + ", \"resume\": 1}", "/resume"},
-      {"measure_unknown_key", "{" + in + ", \"measure\": {\"enabled\": true, \"sample\": 3}}", "/measure/sample: unknown key"},
-      {"measure_density_zero", "{" + in + ", \"measure\": {\"enabled\": true, \"samples_per_triangle\": 0}}", "/measure/samples_per_triangle"},
-      {"measure_render_size", "{" + in + ", \"measure\": {\"enabled\": true, \"render_size\": [10, 20000]}}", "/measure/render_size/0"},
+      {"measure_unknown_key", "{" + in + ", \"measure\": {\"enabled\": true, \"sample\": 3}}",
+       "/measure/sample: unknown key"},
+      {"measure_density_zero", "{" + in + ", \"measure\": {\"enabled\": true, \"samples_per_triangle\": 0}}",
+       "/measure/samples_per_triangle"},
+      {"measure_render_size", "{" + in + ", \"measure\": {\"enabled\": true, \"render_size\": [10, 20000]}}",
+       "/measure/render_size/0"},
       {"measure_render_without_enabled", "{" + in + ", \"measure\": {\"render\": true}}", "/measure/render"},
       {"escaped_key", "{" + in + ", \"a/b\": 1}", "/a~1b: unknown key"},
       {"stages_not_array", "{" + in + ", \"stages\": {\"name\": \"smooth\"}}", "/stages: must be an array"},
@@ -93,8 +93,11 @@ TEST(JobConfig, InvalidFilesNameThePointerExitOneWriteNothing) {
        "/stages/1/mu: must be in (-1, -lambda)"},
       {"stage_iterations", "{" + in + ", \"stages\": [{\"name\": \"smooth\", \"iterations\": 5000}]}",
        "/stages/0/iterations"},
-      {"glob_matches_nothing", "{\"inputs\": [\"" + dir.path() + "/*.nothing\"], \"output\": {\"directory\": \"out\"}}", "/inputs/0"},
-      {"output_collision", "{\"inputs\": [\"" + bunny + "\", \"" + dir.path() + "/bun_zipper.obj\"], \"output\": {\"directory\": \"out\"}}", "/output/name"},
+      {"glob_matches_nothing",
+       "{\"inputs\": [\"" + dir.path() + "/*.nothing\"], \"output\": {\"directory\": \"out\"}}", "/inputs/0"},
+      {"output_collision",
+       "{\"inputs\": [\"" + bunny + "\", \"" + dir.path() + "/bun_zipper.obj\"], \"output\": {\"directory\": \"out\"}}",
+       "/output/name"},
   };
   ASSERT_GE(cases.size(), 15u);
   testing::writeBytes(dir.file("bun_zipper.obj"), "v 0 0 0\n");
@@ -142,7 +145,8 @@ TEST(JobConfig, EveryExampleParsesAndTheReferenceListsEveryKey) {
 // Stages from a job file and from the CLI's --stages are the same specs, read by the same code.
 TEST(JobConfig, StagesFromJobFilesAndTheCommandLine) {
   auto job = parseJobConfig(R"({"inputs": ["a.ply"], "stages": [{"name": "smooth", "iterations": 4, "lambda": 0.5,
-                                "mu": -0.53}, {"name": "smooth"}]})", "/x/j.json");
+                                "mu": -0.53}, {"name": "smooth"}]})",
+                            "/x/j.json");
   ASSERT_TRUE(job.isOk()) << job.status().toString();
   ASSERT_EQ(job->encode.stages.size(), 2u);
   EXPECT_EQ(job->encode.stages[0].kind, StageKind::kSmooth);
@@ -155,8 +159,7 @@ TEST(JobConfig, StagesFromJobFilesAndTheCommandLine) {
   ASSERT_EQ(cli->size(), 2u);
   EXPECT_EQ((*cli)[0].smooth.iterations, 4);
   EXPECT_EQ((*cli)[0].smooth.mu, -0.53);
-  EXPECT_NE(parseStagesOption("smooth:iterations", "--stages").status().message().find("KEY=VALUE"),
-            std::string::npos);
+  EXPECT_NE(parseStagesOption("smooth:iterations", "--stages").status().message().find("KEY=VALUE"), std::string::npos);
   EXPECT_NE(parseStagesOption("smooth:lambda=2", "--stages").status().message().find("--stages: /stages/0/lambda"),
             std::string::npos);
   EXPECT_NE(parseStagesOption("blur", "--stages").status().message().find("unknown stage 'blur'"), std::string::npos);
@@ -288,8 +291,8 @@ TEST(Batch, StrictFailsInputsThatWouldDropData) {
     if (name == "tex.obj") {
       EXPECT_EQ(f["status"], "failed");
       EXPECT_EQ(f["exit_code"], 2);
-      EXPECT_NE(f["error"].get<std::string>().find("strict: the container would not keep obj vt x 1"),
-                std::string::npos) << f["error"];
+      EXPECT_NE(f["error"].get<std::string>().find("strict: the container would not keep obj vt x 1"), std::string::npos)
+          << f["error"];
     } else {
       EXPECT_EQ(f["status"], "ok") << name;  // redone: strict is in the fingerprint
     }

@@ -20,20 +20,13 @@ struct Scan {
 };
 
 const Scan kScans[] = {
-    {"aneurysm_data.stl.zst", 10204, 20294},
-    {"armadillo.obj.zst", 43243, 86482},
-    {"bun_zipper.ply.zst", 35947, 69451},
-    {"bunny.stl.zst", 34834, 69451},
-    {"decimated-max.obj", 5272, 10540},
-    {"fandisk.obj", 6475, 12946},
-    {"gargo.ply.zst", 25002, 50000},
-    {"horse.ply.zst", 48485, 96966},
-    {"igea.ply.zst", 134345, 268686},
-    {"lato000.ply.zst", 44461, 86766},
-    {"lucy.ply.zst", 49987, 99970},
-    {"parasaurolophus_low_normals2.ply.zst", 28291, 54839},
-    {"rs1_normals.ply.zst", 114373, 221803},
-    {"screwdriver.ply", 6789, 13574},
+    {"aneurysm_data.stl.zst", 10204, 20294}, {"armadillo.obj.zst", 43243, 86482},
+    {"bun_zipper.ply.zst", 35947, 69451},    {"bunny.stl.zst", 34834, 69451},
+    {"decimated-max.obj", 5272, 10540},      {"fandisk.obj", 6475, 12946},
+    {"gargo.ply.zst", 25002, 50000},         {"horse.ply.zst", 48485, 96966},
+    {"igea.ply.zst", 134345, 268686},        {"lato000.ply.zst", 44461, 86766},
+    {"lucy.ply.zst", 49987, 99970},          {"parasaurolophus_low_normals2.ply.zst", 28291, 54839},
+    {"rs1_normals.ply.zst", 114373, 221803}, {"screwdriver.ply", 6789, 13574},
     {"turbineblade.ply.zst", 99519, 199034},
 };
 
@@ -109,8 +102,7 @@ void expectLosslessAfterQuantization(const Scan& scan, CodecId codec, std::initi
     ASSERT_TRUE(r.isOk()) << r.status().toString();
     const auto& [q, decoded] = *r;
     EXPECT_EQ(q.triangles.size() + qs.degenerate_triangles, scan.triangles);
-    EXPECT_TRUE(testing::cornerMultiset(decoded, layout.normal_bits) ==
-                testing::cornerMultiset(q, layout.normal_bits));
+    EXPECT_TRUE(testing::cornerMultiset(decoded, layout.normal_bits) == testing::cornerMultiset(q, layout.normal_bits));
   }
 }
 
@@ -208,11 +200,11 @@ TEST_P(DataRoundTrip, ThroughFilesWithTheCommands) {
 
 INSTANTIATE_TEST_SUITE_P(Scans, DataRoundTrip, ::testing::ValuesIn(kScans),
                          [](const ::testing::TestParamInfo<Scan>& info) {
-                           std::string n = info.param.file;
-                           for (char& c : n)
-                             if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
-                           return n;
-                         });
+  std::string n = info.param.file;
+  for (char& c : n)
+    if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+  return n;
+});
 
 TEST(BundledScan, ReadsAndRoundTrips) {
   const std::string path = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";

@@ -53,9 +53,8 @@ int waitExit(pid_t pid) {
 }
 
 void writeJob(const fs::path& job, const fs::path& inputs, const fs::path& out) {
-  std::ofstream(job) << R"({"inputs": [")" << (inputs / "*.ply").string()
-                     << R"("], "output": {"directory": ")" << out.string()
-                     << R"("}, "codec": {"name": "kdtree", "bits": 14}, "tiling": )"
+  std::ofstream(job) << R"({"inputs": [")" << (inputs / "*.ply").string() << R"("], "output": {"directory": ")"
+                     << out.string() << R"("}, "codec": {"name": "kdtree", "bits": 14}, "tiling": )"
                      << R"({"target_triangles": 2048}, "threads": 2})";
 }
 
@@ -69,10 +68,8 @@ DirState listDir(const fs::path& dir) {
   if (!fs::exists(dir)) return s;
   for (const auto& e : fs::directory_iterator(dir)) {
     const std::string name = e.path().filename().string();
-    if (name.find(".tmp-") != std::string::npos)
-      s.temps.push_back(e.path());
-    else if (name[0] != '.')
-      s.finals.push_back(e.path());
+    if (name.find(".tmp-") != std::string::npos) s.temps.push_back(e.path());
+    else if (name[0] != '.') s.finals.push_back(e.path());
   }
   std::sort(s.finals.begin(), s.finals.end());
   return s;
@@ -85,8 +82,8 @@ TEST(Durability, KilledAndResumedBatchMatchesAnUninterruptedRun) {
   const int triangles[] = {16000, 6000, 10000, 3000};
   for (int i = 0; i < 4; ++i) {
     const std::string ply = (dir / "in" / ("scan" + std::to_string(i) + ".ply")).string();
-    ASSERT_EQ(testing::runScanpress("synth '" + ply + "' --triangles " + std::to_string(triangles[i]) +
-                                    " --seed " + std::to_string(i + 1) + " --quiet"),
+    ASSERT_EQ(testing::runScanpress("synth '" + ply + "' --triangles " + std::to_string(triangles[i]) + " --seed " +
+                                    std::to_string(i + 1) + " --quiet"),
               0);
   }
   writeJob(dir / "ref.json", dir / "in", dir / "ref");
@@ -108,8 +105,7 @@ TEST(Durability, KilledAndResumedBatchMatchesAnUninterruptedRun) {
     for (const auto& ref_path : ref_containers) {
       const fs::path p = dir / "out" / ref_path.filename();
       ASSERT_TRUE(fs::exists(p)) << when << ": " << p;
-      EXPECT_TRUE(readAll(p) == readAll(ref_path))
-          << when << ": " << p << " differs from the uninterrupted run's";
+      EXPECT_TRUE(readAll(p) == readAll(ref_path)) << when << ": " << p << " differs from the uninterrupted run's";
     }
   };
   int killed_mid_run = 0, completed = 0, temps_seen = 0, finals_checked = 0;

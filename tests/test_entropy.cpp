@@ -36,17 +36,21 @@ std::vector<Op> randomOps(uint32_t seed, size_t n) {
   for (size_t i = 0; i < n; ++i) {
     const int kind = static_cast<int>(rng() % 6);
     switch (kind) {
-      case 0: ops.push_back({0, (rng() % 10) < 2 ? 1u : 0u, rng() % 4}); break;       // skewed bit, context
-      case 1: ops.push_back({1, static_cast<uint32_t>(std::min<double>(7, std::abs(std::normal_distribution<>(0, 2)(rng0)))), 0}); break;
-      case 2: ops.push_back({2, rng() % 300, 0}); break;                               // 300-symbol alphabet
-      case 3: {                                                                       // explicit distribution
+      case 0: ops.push_back({0, (rng() % 10) < 2 ? 1u : 0u, rng() % 4}); break;  // skewed bit, context
+      case 1:
+        ops.push_back({1, static_cast<uint32_t>(std::min<double>(7, std::abs(std::normal_distribution<>(0, 2)(rng0)))),
+                       0});
+        break;
+      case 2: ops.push_back({2, rng() % 300, 0}); break;  // 300-symbol alphabet
+      case 3: {                                           // explicit distribution
         const uint32_t total = 1 + rng() % 65536;
         ops.push_back({3, rng() % total, total});
         break;
       }
       case 4: {
         const int bits = static_cast<int>(rng() % 33);
-        ops.push_back({4, bits == 32 ? static_cast<uint32_t>(rng()) : static_cast<uint32_t>(rng() & ((1ull << bits) - 1)),
+        ops.push_back({4,
+                       bits == 32 ? static_cast<uint32_t>(rng()) : static_cast<uint32_t>(rng() & ((1ull << bits) - 1)),
                        static_cast<uint32_t>(bits)});
         break;
       }
@@ -166,10 +170,23 @@ TEST(RangeCoder, TruncatedAndCorruptInputNeverReadsOutOfBounds) {
     for (const Op& op : ops) {
       uint32_t v = 0;
       switch (op.kind) {
-        case 0: v = static_cast<uint32_t>(dec.decodeBit(bits[op.aux])); ASSERT_LE(v, 1u); break;
-        case 1: v = dec.decodeSymbol(small); ASSERT_LT(v, 8u); break;
-        case 2: v = dec.decodeSymbol(large); ASSERT_LT(v, 300u); break;
-        case 3: v = dec.peekFrequency(op.aux); ASSERT_LT(v, op.aux); dec.consumeFrequency(v, 1); break;
+        case 0:
+          v = static_cast<uint32_t>(dec.decodeBit(bits[op.aux]));
+          ASSERT_LE(v, 1u);
+          break;
+        case 1:
+          v = dec.decodeSymbol(small);
+          ASSERT_LT(v, 8u);
+          break;
+        case 2:
+          v = dec.decodeSymbol(large);
+          ASSERT_LT(v, 300u);
+          break;
+        case 3:
+          v = dec.peekFrequency(op.aux);
+          ASSERT_LT(v, op.aux);
+          dec.consumeFrequency(v, 1);
+          break;
         case 4: dec.decodeBits(static_cast<int>(op.aux)); break;
         default: v = dec.decodeUniform(op.aux); ASSERT_LT(v, op.aux);
       }

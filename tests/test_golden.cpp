@@ -40,7 +40,8 @@ const Golden& golden() {
     m.normals.push_back({uint16_t(m.normals[0][0] ^ 1), m.normals[0][1]});
     m.colors.push_back(m.colors[0]);
     size_t far = 0;  // a triangle away from vertex 0, to share an edge with the twin
-    while (m.positions[m.triangles[far][1]] == m.positions[0] || m.positions[m.triangles[far][2]] == m.positions[0]) ++far;
+    while (m.positions[m.triangles[far][1]] == m.positions[0] || m.positions[m.triangles[far][2]] == m.positions[0])
+      ++far;
     m.triangles.push_back({twin, m.triangles[far][1], m.triangles[far][2]});
     m.triangles.push_back(m.triangles[7]);
     m.triangles.push_back({m.triangles[9][0], m.triangles[9][2], m.triangles[9][1]});
@@ -53,8 +54,7 @@ const Golden& golden() {
 }
 
 std::string goldenPath(const CodecInfo& codec) {
-  return std::string(SCANPRESS_GOLDEN) + "/" + std::string(codec.name) + "-v" + std::to_string(codec.version) +
-         ".spz";
+  return std::string(SCANPRESS_GOLDEN) + "/" + std::string(codec.name) + "-v" + std::to_string(codec.version) + ".spz";
 }
 
 class GoldenStream : public ::testing::TestWithParam<CodecId> {};
@@ -97,8 +97,8 @@ std::vector<CodecId> everyCodec() {
 
 INSTANTIATE_TEST_SUITE_P(Codecs, GoldenStream, ::testing::ValuesIn(everyCodec()),
                          [](const ::testing::TestParamInfo<CodecId>& info) {
-                           return std::string(findCodec(info.param)->name);
-                         });
+  return std::string(findCodec(info.param)->name);
+});
 
 }  // namespace
 }  // namespace scanpress

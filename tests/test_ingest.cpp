@@ -198,7 +198,7 @@ TEST(Ingest, PointCloudRoundTripsThroughEveryCodec) {
   for (const char* codec : {"store", "kdtree", "octree"}) {
     SCOPED_TRACE(codec);
     EncodeSettings s = settingsFor(in, dir.file(std::string(codec) + ".spz"), codec);
-    s.tile_triangles = 1024;  // several tiles: points are binned by position
+    s.tile_triangles = 1024;   // several tiles: points are binned by position
     s.measure.enabled = true;  // not measured (no surface), and no failure either
     auto enc = encodeFile(s);
     ASSERT_TRUE(enc.isOk()) << enc.status().toString();

@@ -30,8 +30,7 @@ TEST(ErrnoStatus, FilesReportThroughIt) {
   auto missing = RandomAccessFile::open(dir.file("missing.spz"));
   ASSERT_FALSE(missing.isOk());
   EXPECT_EQ(missing.status().code(), ErrorCode::kIo);
-  EXPECT_NE(missing.status().message().find(std::strerror(ENOENT)), std::string::npos)
-      << missing.status().message();
+  EXPECT_NE(missing.status().message().find(std::strerror(ENOENT)), std::string::npos) << missing.status().message();
   auto no_dir = AtomicFile::create(dir.file("no/such/dir/a.spz"));
   ASSERT_FALSE(no_dir.isOk());
   EXPECT_EQ(no_dir.status().code(), ErrorCode::kIo);
@@ -67,11 +66,9 @@ TEST(Numbers, IntegersInRange) {
   EXPECT_EQ(*parseInteger("9223372036854775807", 0, INT64_MAX, "x"), INT64_MAX);
   EXPECT_EQ(*parseInteger("-9223372036854775808", INT64_MIN, 0, "x"), INT64_MIN);
   EXPECT_EQ(error(parseInteger("99", 8, 24, "--bits")), "--bits: must be an integer in [8, 24], got '99'");
-  EXPECT_EQ(error(parseInteger("7", 8, 24, "/codec/bits")),
-            "/codec/bits: must be an integer in [8, 24], got '7'");
+  EXPECT_EQ(error(parseInteger("7", 8, 24, "/codec/bits")), "/codec/bits: must be an integer in [8, 24], got '7'");
   std::vector<std::string> bad = {"", " 16", "16 ", "1.5", "16x", "0x10", "1_000", "--16", "+-1", "1e", "e3"};
-  bad.insert(bad.end(),
-             {".5", "5.", "1.5e0", "nan", "inf", "-1", "1e19", "1e400", "99999999999999999999999"});
+  bad.insert(bad.end(), {".5", "5.", "1.5e0", "nan", "inf", "-1", "1e19", "1e400", "99999999999999999999999"});
   bad.insert(bad.end(), {"9223372036854775808", "-9223372036854775809"});
   for (const auto& b : bad) EXPECT_NE(error(parseInteger(b, 0, INT64_MAX, "x")), "") << b;
 }
@@ -83,8 +80,7 @@ TEST(Numbers, UnsignedFullRange) {
   EXPECT_EQ(*parseUnsigned("-0", UINT64_MAX, "--seed"), 0u);
   EXPECT_EQ(error(parseUnsigned("-1", UINT64_MAX, "--seed")),
             "--seed: must be a non-negative integer below 2^64, got '-1'");
-  EXPECT_EQ(error(parseUnsigned("25", 24, "--level")),
-            "--level: must be a non-negative integer in [0, 24], got '25'");
+  EXPECT_EQ(error(parseUnsigned("25", 24, "--level")), "--level: must be a non-negative integer in [0, 24], got '25'");
   for (const char* bad : {"18446744073709551616", "2e19", "1.5", "", "abc", " -1", "1e-3"})
     EXPECT_NE(error(parseUnsigned(bad, UINT64_MAX, "x")), "") << bad;
 }
@@ -104,8 +100,7 @@ TEST(Numbers, SizesWithBinaryUnits) {
   auto size = [](const char* text) { return *parseSize(text, "--memory-budget"); };
   EXPECT_EQ(size("512"), 512ull << 20);  // no unit: MiB
   EXPECT_EQ(size("0"), 0u);
-  for (const char* k : {"64K", "64k", "64KB", "64kb", "64KiB", "64kib", "64Ki"})
-    EXPECT_EQ(size(k), 64ull << 10) << k;
+  for (const char* k : {"64K", "64k", "64KB", "64kb", "64KiB", "64kib", "64Ki"}) EXPECT_EQ(size(k), 64ull << 10) << k;
   for (const char* m : {"512M", "512m", "512MB", "512MiB"}) EXPECT_EQ(size(m), 512ull << 20) << m;
   for (const char* g : {"2G", "2g", "2GB", "2GiB"}) EXPECT_EQ(size(g), 2ull << 30) << g;
   EXPECT_EQ(size("2T"), 2ull << 40);

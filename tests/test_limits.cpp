@@ -56,8 +56,8 @@ struct Outcome {
 Outcome decodeWithCli(const std::vector<uint8_t>& container) {
   testing::TempDir dir;
   const std::string in = dir.file("crafted.spz"), peak = dir.file("peak.txt");
-  std::ofstream(in, std::ios::binary).write(reinterpret_cast<const char*>(container.data()),
-                                            static_cast<std::streamsize>(container.size()));
+  std::ofstream(in, std::ios::binary)
+      .write(reinterpret_cast<const char*>(container.data()), static_cast<std::streamsize>(container.size()));
   Outcome o;
   o.exit_code = testing::runScanpress("decode '" + in + "' '" + dir.file("out.ply") + "'", &o.output,
                                       "SCANPRESS_PEAK_RSS_FILE='" + peak + "'");

@@ -57,30 +57,14 @@ void* operator new[](size_t n) {
   if (void* p = countedAllocation(n)) return p;
   throw std::bad_alloc();
 }
-void* operator new(size_t n, const std::nothrow_t&) noexcept {
-  return countedAllocation(n);
-}
-void* operator new[](size_t n, const std::nothrow_t&) noexcept {
-  return countedAllocation(n);
-}
-void operator delete(void* p) noexcept {
-  std::free(p);
-}
-void operator delete[](void* p) noexcept {
-  std::free(p);
-}
-void operator delete(void* p, size_t) noexcept {
-  std::free(p);
-}
-void operator delete[](void* p, size_t) noexcept {
-  std::free(p);
-}
-void operator delete(void* p, const std::nothrow_t&) noexcept {
-  std::free(p);
-}
-void operator delete[](void* p, const std::nothrow_t&) noexcept {
-  std::free(p);
-}
+void* operator new(size_t n, const std::nothrow_t&) noexcept { return countedAllocation(n); }
+void* operator new[](size_t n, const std::nothrow_t&) noexcept { return countedAllocation(n); }
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, size_t) noexcept { std::free(p); }
+void operator delete[](void* p, size_t) noexcept { std::free(p); }
+void operator delete(void* p, const std::nothrow_t&) noexcept { std::free(p); }
+void operator delete[](void* p, const std::nothrow_t&) noexcept { std::free(p); }
 #endif
 
 namespace scanpress {
@@ -137,8 +121,7 @@ void runFamily(const sweep::SweepContainer& c, sweep::Family family, uint64_t se
   uint64_t stride = 1;
   if (c.progressive && !sweep::mustBeRefused(family)) {
     uint64_t count = 0;
-    sweep::forEachMutation(c.bytes, family, seed, kPayloadEdits,
-                           [&](const std::vector<uint8_t>&) { ++count; });
+    sweep::forEachMutation(c.bytes, family, seed, kPayloadEdits, [&](const std::vector<uint8_t>&) { ++count; });
     stride = (count + kProgressiveRepairedCap - 1) / kProgressiveRepairedCap;
   }
   std::unordered_map<uint64_t, Status> seen;
@@ -164,8 +147,8 @@ void runFamily(const sweep::SweepContainer& c, sweep::Family family, uint64_t se
 TEST(MalformationSweep, EveryCodecEveryFamilyFailsCleanly) {
   const auto start = std::chrono::steady_clock::now();
   const std::vector<sweep::SweepContainer> containers = sweep::sweepContainers();
-  auto* shared = static_cast<ChildCounts*>(
-      mmap(nullptr, sizeof(ChildCounts), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
+  auto* shared = static_cast<ChildCounts*>(mmap(nullptr, sizeof(ChildCounts), PROT_READ | PROT_WRITE,
+                                                MAP_SHARED | MAP_ANONYMOUS, -1, 0));
   ASSERT_NE(shared, MAP_FAILED);
   uint64_t mutations = 0, ok = 0, signals = 0, refused_accepted = 0, peak_kb = 0, largest_allocation = 0;
   uint64_t by_code[256] = {};
@@ -194,8 +177,8 @@ TEST(MalformationSweep, EveryCodecEveryFamilyFailsCleanly) {
                       << " ended the process (" << (WIFSIGNALED(status) ? "signal " : "exit ")
                       << (WIFSIGNALED(status) ? WTERMSIG(status) : WEXITSTATUS(status)) << ")";
       }
-      EXPECT_EQ(r.refused_accepted, 0u)
-          << c.name << ", " << sweep::familyName(family) << ": mutations that must be refused decoded ok";
+      EXPECT_EQ(r.refused_accepted, 0u) << c.name << ", " << sweep::familyName(family)
+                                        << ": mutations that must be refused decoded ok";
       mutations += r.mutations;
       ok += r.containers_ok;
       refused_accepted += r.refused_accepted;
@@ -218,8 +201,8 @@ TEST(MalformationSweep, EveryCodecEveryFamilyFailsCleanly) {
   munmap(shared, sizeof(ChildCounts));
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
-  std::printf("malformation sweep%s: %zu containers, %llu mutations in %.1f s, %llu signals\n",
-              kAsan ? " (ASan)" : "", containers.size(), static_cast<unsigned long long>(mutations), seconds,
+  std::printf("malformation sweep%s: %zu containers, %llu mutations in %.1f s, %llu signals\n", kAsan ? " (ASan)" : "",
+              containers.size(), static_cast<unsigned long long>(mutations), seconds,
               static_cast<unsigned long long>(signals));
   for (const auto& [name, count] : per_family)
     std::printf("  %-32s %llu\n", name.c_str(), static_cast<unsigned long long>(count));
@@ -227,8 +210,7 @@ TEST(MalformationSweep, EveryCodecEveryFamilyFailsCleanly) {
               static_cast<unsigned long long>(mutations - ok));
   for (int i = 0; i < 256; ++i)
     if (by_code[i])
-      std::printf(" %s %llu;", errorCodeName(static_cast<ErrorCode>(i)),
-                  static_cast<unsigned long long>(by_code[i]));
+      std::printf(" %s %llu;", errorCodeName(static_cast<ErrorCode>(i)), static_cast<unsigned long long>(by_code[i]));
   std::printf(
       "\ndecoder calls (tiles whole and every level): %llu (%llu ok, %llu clean errors) in %llu parsed "
       "containers; %llu tiles not decoded again (same bytes as a tile decoded before)\n",

@@ -84,8 +84,7 @@ std::vector<Case> cases() {
        ErrorCode::kMalformed},
       {"ply_header_without_end", "a.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n",
        ErrorCode::kMalformed},
-      {"ply_no_vertex_element", "a.ply", "ply\nformat ascii 1.0\nelement thing 0\nend_header\n",
-       ErrorCode::kMalformed},
+      {"ply_no_vertex_element", "a.ply", "ply\nformat ascii 1.0\nelement thing 0\nend_header\n", ErrorCode::kMalformed},
       {"ply_vertex_without_z", "a.ply",
        "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n",
        ErrorCode::kMalformed},
@@ -118,7 +117,8 @@ std::vector<Case> cases() {
        ErrorCode::kLimitExceeded},
       {"ply_huge_count_small_file", "a.ply",
        "ply\nformat binary_little_endian 1.0\nelement vertex 4000000000\nproperty float x\nproperty float y\n"
-       "property float z\nend_header\n" + binVerts(),
+       "property float z\nend_header\n" +
+           binVerts(),
        ErrorCode::kTruncated},
       {"ply_count_over_32_bits", "a.ply",
        "ply\nformat binary_little_endian 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\n"
@@ -126,7 +126,8 @@ std::vector<Case> cases() {
        ErrorCode::kLimitExceeded},
       {"ply_zst_huge_count", "a.ply.zst",
        zstdOf("ply\nformat binary_little_endian 1.0\nelement vertex 2000000000\nproperty float x\n"
-              "property float y\nproperty float z\nend_header\n" + binVerts()),
+              "property float y\nproperty float z\nend_header\n" +
+              binVerts()),
        ErrorCode::kTruncated},
       {"ply_tristrip_out_of_range", "a.ply",
        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
@@ -153,8 +154,8 @@ std::vector<Case> cases() {
       {"stl_ascii_two_vertex_facet", "a.stl",
        "solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nendloop\nendfacet\nendsolid s\n",
        ErrorCode::kMalformed},
-      {"stl_ascii_short_vertex", "a.stl",
-       "solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0\n", ErrorCode::kMalformed},
+      {"stl_ascii_short_vertex", "a.stl", "solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0\n",
+       ErrorCode::kMalformed},
       {"stl_ascii_ends_inside_solid", "a.stl",
        "solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\n",
        ErrorCode::kTruncated},

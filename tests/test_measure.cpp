@@ -241,12 +241,10 @@ TEST(Measure, DegenerateTrianglesMatchBruteForceBothWays) {
     s.samples_per_triangle = per_triangle;
     auto r = measureMeshes(sphere, lossy, s, device());
     ASSERT_TRUE(r.isOk());
-    const double density =
-        samplingDensity(s, sphere.triangles.size(), surfaceArea(sphere.positions, sphere.triangles));
+    const double density = samplingDensity(s, sphere.triangles.size(), surfaceArea(sphere.positions, sphere.triangles));
     const ErrorStats f = bruteForceStats(sphere, lossy, s, density, 0),
                      b = bruteForceStats(lossy, sphere, s, density, 1);
-    for (auto [got, ref, name] :
-         {std::tuple{r->forward, f, "forward"}, std::tuple{r->backward, b, "backward"}}) {
+    for (auto [got, ref, name] : {std::tuple{r->forward, f, "forward"}, std::tuple{r->backward, b, "backward"}}) {
       SCOPED_TRACE(std::string(name) + " at " + std::to_string(per_triangle) + " samples per triangle");
       ASSERT_TRUE(std::isfinite(got.mean) && std::isfinite(got.rms) && std::isfinite(got.max));
       EXPECT_EQ(got.samples, ref.samples);
@@ -297,8 +295,7 @@ TEST(Measure, CliOnADegenerateTarget) {
     EXPECT_EQ(text.find("nan"), std::string::npos) << text;
     const nlohmann::json j = nlohmann::json::parse(text);
     for (const char* way : {"forward", "backward"})
-      for (const char* stat : {"mean", "rms", "max"})
-        EXPECT_LT(j[way][stat].get<double>(), 1e-14) << way << stat;
+      for (const char* stat : {"mean", "rms", "max"}) EXPECT_LT(j[way][stat].get<double>(), 1e-14) << way << stat;
   }
 }
 
@@ -429,23 +426,25 @@ TEST(Render, ShadedAndErrorColoredPicturesAreDeterministic) {
   // Without a reference: grey shading only.
   auto grey = renderMesh(ico, s, device());
   ASSERT_TRUE(grey.isOk());
-  for (size_t i = 0; i < grey->image.rgb.size(); i += 3)
-    ASSERT_EQ(grey->image.rgb[i], grey->image.rgb[i + 2]);
+  for (size_t i = 0; i < grey->image.rgb.size(); i += 3) ASSERT_EQ(grey->image.rgb[i], grey->image.rgb[i + 2]);
   EXPECT_FALSE(renderMesh(Mesh(), s, device()).isOk());
 }
 
 TEST(Render, JobWritesTheErrorPicture) {
   testing::TempDir dir;
   const std::string bunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
-  testing::writeBytes(dir.file("job.json"), "{\"inputs\": [\"" + bunny + "\"], \"output\": {\"directory\": \"out\"}, "
-                                            "\"codec\": {\"bits\": 9}, \"measure\": {\"enabled\": true, \"render\": "
-                                            "true, \"render_size\": [200, 150]}}");
+  testing::writeBytes(dir.file("job.json"),
+                      "{\"inputs\": [\"" + bunny +
+                          "\"], \"output\": {\"directory\": \"out\"}, "
+                          "\"codec\": {\"bits\": 9}, \"measure\": {\"enabled\": true, \"render\": "
+                          "true, \"render_size\": [200, 150]}}");
   const std::string cmd = std::string("'") + SCANPRESS_BIN + "' run '" + dir.file("job.json") + "' --quiet";
   ASSERT_EQ(std::system(cmd.c_str()), 0);
   const Image img = decodePng(testing::readBytes(dir.file("out/bun_zipper.error.png")));
   EXPECT_EQ(img.width, 200);
   EXPECT_EQ(img.height, 150);
-  const std::string report(reinterpret_cast<const char*>(testing::readBytes(dir.file("out/bun_zipper.report.json")).data()),
+  const std::string report(reinterpret_cast<const char*>(testing::readBytes(dir.file("out/bun_zipper.report.json"))
+                                                             .data()),
                            testing::readBytes(dir.file("out/bun_zipper.report.json")).size());
   EXPECT_NE(report.find("\"max_relative\""), std::string::npos);
 }

@@ -32,9 +32,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-int run(const std::string& args, std::string* out = nullptr) {
-  return testing::runScanpress(args, out);
-}
+int run(const std::string& args, std::string* out = nullptr) { return testing::runScanpress(args, out); }
 
 const std::string kBunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
 
@@ -45,9 +43,7 @@ std::string slurp(const std::string& path) {
   return ss.str();
 }
 
-std::string quoted(const std::string& path) {
-  return "'" + path + "'";
-}
+std::string quoted(const std::string& path) { return "'" + path + "'"; }
 
 // Entries of `dir` (recursively) whose names mark a temporary: `.NAME.tmp-PID-N` or a scratch directory.
 std::vector<std::string> leftovers(const std::string& dir) {
@@ -139,13 +135,11 @@ TEST(Outputs, EncodeOrDecodeOntoTheInputIsRefused) {
   }
   EXPECT_TRUE(fs::is_symlink(dir.file("soft.ply.zst")));
   // The report must not replace the container nor the input.
-  EXPECT_EQ(run("encode " + quoted(scan) + " " + quoted(dir.file("o.spz")) + " --report " +
-                    quoted(dir.file("o.spz")),
+  EXPECT_EQ(run("encode " + quoted(scan) + " " + quoted(dir.file("o.spz")) + " --report " + quoted(dir.file("o.spz")),
                 &out),
             1)
       << out;
-  EXPECT_EQ(
-      run("encode " + quoted(scan) + " " + quoted(dir.file("o.spz")) + " --report " + quoted(scan), &out), 1)
+  EXPECT_EQ(run("encode " + quoted(scan) + " " + quoted(dir.file("o.spz")) + " --report " + quoted(scan), &out), 1)
       << out;
   EXPECT_TRUE(slurp(scan) == original) << "the input changed";
   EXPECT_FALSE(fs::exists(dir.file("o.spz")));
@@ -183,10 +177,9 @@ TEST(Outputs, JobOutputsMustNotReplaceInputsNorEachOther) {
       // The report named as the container: literally, and only once substituted.
       {"report_is_container", R"({"directory": "out", "name": "{stem}.spz", "report": "{stem}.spz"})",
        "/output/report"},
-      {"report_is_container_substituted",
-       R"({"directory": "out", "name": "{name}.x", "report": "{stem}.ply.zst.x"})", "/output/report"},
-      {"summary_is_report", R"({"directory": "out", "report": "{stem}.json", "summary": "a.json"})",
-       "/output/summary"},
+      {"report_is_container_substituted", R"({"directory": "out", "name": "{name}.x", "report": "{stem}.ply.zst.x"})",
+       "/output/report"},
+      {"summary_is_report", R"({"directory": "out", "report": "{stem}.json", "summary": "a.json"})", "/output/summary"},
   };
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
@@ -210,8 +203,7 @@ TEST(Outputs, SymlinksAreWrittenThroughAtomically) {
   fs::create_symlink("../archive/scan.spz", dir.file("links/scan.spz"));
   fs::create_symlink(dir.file("links/scan.spz"), dir.file("chain.spz"));
   std::string out;
-  ASSERT_EQ(run("encode " + quoted(kBunny) + " " + quoted(dir.file("chain.spz")) + " --quiet", &out), 0)
-      << out;
+  ASSERT_EQ(run("encode " + quoted(kBunny) + " " + quoted(dir.file("chain.spz")) + " --quiet", &out), 0) << out;
   EXPECT_TRUE(fs::is_symlink(dir.file("chain.spz")));
   EXPECT_TRUE(fs::is_symlink(dir.file("links/scan.spz")));
   EXPECT_TRUE(fs::is_regular_file(fs::symlink_status(dir.file("archive/scan.spz"))));
@@ -224,8 +216,7 @@ TEST(Outputs, SymlinksAreWrittenThroughAtomically) {
   // Decode's mesh writer goes through the same code.
   testing::writeBytes(dir.file("archive/mesh.ply"), "old");
   fs::create_symlink("archive/mesh.ply", dir.file("mesh.ply"));
-  ASSERT_EQ(
-      run("decode " + quoted(dir.file("new.spz")) + " " + quoted(dir.file("mesh.ply")) + " --quiet", &out), 0)
+  ASSERT_EQ(run("decode " + quoted(dir.file("new.spz")) + " " + quoted(dir.file("mesh.ply")) + " --quiet", &out), 0)
       << out;
   EXPECT_TRUE(fs::is_symlink(dir.file("mesh.ply")));
   EXPECT_GT(fs::file_size(dir.file("archive/mesh.ply")), 100000u);
@@ -301,8 +292,8 @@ TEST(Outputs, InterruptRemovesTemporariesAndScratch) {
   for (const auto& [sig, marker] :
        {std::pair<int, std::string>{SIGTERM, "scanpress-scratch-"}, {SIGINT, ".o.spz.tmp-"}}) {
     SCOPED_TRACE(sig);
-    const pid_t pid = spawn({"encode", scan, dir.file("work/o.spz"), "--memory-budget", "16M",
-                             "--scratch-dir", dir.file("work"), "--threads", "2"});
+    const pid_t pid = spawn({"encode", scan, dir.file("work/o.spz"), "--memory-budget", "16M", "--scratch-dir",
+                             dir.file("work"), "--threads", "2"});
     const bool underway = waitForTemporary(dir.file("work"), marker, pid, 60);
     ::kill(pid, sig);
     const int status = waitStatus(pid);

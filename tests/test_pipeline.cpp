@@ -167,7 +167,8 @@ TEST(Pipeline, SameBytesAtAnyThreadCountAndMemoryMode) {
   EXPECT_TRUE(encode("disk.spz", 2, 16u << 20));
   const auto reference = testing::readBytes(dir.file("t1.spz"));
   EXPECT_GT(reference.size(), 0u);
-  for (const char* other : {"t2.spz", "t8.spz", "disk.spz"}) EXPECT_TRUE(testing::readBytes(dir.file(other)) == reference) << other;
+  for (const char* other : {"t2.spz", "t8.spz", "disk.spz"})
+    EXPECT_TRUE(testing::readBytes(dir.file(other)) == reference) << other;
 }
 
 TEST(Pipeline, FailedTileIsReportedAndTheOthersAreKept) {
@@ -322,8 +323,8 @@ TEST(Pipeline, StageBreakingTheBorderContractIsATileError) {
     });
     return out;
   };
-  for (auto [hooks, bad_tile, what] : {std::tuple{&moves_locked, 2u, "locked vertex"},
-                                       std::tuple{&drops_border, 5u, "border edge"}}) {
+  for (auto [hooks, bad_tile, what] :
+       {std::tuple{&moves_locked, 2u, "locked vertex"}, std::tuple{&drops_border, 5u, "border edge"}}) {
     SCOPED_TRACE(what);
     auto r = encodeFile(stageSettings(input, dir.file("bad.spz"), "kdtree"), nullptr, nullptr, hooks);
     ASSERT_TRUE(r.isOk()) << r.status().toString();
@@ -399,8 +400,8 @@ TEST(Pipeline, ScanLargerThanTheBudgetStaysWithinIt) {
   // set at the spawn, which is large after the data tests when the whole binary runs in one process.
   const auto report = nlohmann::json::parse(testing::readBytes(dir.file("r.json")));
   const uint64_t peak = report.at("peak_rss").get<uint64_t>();
-  std::printf("peak RSS %.1f MiB with a %.0f MiB budget (wait4: %.1f MiB)\n", peak / 1048576.0,
-              budget / 1048576.0, rss / 1048576.0);
+  std::printf("peak RSS %.1f MiB with a %.0f MiB budget (wait4: %.1f MiB)\n", peak / 1048576.0, budget / 1048576.0,
+              rss / 1048576.0);
   EXPECT_GT(peak, 0u);
   EXPECT_LE(peak, budget + kRssMargin);
   EXPECT_TRUE(fs::is_empty(dir.file("scratch"))) << "scratch files left behind";

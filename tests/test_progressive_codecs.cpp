@@ -39,7 +39,8 @@ void expectRoundTrip(const CodecInfo& codec, const TileContext& ctx, const Quant
   auto d = codec.decode(ctx, 1, enc.payload, limitsOf(enc.decoded));
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   EXPECT_EQ(d->triangles.size(), q.triangles.size());
-  EXPECT_TRUE(testing::cornerMultiset(*d, ctx.layout.normal_bits) == testing::cornerMultiset(q, ctx.layout.normal_bits));
+  EXPECT_TRUE(testing::cornerMultiset(*d, ctx.layout.normal_bits) ==
+              testing::cornerMultiset(q, ctx.layout.normal_bits));
   // What the encoder said the decoder yields is what it yields.
   const TileSummary got = summarize(*d);
   EXPECT_EQ(got.vertices, enc.decoded.vertices);
@@ -48,12 +49,14 @@ void expectRoundTrip(const CodecInfo& codec, const TileContext& ctx, const Quant
   EXPECT_EQ(got.hi, enc.decoded.hi);
   // A limit one below either count is refused before decoding.
   if (enc.decoded.vertices > 0) {
-    EXPECT_EQ(codec.decode(ctx, 1, enc.payload, DecodeLimits{enc.decoded.vertices - 1, enc.decoded.faces})
-                  .status().code(), ErrorCode::kMalformed);
+    EXPECT_EQ(
+        codec.decode(ctx, 1, enc.payload, DecodeLimits{enc.decoded.vertices - 1, enc.decoded.faces}).status().code(),
+        ErrorCode::kMalformed);
   }
   if (enc.decoded.faces > 0) {
-    EXPECT_EQ(codec.decode(ctx, 1, enc.payload, DecodeLimits{enc.decoded.vertices, enc.decoded.faces - 1})
-                  .status().code(), ErrorCode::kMalformed);
+    EXPECT_EQ(
+        codec.decode(ctx, 1, enc.payload, DecodeLimits{enc.decoded.vertices, enc.decoded.faces - 1}).status().code(),
+        ErrorCode::kMalformed);
   }
   // Every input position comes back (isolated vertices included).
   auto positions = [](const QuantizedMesh& m) {
@@ -91,10 +94,10 @@ TEST_P(Progressive, EmptySingleAndIsolated) {
 TEST_P(Progressive, NonManifoldBoundariesAndSoups) {
   const TileContext ctx{10, {}};
   // Three triangles on one edge; a bow-tie vertex; an open strip with boundary.
-  expectRoundTrip(codec(), ctx, rawMesh({{0, 0, 0}, {10, 0, 0}, {5, 9, 0}, {5, 0, 9}, {5, 3, 3}},
-                               {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}}));
-  expectRoundTrip(codec(), ctx, rawMesh({{10, 10, 10}, {0, 0, 0}, {0, 20, 0}, {20, 0, 20}, {20, 20, 20}},
-                               {{0, 1, 2}, {0, 3, 4}}));
+  expectRoundTrip(codec(), ctx,
+                  rawMesh({{0, 0, 0}, {10, 0, 0}, {5, 9, 0}, {5, 0, 9}, {5, 3, 3}}, {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}}));
+  expectRoundTrip(codec(), ctx,
+                  rawMesh({{10, 10, 10}, {0, 0, 0}, {0, 20, 0}, {20, 0, 20}, {20, 20, 20}}, {{0, 1, 2}, {0, 3, 4}}));
   std::vector<Vec3u> strip;
   std::vector<Triangle> st;
   for (uint32_t i = 0; i < 40; ++i) strip.push_back({i * 7, (i % 2) * 11, 3 + (i * 13) % 5});
@@ -123,15 +126,16 @@ TEST_P(Progressive, NonManifoldBoundariesAndSoups) {
 TEST_P(Progressive, DuplicatesOrientationAndCoincidentVertices) {
   const TileContext ctx{10, {}};
   // The same triangle twice, and once more reversed; an inconsistently oriented neighbour.
-  expectRoundTrip(codec(), ctx, rawMesh({{0, 0, 0}, {10, 0, 0}, {0, 10, 0}, {10, 10, 0}},
-                               {{0, 1, 2}, {0, 1, 2}, {0, 2, 1}, {1, 3, 2}, {1, 2, 3}, {1, 2, 3}}));
+  expectRoundTrip(codec(), ctx,
+                  rawMesh({{0, 0, 0}, {10, 0, 0}, {0, 10, 0}, {10, 10, 0}},
+                          {{0, 1, 2}, {0, 1, 2}, {0, 2, 1}, {1, 3, 2}, {1, 2, 3}, {1, 2, 3}}));
   // Flipped halves of an icosphere.
   QuantizedMesh q = quantized(icosphere(2), 10);
   for (size_t t = 0; t < q.triangles.size(); t += 3) std::swap(q.triangles[t][1], q.triangles[t][2]);
   expectRoundTrip(codec(), ctx, q);
   // Vertices sharing a cell: without attributes they merge (same triangles over positions).
-  expectRoundTrip(codec(), ctx, rawMesh({{0, 0, 0}, {10, 0, 0}, {0, 10, 0}, {0, 0, 0}, {0, 0, 10}},
-                               {{0, 1, 2}, {3, 2, 4}}));
+  expectRoundTrip(codec(), ctx,
+                  rawMesh({{0, 0, 0}, {10, 0, 0}, {0, 10, 0}, {0, 0, 0}, {0, 0, 10}}, {{0, 1, 2}, {3, 2, 4}}));
   // With attributes they stay apart: coincident vertices with different normals and colors.
   TileContext actx{10, {8, 3}};
   QuantizedMesh a = rawMesh({{0, 0, 0}, {10, 0, 0}, {0, 10, 0}, {0, 0, 0}, {0, 0, 10}, {0, 0, 0}},
@@ -218,7 +222,8 @@ TEST_P(Progressive, EveryLevelDecodesToAValidMesh) {
       }
     }
   }
-  EXPECT_TRUE(testing::cornerMultiset(*codec().decode_level(ctx, 1, bytes, 12, lim), 12) == testing::cornerMultiset(q, 12));
+  EXPECT_TRUE(testing::cornerMultiset(*codec().decode_level(ctx, 1, bytes, 12, lim), 12) ==
+              testing::cornerMultiset(q, 12));
   // Coarse levels look like the mesh: by level 6 it has most of its sphere.
   auto l6 = codec().decode_level(ctx, 1, bytes, 6, lim);
   ASSERT_TRUE(l6.isOk());
@@ -280,8 +285,8 @@ TEST_P(Progressive, RejectsWhatItCannotCode) {
 
 INSTANTIATE_TEST_SUITE_P(Codecs, Progressive, ::testing::Values(CodecId::kKdtree, CodecId::kOctree),
                          [](const ::testing::TestParamInfo<CodecId>& info) {
-                           return std::string(findCodec(info.param)->name);
-                         });
+  return std::string(findCodec(info.param)->name);
+});
 
 }  // namespace
 }  // namespace scanpress

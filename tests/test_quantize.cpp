@@ -47,10 +47,10 @@ TEST(Grid, RejectsBadBitsAndEmptyBoxes) {
 
 TEST(Quantize, DropsDegenerateTrianglesAndUnreferencedVertices) {
   Mesh m = testing::octahedron();
-  m.positions.push_back({0.5, 0.5, 0.5});             // 6: unreferenced
-  m.positions.push_back({1.0 + 1e-9, 0, 0});          // 7: same cell as vertex 0
-  m.triangles.push_back({0, 7, 2});                   // degenerate after quantization
-  m.triangles.push_back({3, 3, 4});                   // degenerate in the input
+  m.positions.push_back({0.5, 0.5, 0.5});     // 6: unreferenced
+  m.positions.push_back({1.0 + 1e-9, 0, 0});  // 7: same cell as vertex 0
+  m.triangles.push_back({0, 7, 2});           // degenerate after quantization
+  m.triangles.push_back({3, 3, 4});           // degenerate in the input
   QuantizeStats stats;
   auto grid = makeGrid(boundingBox(m), 10);
   ASSERT_TRUE(grid.isOk());

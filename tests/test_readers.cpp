@@ -86,8 +86,9 @@ TEST(PlyReader, BinaryBothEndiansDoublePositionsFloatColors) {
 TEST(PlyReader, TristripsWithRestarts) {
   TempDir dir;
   const std::string p = dir.file("s.ply");
-  std::string s = "ply\nformat binary_little_endian 1.0\nelement vertex 6\nproperty float x\nproperty float y\n"
-                  "property float z\nelement tristrips 1\nproperty list int int vertex_indices\nend_header\n";
+  std::string s =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 6\nproperty float x\nproperty float y\n"
+      "property float z\nelement tristrips 1\nproperty list int int vertex_indices\nend_header\n";
   for (int i = 0; i < 6; ++i) s += bin<float>(i) + bin<float>(i % 2) + bin<float>(0);
   for (int v : {8, 0, 1, 2, 3, -1, 3, 4, 5}) s += bin<int32_t>(v);
   writeBytes(p, s);
@@ -165,9 +166,10 @@ TEST(OffReader, PlainAndColoredWithComments) {
 
 TEST(Readers, ZstdCompressedInputAndContentSniffing) {
   TempDir dir;
-  const std::string plain = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-                            "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
-                            "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  const std::string plain =
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+      "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
   std::string packed(ZSTD_compressBound(plain.size()), '\0');
   packed.resize(ZSTD_compress(packed.data(), packed.size(), plain.data(), plain.size(), 3));
   writeBytes(dir.file("m.ply.zst"), packed);

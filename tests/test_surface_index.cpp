@@ -48,7 +48,8 @@ Mesh randomSoup(std::mt19937& rng, int count, double size) {
   Mesh m;
   for (int t = 0; t < count; ++t) {
     const Vec3d c{u(rng) * 3, u(rng) * 3, u(rng) * 3};
-    for (int k = 0; k < 3; ++k) m.positions.push_back({c[0] + size * u(rng), c[1] + size * u(rng), c[2] + size * u(rng)});
+    for (int k = 0; k < 3; ++k)
+      m.positions.push_back({c[0] + size * u(rng), c[1] + size * u(rng), c[2] + size * u(rng)});
     m.triangles.push_back({uint32_t(3 * t), uint32_t(3 * t + 1), uint32_t(3 * t + 2)});
   }
   return m;
@@ -89,8 +90,7 @@ void expectSameAsOneByOne(const SurfaceIndex& index, const Mesh& m, std::span<co
     ASSERT_LT(many[i].triangle, m.triangles.size()) << "point " << i;
     ASSERT_NEAR(vlen(vsub(many[i].point, points[i])), many[i].distance, 1e-12 * (1 + many[i].distance));
     const auto& t = m.triangles[many[i].triangle];
-    const Vec3d q =
-        closestPointOnTriangle(points[i], m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]);
+    const Vec3d q = closestPointOnTriangle(points[i], m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]);
     ASSERT_EQ(std::sqrt(vdot(vsub(q, points[i]), vsub(q, points[i]))), many[i].distance) << "point " << i;
   }
 }
@@ -106,7 +106,8 @@ TEST(Measure, ManyQueriesMatchBruteForceOnRandomSoups) {
     for (int cl = 0; cl < 100; ++cl) {
       const Vec3d c{u(rng) * 4, u(rng) * 4, u(rng) * 4};
       const double spread = cl % 3 == 0 ? 1e-3 : cl % 3 == 1 ? 0.05 : 0.5;
-      for (int k = 0; k < 12; ++k) points.push_back({c[0] + spread * u(rng), c[1] + spread * u(rng), c[2] + spread * u(rng)});
+      for (int k = 0; k < 12; ++k)
+        points.push_back({c[0] + spread * u(rng), c[1] + spread * u(rng), c[2] + spread * u(rng)});
       points.push_back({u(rng) * 6, u(rng) * 6, u(rng) * 6});
     }
     auto index = SurfaceIndex::build(device(), m.positions, m.triangles);
@@ -161,11 +162,11 @@ TEST(Measure, ManyQueriesWithDegenerateTrianglesAndOutlyingPoints) {
   m.triangles.push_back({b, b + 1, b + 2});
   for (int k = 0; k < 30; ++k) points.push_back({0.3 + 0.01 * k, 0.3 + 0.01 * k + 1e-4, 0.1 + 1e-4});
   for (int k = 0; k < 50; ++k) points.push_back({0.6 + 1e-3 * k, 0.5, 0.21});  // above the degenerate ones
-  for (int k = 0; k < 50; ++k) points.push_back({0.3, 0.3, 0.0});             // one point, many times
-  points.push_back({1e15, -1e15, 3e14});                                      // far outside any grid
+  for (int k = 0; k < 50; ++k) points.push_back({0.3, 0.3, 0.0});              // one point, many times
+  points.push_back({1e15, -1e15, 3e14});                                       // far outside any grid
   points.push_back({1e15, -1e15, 3e14 + 1});
   points.push_back({-2e9, 0.5, 0.5});
-  for (int k = 0; k < 20; ++k) points.push_back({5.0 + 1e-4 * k, 5.0, 5.0});   // a run far from the surface
+  for (int k = 0; k < 20; ++k) points.push_back({5.0 + 1e-4 * k, 5.0, 5.0});  // a run far from the surface
   auto index = SurfaceIndex::build(device(), m.positions, m.triangles);
   ASSERT_TRUE(index.isOk());
   expectSameAsOneByOne(*index, m, points);
@@ -192,10 +193,8 @@ TEST(Measure, ManyQueriesSetNonFinitePointsApart) {
   index->closestMany(points, many);
   for (size_t i = 0; i < points.size(); ++i) {
     const auto one = index->closest(points[i]);
-    if (std::isnan(one.distance))
-      EXPECT_TRUE(std::isnan(many[i].distance)) << "point " << i;
-    else
-      EXPECT_EQ(many[i].distance, one.distance) << "point " << i;
+    if (std::isnan(one.distance)) EXPECT_TRUE(std::isnan(many[i].distance)) << "point " << i;
+    else EXPECT_EQ(many[i].distance, one.distance) << "point " << i;
   }
 }
 
@@ -275,7 +274,7 @@ Mesh gridWithDegenerateTriangles(std::mt19937& rng) {
                            : kind == 5 ? add(vadd(a, vmul(vsub(b, a), 1.6)))
                            : kind == 6 ? add(vadd(vadd(a, vmul(vsub(b, a), 0.5)), {0, 0, 1e-12}))
                                        : add(vadd(b, {1e-9, -2e-9, 1e-9}));
-    const Triangle kinds[8] = {{i, i, j}, {i, j, j}, {i, j, i}, {i, i, i},
+    const Triangle kinds[8] = {{i, i, j},     {i, j, j},     {i, j, i},     {i, i, i},
                                {i, j, third}, {i, third, j}, {i, j, third}, {i, j, third}};
     m.triangles.push_back(kinds[kind]);
   }
@@ -298,13 +297,11 @@ TEST(Measure, DegenerateTrianglesAreTheirSegmentsOrPoints) {
     const Vec3d &a = m.positions[t[0]], &b = m.positions[t[1]], &c = m.positions[t[2]];
     for (int k = 0; k < 200; ++k) {
       const double spread = k % 3 == 0 ? 1e-3 : k % 3 == 1 ? 0.05 : 0.5;
-      const Vec3d on =
-          vadd(a, vadd(vmul(vsub(b, a), 0.5 + 0.7 * u(rng)), vmul(vsub(c, a), 0.5 + 0.7 * u(rng))));
+      const Vec3d on = vadd(a, vadd(vmul(vsub(b, a), 0.5 + 0.7 * u(rng)), vmul(vsub(c, a), 0.5 + 0.7 * u(rng))));
       const Vec3d p{on[0] + spread * u(rng), on[1] + spread * u(rng), on[2] + spread * u(rng)};
       const Vec3d q = closestPointOnTriangle(p, a, b, c);
       const double ref = double(exactDistance(p, a, b, c));
-      ASSERT_NEAR(vlen(vsub(q, p)), ref, 1e-12)
-          << "triangle (" << t[0] << "," << t[1] << "," << t[2] << ") " << k;
+      ASSERT_NEAR(vlen(vsub(q, p)), ref, 1e-12) << "triangle (" << t[0] << "," << t[1] << "," << t[2] << ") " << k;
     }
   }
 }

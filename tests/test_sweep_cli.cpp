@@ -47,8 +47,8 @@ TEST(MalformationSweepCli, DecodeExitsWithZeroOrTwo) {
         const int code = testing::runScanpress("decode '" + file + "' '" + out + "' --quiet", &text);
         ++exits[code];
         ++runs;
-        EXPECT_TRUE(code == 0 || code == 2) << c.name << ", " << sweep::familyName(family) << ", mutation #"
-                                            << (i - 1) << ": exit " << code << ": " << text;
+        EXPECT_TRUE(code == 0 || code == 2) << c.name << ", " << sweep::familyName(family) << ", mutation #" << (i - 1)
+                                            << ": exit " << code << ": " << text;
         if (sweep::mustBeRefused(family)) {
           EXPECT_EQ(code, 2) << c.name << ", " << sweep::familyName(family);
         }

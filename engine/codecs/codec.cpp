@@ -19,10 +19,8 @@ constexpr PayloadFloor kHierarchyFloor{8.0 / 1024, 8.0 / (1024 * 64), 1024};
 
 constexpr std::array<CodecInfo, 3> kCodecs = {{
     {CodecId::kStore, "store", 1, kStoreFloor, &storeEncode, &storeDecode},
-    {CodecId::kKdtree, "kdtree", 1, kHierarchyFloor, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels,
-     &kdtreeDecodeLevel},
-    {CodecId::kOctree, "octree", 1, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels,
-     &octreeDecodeLevel},
+    {CodecId::kKdtree, "kdtree", 1, kHierarchyFloor, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel},
+    {CodecId::kOctree, "octree", 1, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel},
 }};
 
 }  // namespace
@@ -55,15 +53,11 @@ std::string codecName(CodecId id) {
 std::string describeLevel(const CodecLevel& l) {
   std::string s;
   switch (l.kind) {
-    case LevelKind::kCells:
-      s = "cells of 2^" + std::to_string(l.cell_bits) + " grid cells";
-      break;
+    case LevelKind::kCells: s = "cells of 2^" + std::to_string(l.cell_bits) + " grid cells"; break;
     case LevelKind::kSimplified:
       s = std::to_string(l.vertices) + " vertices within " + std::to_string(l.max_error) + " grid cells";
       break;
-    case LevelKind::kRemeshed:
-      s = "remeshed on a grid of " + std::to_string(l.spacing) + " grid cells";
-      break;
+    case LevelKind::kRemeshed: s = "remeshed on a grid of " + std::to_string(l.spacing) + " grid cells"; break;
   }
   if (l.complete) s += " (complete)";
   return s;

@@ -64,7 +64,7 @@ struct CodecLevel {
   uint32_t level = 0;
   uint64_t end_bytes = 0;
   LevelKind kind = LevelKind::kCells;
-  bool complete = false;  // the tile as encoded (lossless for the lossless codecs)
+  bool complete = false;   // the tile as encoded (lossless for the lossless codecs)
   uint32_t cell_bits = 0;  // kCells
   uint64_t vertices = 0;   // kSimplified
   double max_error = 0;    // kSimplified, in grid cells
@@ -124,8 +124,8 @@ struct CodecInfo {
                                   const DecodeLimits& limits);
   // Progressive codecs only (nullptr otherwise): the levels a payload holds, and the mesh of one level from a
   // payload that may be cut after that level's end_bytes.
-  Result<std::vector<CodecLevel>> (*levels)(const TileContext& ctx, uint16_t version,
-                                            std::span<const uint8_t> payload, const DecodeLimits& limits) = nullptr;
+  Result<std::vector<CodecLevel>> (*levels)(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                            const DecodeLimits& limits) = nullptr;
   Result<QuantizedMesh> (*decode_level)(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         uint32_t level, const DecodeLimits& limits) = nullptr;
   bool progressive() const { return levels != nullptr; }
@@ -181,9 +181,9 @@ Result<QuantizedMesh> octreeDecodeLevel(const TileContext& ctx, uint16_t version
 
 // What a progressive encoding (kdtree, octree) spent, in bits (ideal arithmetic-coding costs; the bytes add flushes and headers).
 struct CodecStats {
-  uint64_t points = 0;         // distinct coded vertices
-  uint64_t triangles = 0;      // triangles coded (with multiplicity)
-  uint64_t splits = 0;         // cell splits with both halves non-empty (vertex splits)
+  uint64_t points = 0;           // distinct coded vertices
+  uint64_t triangles = 0;        // triangles coded (with multiplicity)
+  uint64_t splits = 0;           // cell splits with both halves non-empty (vertex splits)
   uint64_t edge_expansions = 0;  // of those, coded as edge expansions
   double geometry_bits = 0;
   double connectivity_bits = 0;  // vertex splits, triangle orientation and multiplicity

@@ -301,7 +301,8 @@ std::vector<Triangle> orientedTriangles(const std::vector<TriKey>& keys) {
   std::vector<Triangle> out;
   out.reserve(keys.size());
   for (size_t t = 0; t < keys.size(); ++t)
-    out.push_back(orient[t] ? Triangle{keys[t][0], keys[t][2], keys[t][1]} : Triangle{keys[t][0], keys[t][1], keys[t][2]});
+    out.push_back(orient[t] ? Triangle{keys[t][0], keys[t][2], keys[t][1]}
+                            : Triangle{keys[t][0], keys[t][1], keys[t][2]});
   return out;
 }
 

@@ -21,7 +21,7 @@ using u8 = uint8_t;
 using u32 = uint32_t;
 using u64 = uint64_t;
 using Key = unsigned __int128;
-using Axes = std::array<int, 3>;  // the order in which a level splits the axes
+using Axes = std::array<int, 3>;    // the order in which a level splits the axes
 using TriKey = std::array<u32, 3>;  // a triangle's corners, sorted
 
 constexpr u32 kMaxPoints = 1u << 26;
@@ -152,8 +152,8 @@ Status codeFaceCopies(Io& io, std::string_view codec, SymbolModel* orient_models
 
 // Normals and colors per vertex, raw; truth (encoder) in the vertices' order.
 template <class Io>
-void codeRawAttributes(Io& io, const AttributeLayout& layout, u32 n, const Points* truth, std::vector<OctNormal>& normals,
-                       std::vector<Rgba8>& colors);
+void codeRawAttributes(Io& io, const AttributeLayout& layout, u32 n, const Points* truth,
+                       std::vector<OctNormal>& normals, std::vector<Rgba8>& colors);
 
 template <class T>
 bool eraseOne(std::vector<T>& v, T x) {
@@ -189,16 +189,15 @@ void sortAndMergeFlags(std::vector<std::pair<K, u8>>& v) {
 // How many of the Morton-ordered points [s, e) have bit `bit` of `axis` clear: the lower half of a split.
 inline u32 lowerHalf(const std::vector<Vec3u>& pos, u32 s, u32 e, int axis, int bit) {
   const auto first = pos.begin() + s;
-  return static_cast<u32>(
-      std::partition_point(first, pos.begin() + e, [&](const Vec3u& q) { return ((q[axis] >> bit) & 1) == 0; }) -
-      first);
+  return static_cast<u32>(std::partition_point(first, pos.begin() + e,
+                                               [&](const Vec3u& q) { return ((q[axis] >> bit) & 1) == 0; }) -
+                          first);
 }
 
 // Where the centroid of the neighbours `nb` (doubled centers in c2) lies relative to a split plane, in units of
 // `half` (bins 0..9; kCentroidBins - 1: no neighbours): geometry predicted from connectivity.
 constexpr int kCentroidBins = 11;
-inline int centroidBin(const std::vector<u32>& nb, const std::vector<Vec3u>& c2, int axis, double plane,
-                       double half) {
+inline int centroidBin(const std::vector<u32>& nb, const std::vector<Vec3u>& c2, int axis, double plane, double half) {
   if (nb.empty()) return kCentroidBins - 1;
   u64 sum = 0;
   for (u32 n : nb) sum += c2[n][axis];
@@ -301,8 +300,8 @@ Status codeFaceCopies(Io& io, std::string_view codec, SymbolModel* orient_models
 }
 
 template <class Io>
-void codeRawAttributes(Io& io, const AttributeLayout& layout, u32 n, const Points* truth, std::vector<OctNormal>& normals,
-                       std::vector<Rgba8>& colors) {
+void codeRawAttributes(Io& io, const AttributeLayout& layout, u32 n, const Points* truth,
+                       std::vector<OctNormal>& normals, std::vector<Rgba8>& colors) {
   if (layout.hasNormals()) {
     normals.resize(n);
     for (u32 i = 0; i < n; ++i)

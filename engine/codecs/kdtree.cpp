@@ -234,9 +234,9 @@ struct Models {
 // The link of V (the graph of its star triangles' opposite edges), when it is one cycle or one path through all
 // of V's neighbours: the only stars an edge expansion can split.
 struct Link {
-  int kind = 2;                 // 0 cycle, 1 path, 2 neither
-  std::vector<u32> order;       // neighbour indices along the link (path: from its smaller end)
-  std::vector<u32> edge_tri;    // triangle index of link edge t (order[t], order[t+1 mod k])
+  int kind = 2;               // 0 cycle, 1 path, 2 neither
+  std::vector<u32> order;     // neighbour indices along the link (path: from its smaller end)
+  std::vector<u32> edge_tri;  // triangle index of link edge t (order[t], order[t+1 mod k])
 };
 
 template <class Io>
@@ -509,7 +509,8 @@ class Engine {
 
   u32 codeRank(SymbolModel& model, u32 r, u32 count) {
     u32 s = io_.sym(model, std::min(r, kRankEscape));
-    if (s == kRankEscape) s += io_.uniform(r - std::min(r, kRankEscape), count > kRankEscape ? count - kRankEscape : 1);
+    if (s == kRankEscape)
+      s += io_.uniform(r - std::min(r, kRankEscape), count > kRankEscape ? count - kRankEscape : 1);
     return s;
   }
 
@@ -814,7 +815,8 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
       cx.nb[pairHi(e)].push_back(pairLo(e));
     }
     std::vector<std::vector<u8>> per_split(truth.splits.size());
-    for (size_t i = truth.splits.size(); i-- > 0;) mergeCells(cx, truth.splits[i][0], truth.splits[i][1], per_split[i]);
+    for (size_t i = truth.splits.size(); i-- > 0;)
+      mergeCells(cx, truth.splits[i][0], truth.splits[i][1], per_split[i]);
     truth.code_start.reserve(per_split.size() + 1);
     for (auto& c : per_split) {
       truth.code_start.push_back(u32(truth.codes.size()));

@@ -66,7 +66,7 @@ u64 coarseTriangleLimit(const DecodeLimits& limits) {
   return kCoarseTrianglesPerElement * (u64(limits.vertices) + limits.faces) + 64;
 }  // levels remaining after the step (0..10), coincident rounds (11)
 constexpr int kDegreeClasses = 3;
-constexpr int kPlaneBins = 10;     // a neighbour's offset from the split plane (9 bins), coincident splits (1)
+constexpr int kPlaneBins = 10;  // a neighbour's offset from the split plane (9 bins), coincident splits (1)
 enum : u8 { kStay = 0, kMove = 1, kDuplicate = 2, kUncoded = 3 };
 constexpr std::string_view kCodec = "octree";
 constexpr HeaderFormat kFormat{kCodec, true};
@@ -104,7 +104,7 @@ struct Models {
   std::vector<SymbolModel> next;     // [role 3][level class][degree class], symbols 0 (never), 1..3*bits+1
   std::vector<SymbolModel> cls;      // [link neighbours' classes seen][plane bin][DUPLICATEs so far, 0..2]
   BitModel connect[4];
-  BitModel face[3];                  // by faces already on the clique's first edge
+  BitModel face[3];  // by faces already on the clique's first edge
   std::vector<SymbolModel> orient;
   explicit Models(int bits) {
     for (int i = 0; i < 3 * kLevelClasses * kDegreeClasses; ++i) next.emplace_back(u32(3 * bits + 2));
@@ -198,9 +198,9 @@ class Engine {
     return m;
   }
 
-  AttributeLayout layout;  // set by the caller before run()
+  AttributeLayout layout;            // set by the caller before run()
   u64 max_cliques_ = kMaxTriangles;  // coarse levels' triangles (set by the decoder from the index)
-  bool flat_ = false;      // one model per symbol kind (measuring the contexts' gain)
+  bool flat_ = false;                // one model per symbol kind (measuring the contexts' gain)
   u64 splits_ = 0;
   std::vector<std::array<u32, 2>> range_;   // encoder: the points [s, e) of each vertex
   std::vector<std::array<u32, 2>> events_;  // planning: the splits in order
@@ -270,7 +270,9 @@ class Engine {
     }
     int ctx = 0;
     if (!flat_) {
-      const int lc = t < 0 ? 0 : t >= steps_ ? kLevelClasses - 1 : std::min(bits_ - 1 - (k0_ + t / 3), kLevelClasses - 2);
+      const int lc = t < 0         ? 0
+                     : t >= steps_ ? kLevelClasses - 1
+                                   : std::min(bits_ - 1 - (k0_ + t / 3), kLevelClasses - 2);
       const size_t deg = nb_[v].size();
       const int dc = deg == 0 ? 0 : deg <= 5 ? 1 : 2;
       ctx = (role * kLevelClasses + lc) * kDegreeClasses + dc;
@@ -290,8 +292,8 @@ class Engine {
   // VS at step t along `axis` (axis < 0: a coincident split, no geometry).
   Status splitVertex(u32 v, int t, int axis, int bit) {
     if (lo_.size() >= n_)
-      return makeError(ErrorCode::kMalformed, "octree payload: more vertex splits than the header's " +
-                                                  std::to_string(n_) + " vertices");
+      return makeError(ErrorCode::kMalformed,
+                       "octree payload: more vertex splits than the header's " + std::to_string(n_) + " vertices");
     ++splits_;
     const u32 w = u32(lo_.size());
     addVertex(lo_[v], c2_[v]);
@@ -346,9 +348,7 @@ class Engine {
       const u8 c = u8(io_.sym(models_.cls[ctx], codes ? codes[i].second : 0));
       cls_[i] = c;
       switch (c) {
-        case kStay:
-          nb_[v].push_back(x);
-          break;
+        case kStay: nb_[v].push_back(x); break;
         case kMove:
           replaceOne(nb_[x], v, w);
           nb_[w].push_back(x);
@@ -459,8 +459,8 @@ class Engine {
       return 1;
     });
     SP_RETURN_IF_ERROR(status);
-    return codeFaceCopies(io_, kCodec, models_.orient.data(), faces, truth_ ? &truth_->by_id : nullptr,
-                          max_triangles_, triangles_);
+    return codeFaceCopies(io_, kCodec, models_.orient.data(), faces, truth_ ? &truth_->by_id : nullptr, max_triangles_,
+                          triangles_);
   }
 
   Io& io_;
@@ -529,7 +529,8 @@ Plan planCodes(const Points& by_id, const std::vector<std::array<u32, 2>>& event
   const size_t n = by_id.pos.size();
   std::vector<std::vector<u32>> nb(n);
   std::vector<std::array<u32, 2>> edges;
-  for (const auto& q : by_id.tri_keys) edges.push_back({q[0], q[1]}), edges.push_back({q[1], q[2]}), edges.push_back({q[0], q[2]});
+  for (const auto& q : by_id.tri_keys)
+    edges.push_back({q[0], q[1]}), edges.push_back({q[1], q[2]}), edges.push_back({q[0], q[2]});
   std::sort(edges.begin(), edges.end());
   edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
   for (const auto& [a, b] : edges) nb[a].push_back(b), nb[b].push_back(a);

@@ -56,8 +56,8 @@ Result<EncodedTile> storeEncode(const TileContext& ctx, const TileView& tile, co
 Result<QuantizedMesh> storeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                   const DecodeLimits& limits) {
   if (version != 1)
-    return makeError(ErrorCode::kUnknownVersion, "store codec version " + std::to_string(version) +
-                                                     " is not known to this build (knows 1)");
+    return makeError(ErrorCode::kUnknownVersion,
+                     "store codec version " + std::to_string(version) + " is not known to this build (knows 1)");
   ByteReader r(payload, "store payload");
   uint32_t n = 0, t = 0;
   SP_RETURN_IF_ERROR(r.u32(n));

@@ -26,8 +26,8 @@ std::string hex32(uint32_t v) {
 Status checkCrc(uint32_t stored, std::span<const uint8_t> covered, const std::string& what_part) {
   const uint32_t actual = crc32c(covered);
   if (stored != actual)
-    return makeError(ErrorCode::kChecksum, what_part + ": checksum mismatch (stored " + hex32(stored) +
-                                               ", computed " + hex32(actual) + ")");
+    return makeError(ErrorCode::kChecksum,
+                     what_part + ": checksum mismatch (stored " + hex32(stored) + ", computed " + hex32(actual) + ")");
   return Status::ok();
 }
 
@@ -172,9 +172,9 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
   uint32_t header_size = 0;
   SP_RETURN_IF_ERROR(r.u32(h.version));
   if (h.version != kContainerVersion)
-    return makeError(ErrorCode::kUnknownVersion, where + " at byte 8: container format version " +
-                                                     std::to_string(h.version) + " is not known to this build (knows " +
-                                                     std::to_string(kContainerVersion) + ")");
+    return makeError(ErrorCode::kUnknownVersion,
+                     where + " at byte 8: container format version " + std::to_string(h.version) +
+                         " is not known to this build (knows " + std::to_string(kContainerVersion) + ")");
   SP_RETURN_IF_ERROR(r.u32(header_size));
   uint32_t stored_crc = 0;
   std::memcpy(&stored_crc, bytes.data() + kHeaderSize - 4, 4);
@@ -200,11 +200,10 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
       !std::isfinite(h.grid.origin[1]) || !std::isfinite(h.grid.origin[2]))
     return makeError(ErrorCode::kMalformed, where + " at byte 16: grid origin or cell not finite and positive");
   if (h.layout.normal_bits != 0 && (h.layout.normal_bits < 4 || h.layout.normal_bits > 16))
-    return makeError(ErrorCode::kMalformed, where + " at byte 49: normal bits " +
-                                                std::to_string(h.layout.normal_bits));
+    return makeError(ErrorCode::kMalformed, where + " at byte 49: normal bits " + std::to_string(h.layout.normal_bits));
   if (h.layout.color_channels != 0 && h.layout.color_channels != 3 && h.layout.color_channels != 4)
-    return makeError(ErrorCode::kMalformed, where + " at byte 50: color channels " +
-                                                std::to_string(h.layout.color_channels));
+    return makeError(ErrorCode::kMalformed,
+                     where + " at byte 50: color channels " + std::to_string(h.layout.color_channels));
   if (reserved != 0 || reserved32 != 0) return makeError(ErrorCode::kMalformed, where + ": reserved bytes not 0");
   if (h.tile_count > kMaxTiles)
     return makeError(ErrorCode::kLimitExceeded, where + " at byte 52: " + std::to_string(h.tile_count) + " tiles");
@@ -232,8 +231,8 @@ Result<Footer> parseFooter(std::span<const uint8_t> last, uint64_t file_size, co
     return makeError(ErrorCode::kUnknownVersion, where + ": container format version " + std::to_string(version));
   if (f.index_offset < kHeaderSize || f.index_bytes < 12 || f.index_offset > base ||
       f.index_bytes != base - f.index_offset)
-    return makeError(ErrorCode::kMalformed, where + " at byte " + std::to_string(base) +
-                                                ": index location does not match the file size");
+    return makeError(ErrorCode::kMalformed,
+                     where + " at byte " + std::to_string(base) + ": index location does not match the file size");
   return f;
 }
 
@@ -271,19 +270,16 @@ Result<std::vector<TileEntry>> parseIndex(std::span<const uint8_t> bytes, const 
     for (uint32_t& c : e.lo) SP_RETURN_IF_ERROR(r.u32(c));
     for (uint32_t& c : e.hi) SP_RETURN_IF_ERROR(r.u32(c));
     // Chunks are contiguous, in index order, between the header and the index.
-    if (e.offset != next_offset || e.chunk_bytes < kChunkHeaderSize ||
-        e.chunk_bytes > footer.index_offset - e.offset)
+    if (e.offset != next_offset || e.chunk_bytes < kChunkHeaderSize || e.chunk_bytes > footer.index_offset - e.offset)
       return r.error(ErrorCode::kMalformed, "tile " + std::to_string(e.tile_id) + " has an invalid location");
     next_offset = e.offset + e.chunk_bytes;
     // The counts bound the decoder, so they must be what the payload's size can hold (unknown codecs fail later).
     if (const CodecInfo* codec = findCodec(e.codec);
         codec && !codec->floor.admits(e.vertices, e.faces, e.chunk_bytes - kChunkHeaderSize))
-      return r.error(ErrorCode::kMalformed, "tile " + std::to_string(e.tile_id) + " claims " +
-                                                std::to_string(e.vertices) + " vertices and " +
-                                                std::to_string(e.faces) + " faces in " +
-                                                std::to_string(e.chunk_bytes - kChunkHeaderSize) +
-                                                " payload bytes, more than codec " + std::string(codec->name) +
-                                                " can code in them");
+      return r.error(ErrorCode::kMalformed,
+                     "tile " + std::to_string(e.tile_id) + " claims " + std::to_string(e.vertices) + " vertices and " +
+                         std::to_string(e.faces) + " faces in " + std::to_string(e.chunk_bytes - kChunkHeaderSize) +
+                         " payload bytes, more than codec " + std::string(codec->name) + " can code in them");
     vertices += e.vertices;
     faces += e.faces;
     for (uint32_t j = 0; j < i; ++j)
@@ -315,8 +311,8 @@ Result<std::span<const uint8_t>> parseTileChunk(std::span<const uint8_t> chunk, 
   SP_RETURN_IF_ERROR(r.u64(payload_bytes));
   SP_RETURN_IF_ERROR(r.u32(payload_crc));
   SP_RETURN_IF_ERROR(r.u32(head_crc));
-  if (magic != kChunkMagic) return makeError(ErrorCode::kMalformed, where + ": bad chunk magic at byte " +
-                                                                         std::to_string(e.offset));
+  if (magic != kChunkMagic)
+    return makeError(ErrorCode::kMalformed, where + ": bad chunk magic at byte " + std::to_string(e.offset));
   SP_RETURN_IF_ERROR(checkCrc(head_crc, chunk.first(kChunkHeaderSize - 4), where + " chunk header"));
   if (tile_id != e.tile_id || codec != static_cast<uint16_t>(e.codec) || version != e.codec_version ||
       vertices != e.vertices || faces != e.faces || payload_bytes != e.chunk_bytes - kChunkHeaderSize)
@@ -378,13 +374,13 @@ Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const Til
                                                   std::to_string(e.faces));
     return mesh;
   } catch (const std::bad_alloc&) {
-    return makeError(ErrorCode::kMalformed, where + ": out of memory while decoding (" +
-                                                std::to_string(payload.size()) + " payload bytes)");
+    return makeError(ErrorCode::kMalformed,
+                     where + ": out of memory while decoding (" + std::to_string(payload.size()) + " payload bytes)");
   }
 }
 
-Result<std::vector<uint8_t>> encodeContainer(const Grid& grid, const AttributeLayout& layout,
-                                             const CodecInfo& codec, std::span<const QuantizedMesh> tiles) {
+Result<std::vector<uint8_t>> encodeContainer(const Grid& grid, const AttributeLayout& layout, const CodecInfo& codec,
+                                             std::span<const QuantizedMesh> tiles) {
   std::vector<uint8_t> out;
   VectorSink sink(out);
   ContainerWriter writer(sink, grid, layout);
@@ -403,8 +399,8 @@ Result<ParsedContainer> parseContainer(std::span<const uint8_t> file, const std:
   SP_ASSIGN_OR_RETURN(pc.header, parseHeader(file, what));
   Footer footer;
   SP_ASSIGN_OR_RETURN(footer, parseFooter(file, file.size(), what));
-  SP_ASSIGN_OR_RETURN(pc.tiles, parseIndex(file.subspan(footer.index_offset, footer.index_bytes), pc.header,
-                                           footer, what));
+  SP_ASSIGN_OR_RETURN(pc.tiles,
+                      parseIndex(file.subspan(footer.index_offset, footer.index_bytes), pc.header, footer, what));
   return pc;
 }
 

@@ -110,8 +110,8 @@ Result<std::vector<CodecLevel>> tilePayloadLevels(const ContainerHeader& header,
                                                   std::span<const uint8_t> payload, const std::string& what);
 
 // Whole-container helpers for in-memory buffers (tests, and small files).
-Result<std::vector<uint8_t>> encodeContainer(const Grid& grid, const AttributeLayout& layout,
-                                             const CodecInfo& codec, std::span<const QuantizedMesh> tiles);
+Result<std::vector<uint8_t>> encodeContainer(const Grid& grid, const AttributeLayout& layout, const CodecInfo& codec,
+                                             std::span<const QuantizedMesh> tiles);
 struct ParsedContainer {
   ContainerHeader header;
   std::vector<TileEntry> tiles;

@@ -44,7 +44,8 @@ class BitReader {
     if (bits == 0) return 0;
     while (fill_ < bits) {
       uint64_t byte = 0;
-      if (pos_ < data_.size()) byte = data_[pos_++]; else overrun_ = true;
+      if (pos_ < data_.size()) byte = data_[pos_++];
+      else overrun_ = true;
       acc_ |= byte << fill_;
       fill_ += 8;
     }

@@ -64,7 +64,8 @@ uint32_t SymbolModel::findSymbol(uint32_t value) const {
   hi = std::min(hi, n_);
   while (hi - lo > 8) {  // binary search among the few candidates of this lookup bucket
     const uint32_t mid = (lo + hi) / 2;
-    if (cum_[mid] <= value) lo = mid; else hi = mid;
+    if (cum_[mid] <= value) lo = mid;
+    else hi = mid;
   }
   while (cum_[lo + 1] <= value) ++lo;
   return lo;
@@ -77,7 +78,8 @@ void RangeEncoder::shiftLow() {
     const uint8_t carry = static_cast<uint8_t>(low_ >> 32);
     uint8_t byte = cache_;
     do {
-      if (first_) first_ = false; else out_.push_back(static_cast<uint8_t>(byte + carry));
+      if (first_) first_ = false;
+      else out_.push_back(static_cast<uint8_t>(byte + carry));
       byte = 0xFF;
     } while (--pending_ != 0);
     cache_ = static_cast<uint8_t>(low_ >> 24);

@@ -70,8 +70,8 @@ class SymbolModel {
   uint32_t update_cycle_;
   uint32_t until_update_;
   std::vector<uint32_t> counts_;
-  std::vector<uint32_t> cum_;      // n+1 entries, cum_[n] == 1 << kTotalBits
-  std::vector<uint16_t> lookup_;   // first symbol whose interval may contain value >> (kTotalBits - kLookupBits)
+  std::vector<uint32_t> cum_;     // n+1 entries, cum_[n] == 1 << kTotalBits
+  std::vector<uint16_t> lookup_;  // first symbol whose interval may contain value >> (kTotalBits - kLookupBits)
 };
 
 class RangeEncoder {

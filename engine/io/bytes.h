@@ -88,8 +88,8 @@ class ByteReader {
  private:
   Status need(size_t n) const {
     if (n > remaining())
-      return error(ErrorCode::kTruncated, "needs " + std::to_string(n) + " more bytes, " +
-                                              std::to_string(remaining()) + " left");
+      return error(ErrorCode::kTruncated,
+                   "needs " + std::to_string(n) + " more bytes, " + std::to_string(remaining()) + " left");
     return Status::ok();
   }
   template <typename T>

@@ -104,8 +104,8 @@ Status checkBorderContract(const TileContext& ctx, const TileView& before, const
   const std::vector<Vec3u> kept = lockedPositions(after);
   for (const Vec3u& p : lockedPositions(before))
     if (!std::binary_search(kept.begin(), kept.end(), p))
-      return makeError(ErrorCode::kInternal, "border contract: locked vertex at " + str(p) +
-                                                 " was moved, removed or unlocked");
+      return makeError(ErrorCode::kInternal,
+                       "border contract: locked vertex at " + str(p) + " was moved, removed or unlocked");
   const std::vector<PositionEdge> now = lockedEdges(after);
   for (const PositionEdge& e : lockedEdges(before)) {
     if (e.uses == 2) continue;  // interior to the tile
@@ -113,8 +113,8 @@ Status checkBorderContract(const TileContext& ctx, const TileView& before, const
       return std::pair(x.a, x.b) < std::pair(y.a, y.b);
     });
     if (it == now.end() || it->a != e.a || it->b != e.b)
-      return makeError(ErrorCode::kInternal, "border contract: border edge " + str(e.a) + " - " + str(e.b) +
-                                                 " was removed");
+      return makeError(ErrorCode::kInternal,
+                       "border contract: border edge " + str(e.a) + " - " + str(e.b) + " was removed");
   }
   return Status::ok();
 }

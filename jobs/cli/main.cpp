@@ -281,15 +281,13 @@ int runEncode(int argc, char** argv) {
   s.keep_colors = !args.has("--no-colors");
   s.allow_degenerate = args.has("--allow-degenerate");
   s.strict = args.has("--strict");
-  if (!integerOption(args, "--tile-triangles", kMinTileTriangles, kMaxTileTriangles, s.tile_triangles,
-                     error) ||
+  if (!integerOption(args, "--tile-triangles", kMinTileTriangles, kMaxTileTriangles, s.tile_triangles, error) ||
       !integerOption(args, "--threads", 0, 4096, s.threads, error) ||
       !option(args, "--memory-budget", s.memory_budget, error,
               [](const std::string& v) { return parseSize(v, "--memory-budget"); }))
     return usage(error, "encode");
   if (s.memory_budget != 0 && s.memory_budget < (16u << 20))
-    return usage("--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'",
-                 "encode");
+    return usage("--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'", "encode");
   if (const auto* d = args.get("--scratch-dir")) s.scratch_dir = *d;
   s.measure.enabled = args.has("--measure");
   if (!numberOption(args, "--samples-per-triangle", 1e-6, 1e6, s.measure.samples_per_triangle, error))
@@ -400,8 +398,8 @@ int runJobCommand(int argc, char** argv) {
 int runMeasure(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {"--samples", "--samples-per-triangle", "--seed"}, {"--json", "--monte-carlo", "--help"},
-                 args, error))
+  if (!parseArgs(argc, argv, 2, {"--samples", "--samples-per-triangle", "--seed"},
+                 {"--json", "--monte-carlo", "--help"}, args, error))
     return usage(error, "measure");
   if (args.has("--help")) return std::fputs(kMeasureHelp, stdout), 0;
   if (args.positional.size() != 2) return usage("measure needs two meshes A and B", "measure");
@@ -425,7 +423,8 @@ int runMeasure(int argc, char** argv) {
     const double d = r->diagonal > 0 ? r->diagonal : 1;
     std::printf("bounding-box diagonal of A: %.9g\n", r->diagonal);
     for (auto [name, e] : {std::pair<const char*, ErrorStats>{"forward (A->B)", r->forward},
-                           {"backward (B->A)", r->backward}, {"symmetric", r->symmetric}})
+                           {"backward (B->A)", r->backward},
+                           {"symmetric", r->symmetric}})
       std::printf("%-16s mean %.6g (%.3e d)  rms %.6g (%.3e d)  max %.6g (%.3e d)  [%llu samples]\n", name, e.mean,
                   e.mean / d, e.rms, e.rms / d, e.max, e.max / d, static_cast<unsigned long long>(e.samples));
   }
@@ -435,7 +434,8 @@ int runMeasure(int argc, char** argv) {
 int runRender(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {"--against", "--view", "--size"}, {"--help"}, args, error)) return usage(error, "render");
+  if (!parseArgs(argc, argv, 2, {"--against", "--view", "--size"}, {"--help"}, args, error))
+    return usage(error, "render");
   if (args.has("--help")) return std::fputs(kRenderHelp, stdout), 0;
   if (args.positional.size() != 2) return usage("render needs MESH and OUT.png", "render");
   RenderSettings s;
@@ -477,7 +477,8 @@ int runSynth(int argc, char** argv) {
   if (!parseArgs(argc, argv, 2, {"--triangles", "--seed", "--from"}, {"--quiet", "--help"}, args, error))
     return usage(error, "synth");
   if (args.has("--help")) return std::fputs(kSynthHelp, stdout), 0;
-  if (args.positional.size() != 1 || !args.has("--triangles")) return usage("synth needs OUT.ply and --triangles N", "synth");
+  if (args.positional.size() != 1 || !args.has("--triangles"))
+    return usage("synth needs OUT.ply and --triangles N", "synth");
   SynthSettings s;
   s.output = args.positional[0];
   if (!unsignedOption(args, "--triangles", UINT64_MAX, s.triangles, error) ||

@@ -124,8 +124,7 @@ Status Scanner::errorAtLine(ErrorCode code, const std::string& message) const {
 // terminator) included, whatever the buffer happened to hold.
 Status Scanner::lineTooLong() const {
   return makeError(ErrorCode::kLimitExceeded, name_ + ":" + std::to_string(line_ + 1) + ": line longer than " +
-                                                  std::to_string(kMaxLine >> 20) +
-                                                  " MiB (the limit for text formats)");
+                                                  std::to_string(kMaxLine >> 20) + " MiB (the limit for text formats)");
 }
 
 Result<bool> Scanner::fill() {

@@ -44,11 +44,11 @@ std::string describeDropped(std::span<const DroppedProperty> dropped);
 
 struct ReadStats {
   MeshFormat format = MeshFormat::kUnknown;
-  std::string format_detail;  // e.g. "PLY binary_big_endian", "STL ascii"
-  uint64_t vertices = 0;      // vertices delivered (after STL welding)
-  uint64_t triangles = 0;     // triangles delivered (after triangulation)
-  uint64_t polygons = 0;      // faces with more than 3 corners that were triangulated
-  uint64_t source_vertices = 0;  // vertex records in the file (STL: 3 per facet)
+  std::string format_detail;             // e.g. "PLY binary_big_endian", "STL ascii"
+  uint64_t vertices = 0;                 // vertices delivered (after STL welding)
+  uint64_t triangles = 0;                // triangles delivered (after triangulation)
+  uint64_t polygons = 0;                 // faces with more than 3 corners that were triangulated
+  uint64_t source_vertices = 0;          // vertex records in the file (STL: 3 per facet)
   std::vector<DroppedProperty> dropped;  // what the reader read past, in file order (empty: nothing)
 };
 

@@ -78,7 +78,8 @@ Status writeObj(const std::string& path, const Mesh& mesh, const WriteOptions& o
   buf.reserve(1u << 20);
   char num[64];
   auto put = [&](double v, bool dbl) {
-    auto r = dbl ? std::to_chars(num, num + sizeof num, v) : std::to_chars(num, num + sizeof num, static_cast<float>(v));
+    auto r = dbl ? std::to_chars(num, num + sizeof num, v)
+                 : std::to_chars(num, num + sizeof num, static_cast<float>(v));
     buf.append(num, r.ptr);
   };
   auto drain = [&]() -> Status {

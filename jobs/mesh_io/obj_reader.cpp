@@ -67,8 +67,8 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
   // Colors are known only when the first `v` line is seen; the buffer is created then.
   std::optional<ChunkBuffer> out;
   uint8_t channels = 0;
-  std::vector<Vec3f> vn;                 // all `vn` records (needed until the end: faces may reference any)
-  std::vector<uint32_t> vertex_normal;   // per vertex: index into vn, or UINT32_MAX
+  std::vector<Vec3f> vn;                // all `vn` records (needed until the end: faces may reference any)
+  std::vector<uint32_t> vertex_normal;  // per vertex: index into vn, or UINT32_MAX
   std::vector<uint32_t> poly;
   std::vector<uint32_t> poly_normals;
   std::string_view line;
@@ -108,8 +108,7 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
           const double v = std::round(c[3 + k] * 255.0);
           col[k] = static_cast<uint8_t>(v < 0 || !(v == v) ? 0 : (v > 255 ? 255 : v));
         }
-      if (vertex_count >= kMaxVertices)
-        return in.errorAtLine(ErrorCode::kLimitExceeded, "more than 2^32-2 vertices");
+      if (vertex_count >= kMaxVertices) return in.errorAtLine(ErrorCode::kLimitExceeded, "more than 2^32-2 vertices");
       SP_RETURN_IF_ERROR(out->addVertex({c[0], c[1], c[2]}, {0, 0, 0}, col));
       ++vertex_count;
     } else if (word == "vn") {
@@ -134,7 +133,8 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
           return in.errorAtLine(ErrorCode::kMalformed, "bad face corner '" + std::string(t) + "'");
         uint32_t v = 0;
         if (!resolveIndex(raw, vertex_count, v))
-          return in.errorAtLine(ErrorCode::kMalformed, "face index " + std::to_string(raw) + " does not name one of the " +
+          return in.errorAtLine(ErrorCode::kMalformed, "face index " + std::to_string(raw) +
+                                                           " does not name one of the " +
                                                            std::to_string(vertex_count) + " vertices so far");
         uint32_t n = UINT32_MAX;
         if (s1 != std::string_view::npos) {
@@ -155,7 +155,8 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
                               "face with " + std::to_string(poly.size()) + " corners (at least 3 needed)");
       if (!out) out.emplace(sink, options.chunk, 0, false);
       if (poly.size() > 3) ++stats.polygons;
-      for (size_t i = 1; i + 1 < poly.size(); ++i) SP_RETURN_IF_ERROR(out->addTriangle({poly[0], poly[i], poly[i + 1]}));
+      for (size_t i = 1; i + 1 < poly.size(); ++i)
+        SP_RETURN_IF_ERROR(out->addTriangle({poly[0], poly[i], poly[i + 1]}));
       for (size_t i = 0; i < poly.size(); ++i) {
         if (poly_normals[i] == UINT32_MAX) continue;
         vn_used[poly_normals[i]] = true;
@@ -178,7 +179,7 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
       chunk.clear();
       for (uint64_t v = first; v < std::min<uint64_t>(vertex_count, first + options.chunk); ++v)
         chunk.push_back(v < vertex_normal.size() && vertex_normal[v] != UINT32_MAX ? vn[vertex_normal[v]]
-                                                                                 : Vec3f{nan, nan, nan});
+                                                                                   : Vec3f{nan, nan, nan});
       SP_RETURN_IF_ERROR(sink.vertexNormals(first, chunk));
     }
   }

@@ -60,8 +60,8 @@ Result<ReadStats> readOff(Scanner& in, MeshSink& sink, const ReadOptions& option
   if (nv > kMaxVertices) return in.errorAtLine(ErrorCode::kLimitExceeded, "more than 2^32-2 vertices");
   if (auto left = in.remaining(); left && (nv + nf) > *left / 2 + 1)
     return in.errorAtLine(ErrorCode::kTruncated, "OFF declares " + std::to_string(nv) + " vertices and " +
-                                                     std::to_string(nf) + " faces, but only " +
-                                                     std::to_string(*left) + " bytes remain");
+                                                     std::to_string(nf) + " faces, but only " + std::to_string(*left) +
+                                                     " bytes remain");
   ChunkBuffer out(sink, options.chunk, colors ? 4 : 0, normals);
   uint64_t vertex_extra = 0, face_extra = 0;  // lines with values past what is kept (ReadStats::dropped)
   for (uint64_t v = 0; v < nv; ++v) {

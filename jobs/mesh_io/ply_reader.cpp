@@ -29,11 +29,11 @@ bool parseType(std::string_view s, PlyType& t) {
     PlyType type;
   };
   static constexpr Name kNames[] = {
-      {"char", PlyType::kInt8},     {"int8", PlyType::kInt8},       {"uchar", PlyType::kUint8},
-      {"uint8", PlyType::kUint8},   {"short", PlyType::kInt16},     {"int16", PlyType::kInt16},
-      {"ushort", PlyType::kUint16}, {"uint16", PlyType::kUint16},   {"int", PlyType::kInt32},
-      {"int32", PlyType::kInt32},   {"uint", PlyType::kUint32},     {"uint32", PlyType::kUint32},
-      {"float", PlyType::kFloat32}, {"float32", PlyType::kFloat32}, {"double", PlyType::kFloat64},
+      {"char", PlyType::kInt8},      {"int8", PlyType::kInt8},       {"uchar", PlyType::kUint8},
+      {"uint8", PlyType::kUint8},    {"short", PlyType::kInt16},     {"int16", PlyType::kInt16},
+      {"ushort", PlyType::kUint16},  {"uint16", PlyType::kUint16},   {"int", PlyType::kInt32},
+      {"int32", PlyType::kInt32},    {"uint", PlyType::kUint32},     {"uint32", PlyType::kUint32},
+      {"float", PlyType::kFloat32},  {"float32", PlyType::kFloat32}, {"double", PlyType::kFloat64},
       {"float64", PlyType::kFloat64}};
   for (const auto& n : kNames)
     if (n.name == s) return t = n.type, true;
@@ -104,8 +104,7 @@ uint8_t colorByte(double v, PlyType t) {
 
 class PlyParser {
  public:
-  PlyParser(Scanner& in, MeshSink& sink, const ReadOptions& options)
-      : in_(in), sink_(sink), options_(options) {}
+  PlyParser(Scanner& in, MeshSink& sink, const ReadOptions& options) : in_(in), sink_(sink), options_(options) {}
 
   Result<ReadStats> run() {
     SP_RETURN_IF_ERROR(parseHeader());
@@ -262,9 +261,9 @@ class PlyParser {
     const auto left = in_.remaining();
     if (!left || e.count == 0 || e.min_record_bytes == 0) return Status::ok();
     if (e.count > *left / e.min_record_bytes + 1)
-      return in_.errorAtOffset(ErrorCode::kTruncated,
-                               "PLY element '" + e.name + "' declares " + std::to_string(e.count) +
-                                   " records, but only " + std::to_string(*left) + " bytes remain");
+      return in_.errorAtOffset(ErrorCode::kTruncated, "PLY element '" + e.name + "' declares " +
+                                                          std::to_string(e.count) + " records, but only " +
+                                                          std::to_string(*left) + " bytes remain");
     return Status::ok();
   }
 
@@ -279,12 +278,36 @@ class PlyParser {
     switch (t) {
       case PlyType::kInt8: return static_cast<int8_t>(b[0]);
       case PlyType::kUint8: return b[0];
-      case PlyType::kInt16: { int16_t v; std::memcpy(&v, b, 2); return v; }
-      case PlyType::kUint16: { uint16_t v; std::memcpy(&v, b, 2); return v; }
-      case PlyType::kInt32: { int32_t v; std::memcpy(&v, b, 4); return v; }
-      case PlyType::kUint32: { uint32_t v; std::memcpy(&v, b, 4); return v; }
-      case PlyType::kFloat32: { float v; std::memcpy(&v, b, 4); return v; }
-      case PlyType::kFloat64: { double v; std::memcpy(&v, b, 8); return v; }
+      case PlyType::kInt16: {
+        int16_t v;
+        std::memcpy(&v, b, 2);
+        return v;
+      }
+      case PlyType::kUint16: {
+        uint16_t v;
+        std::memcpy(&v, b, 2);
+        return v;
+      }
+      case PlyType::kInt32: {
+        int32_t v;
+        std::memcpy(&v, b, 4);
+        return v;
+      }
+      case PlyType::kUint32: {
+        uint32_t v;
+        std::memcpy(&v, b, 4);
+        return v;
+      }
+      case PlyType::kFloat32: {
+        float v;
+        std::memcpy(&v, b, 4);
+        return v;
+      }
+      case PlyType::kFloat64: {
+        double v;
+        std::memcpy(&v, b, 8);
+        return v;
+      }
     }
     return 0;
   }
@@ -438,11 +461,12 @@ class PlyParser {
                                                        " vertices (at least 3 needed)");
         if (n > kMaxPolygonCorners)
           return placeError(ErrorCode::kLimitExceeded, "face " + std::to_string(r) + " has " + std::to_string(n) +
-                                                           " vertices (limit " +
-                                                           std::to_string(kMaxPolygonCorners) + ")");
+                                                           " vertices (limit " + std::to_string(kMaxPolygonCorners) +
+                                                           ")");
         SP_RETURN_IF_ERROR(readIndexList(p.type, n, r, poly));
         if (n > 3) ++stats_.polygons;
-        for (size_t i = 1; i + 1 < poly.size(); ++i) SP_RETURN_IF_ERROR(out_->addTriangle({poly[0], poly[i], poly[i + 1]}));
+        for (size_t i = 1; i + 1 < poly.size(); ++i)
+          SP_RETURN_IF_ERROR(out_->addTriangle({poly[0], poly[i], poly[i + 1]}));
       }
     }
     return out_->flushTriangles();

@@ -58,9 +58,9 @@ Status readBinary(Scanner& in, ChunkBuffer& out, ReadStats& stats) {
   uint32_t count = 0;
   SP_RETURN_IF_ERROR(in.read(&count, 4));
   if (auto left = in.remaining(); left && uint64_t(count) * 50 > *left)
-    return in.errorAtOffset(ErrorCode::kTruncated, "binary STL declares " + std::to_string(count) +
-                                                       " triangles (" + std::to_string(uint64_t(count) * 50) +
-                                                       " bytes) but " + std::to_string(*left) + " bytes remain");
+    return in.errorAtOffset(ErrorCode::kTruncated, "binary STL declares " + std::to_string(count) + " triangles (" +
+                                                       std::to_string(uint64_t(count) * 50) + " bytes) but " +
+                                                       std::to_string(*left) + " bytes remain");
   Welder welder(out);
   uint8_t rec[50];
   uint64_t attributes = 0;  // facets with a non-zero attribute word
@@ -71,9 +71,9 @@ Status readBinary(Scanner& in, ChunkBuffer& out, ReadStats& stats) {
       float p[3];
       std::memcpy(p, rec + 12 + 12 * c, 12);
       if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
-        return makeError(ErrorCode::kMalformed, in.name() + ": byte " + std::to_string(in.offset() - 50 + 12 + 12 * c) +
-                                                    ": triangle " + std::to_string(t) +
-                                                    " has a NaN or infinite coordinate");
+        return makeError(ErrorCode::kMalformed, in.name() + ": byte " +
+                                                    std::to_string(in.offset() - 50 + 12 + 12 * c) + ": triangle " +
+                                                    std::to_string(t) + " has a NaN or infinite coordinate");
       SP_RETURN_IF_ERROR(welder.corner({p[0], p[1], p[2]}, bitsKey(p), tri[c]));
     }
     uint16_t attribute;  // "attribute byte count": 0 by the standard, colors in some writers (VisCAM, Magics)

@@ -80,8 +80,8 @@ inline uint64_t fnv1a(std::span<const uint8_t> bytes, uint64_t h = 0xcbf29ce4842
 // One tile: whole, then every level (cut at its end) and one past the last. `decoded` takes each decoder
 // call's status, `note` any other error.
 template <typename Decoded, typename Note>
-void decodeTile(const ContainerHeader& header, const TileEntry& e, std::span<const uint8_t> payload,
-                Decoded& decoded, Note& note) {
+void decodeTile(const ContainerHeader& header, const TileEntry& e, std::span<const uint8_t> payload, Decoded& decoded,
+                Note& note) {
   decoded(decodeTilePayload(header, e, payload, "fuzz").status());
   auto levels = tilePayloadLevels(header, e, payload, "fuzz");
   if (!levels.isOk()) {
@@ -92,16 +92,14 @@ void decodeTile(const ContainerHeader& header, const TileEntry& e, std::span<con
     const auto cut = payload.first(std::min<uint64_t>(level.end_bytes, payload.size()));
     decoded(decodeTilePayload(header, e, cut, "fuzz", level.level).status());
   }
-  if (!levels->empty())
-    decoded(decodeTilePayload(header, e, payload, "fuzz", levels->back().level + 1).status());
+  if (!levels->empty()) decoded(decodeTilePayload(header, e, payload, "fuzz", levels->back().level + 1).status());
 }
 
 // Parses the container and decodes every tile whole and, for progressive codecs, every level from the payload
 // cut at the level's end (as `decode --bytes` does) and one level past the last. Keeps going after a failing
 // tile so that one mutation reaches every decoder it can. Returns the first error (ok when everything
 // decoded).
-inline Status decodeEverything(std::span<const uint8_t> file, DecodeCounts& counts,
-                               const DecodeOptions& options = {}) {
+inline Status decodeEverything(std::span<const uint8_t> file, DecodeCounts& counts, const DecodeOptions& options = {}) {
   auto parsed = parseContainer(file, "fuzz");
   if (!parsed.isOk()) return parsed.status();
   ++counts.containers_parsed;
