@@ -278,9 +278,7 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     c.boolean("allow_degenerate", s.encode.allow_degenerate);
     c.finish();
     if (error.isOk() && !findCodec(s.encode.codec)) {
-      std::string names;
-      for (const auto& info : allCodecs()) names += (names.empty() ? "" : ", ") + std::string(info.name);
-      c.fail("/codec/name", "unknown codec '" + s.encode.codec + "' (available: " + names + ")");
+      c.fail("/codec/name", "unknown codec '" + s.encode.codec + "' (available: " + codecNames() + ")");
     }
   }
   if (const json* stages = top.object("stages")) readStages(*stages, config_path, error, s.encode.stages);

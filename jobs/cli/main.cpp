@@ -244,12 +244,6 @@ bool numberOption(const Args& args, const char* name, double lo, double hi, doub
   return option(args, name, out, error, [&](const std::string& v) { return parseNumber(v, lo, hi, name); });
 }
 
-std::string codecList() {
-  std::string s;
-  for (const auto& c : allCodecs()) s += (s.empty() ? "" : ", ") + std::string(c.name);
-  return s;
-}
-
 int runEncode(int argc, char** argv) {
   Args args;
   std::string error;
@@ -260,7 +254,7 @@ int runEncode(int argc, char** argv) {
                  args, error))
     return usage(error, "encode");
   if (args.has("--help")) {
-    std::printf(kEncodeHelp, codecList().c_str(), stageNames().c_str());
+    std::printf(kEncodeHelp, codecNames().c_str(), stageNames().c_str());
     return 0;
   }
   if (args.positional.size() != 2) return usage("encode needs IN and OUT", "encode");
@@ -268,7 +262,7 @@ int runEncode(int argc, char** argv) {
   s.input = args.positional[0];
   s.output = args.positional[1];
   if (const auto* c = args.get("--codec")) s.codec = *c;
-  if (!findCodec(s.codec)) return usage("unknown codec '" + s.codec + "' (available: " + codecList() + ")", "encode");
+  if (!findCodec(s.codec)) return usage("unknown codec '" + s.codec + "' (available: " + codecNames() + ")", "encode");
   if (const auto* st = args.get("--stages")) {
     auto stages = parseStagesOption(*st, "--stages");
     if (!stages.isOk()) return usage(stages.status().message(), "encode");
@@ -500,7 +494,7 @@ int run(int argc, char** argv) {
   if (isHelp(cmd) || cmd == "help") {
     if (argc >= 3) {
       const std::string sub = argv[2];
-      if (sub == "encode") return std::printf(kEncodeHelp, codecList().c_str(), stageNames().c_str()), 0;
+      if (sub == "encode") return std::printf(kEncodeHelp, codecNames().c_str(), stageNames().c_str()), 0;
       if (sub == "decode") return std::fputs(kDecodeHelp, stdout), 0;
       if (sub == "info") return std::fputs(kInfoHelp, stdout), 0;
       if (sub == "run") return std::fputs(kRunHelp, stdout), 0;
