@@ -1,7 +1,7 @@
 // One tile of a scan, as the per-tile pipeline sees it.
 //
-// A tile task receives a TileMesh built by the tiler: the tile's triangles (those whose centroid lies in the
-// tile), the vertices they use with local indices, each vertex's global index, and a border flag.
+// A tile task receives a TileMesh built by spatial/tile_builder.h: the tile's triangles (those whose centroid lies
+// in the tile), the vertices they use with local indices, each vertex's global index, and a border flag.
 //
 // THE BORDER CONTRACT. A vertex is a border vertex when some triangle of another tile also uses it. All tiles
 // share the scan's one global grid, so a border vertex has the same integer coordinates in every tile that holds
@@ -11,7 +11,9 @@
 // the neighbouring tile still matches. Interior vertices are free. Codecs that are lossless after quantization
 // keep everything and satisfy the contract trivially.
 //
-// A tile stage is a pure function of its TileMesh: no shared mutable state, same output at any thread count.
+// The border flags are the lock flags of the tile's view (TileView in engine/codecs/codec.h). Stages
+// (engine/stages/stage.h) are pure functions of that view: no shared mutable state, the same output at any thread
+// count; the pipeline checks the contract after every stage (checkBorderContract).
 #pragma once
 
 #include <cstdint>
