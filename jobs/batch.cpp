@@ -11,6 +11,7 @@
 #include <set>
 
 #include "jobs/container_file.h"
+#include "jobs/errors.h"
 #include "jobs/file_io.h"
 #include "jobs/progress.h"
 #include "jobs/render.h"
@@ -224,7 +225,39 @@ std::string settingsFingerprint(const EncodeSettings& s) {
   return hex;
 }
 
-Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
+// Encodes one input of a job into `f`: the container, the error picture and the report.
+static void encodeOne(const JobSettings& job, const EncodeSettings& s, const std::string& fingerprint,
+                      const std::shared_ptr<EmbreeDevice>& device, TerminalProgress& progress,
+                      const PipelineHooks* hooks, FileOutcome& f) {
+  auto result = encodeFile(s, progress.enabled() ? &progress : nullptr, device, hooks);
+  if (result.isOk()) {
+    f.has_result = true;
+    f.result = std::move(result).value();
+    f.state = f.result.failed_tiles == 0 ? FileOutcome::State::kOk : FileOutcome::State::kFailed;
+    if (f.result.failed_tiles)
+      for (const auto& t : f.result.tiles)
+        if (!t.status.isOk()) {
+          f.error = t.status.withContext(f.input + ": tile " + std::to_string(t.id) + " (" +
+                                         std::to_string(f.result.failed_tiles) + " tiles failed)");
+          break;
+        }
+    if (s.measure.render && f.state == FileOutcome::State::kOk) {
+      Status w = renderErrorPicture(s,
+                                    (fs::path(job.output_directory) / outputName(kErrorPictureName, f.input)).string(),
+                                    device);
+      if (!w.isOk()) f.state = FileOutcome::State::kFailed, f.error = w;
+    }
+    if (!f.report.empty()) {
+      Status w = writeText(f.report, encodeReportJson(s, f.result, fingerprint));
+      if (!w.isOk()) f.state = FileOutcome::State::kFailed, f.error = w;
+    }
+  } else {
+    f.state = FileOutcome::State::kFailed;
+    f.error = result.status();
+  }
+}
+
+Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options, const PipelineHooks* hooks) {
   SP_ASSIGN_OR_RETURN(std::vector<std::string> inputs, expandInputs(job));
   SP_RETURN_IF_ERROR(checkJobOutputs(job, inputs));
   std::error_code ec;
@@ -259,31 +292,12 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options) {
       continue;
     }
     progress.file(i, inputs.size(), fs::path(f.input).filename().string());
-    auto result = encodeFile(s, progress.enabled() ? &progress : nullptr, device);
-    if (result.isOk()) {
-      f.has_result = true;
-      f.result = std::move(result).value();
-      f.state = f.result.failed_tiles == 0 ? FileOutcome::State::kOk : FileOutcome::State::kFailed;
-      if (f.result.failed_tiles)
-        for (const auto& t : f.result.tiles)
-          if (!t.status.isOk()) {
-            f.error = t.status.withContext(f.input + ": tile " + std::to_string(t.id) + " (" +
-                                           std::to_string(f.result.failed_tiles) + " tiles failed)");
-            break;
-          }
-      if (s.measure.render && f.state == FileOutcome::State::kOk) {
-        Status w =
-            renderErrorPicture(s, (fs::path(job.output_directory) / outputName(kErrorPictureName, f.input)).string(),
-                               device);
-        if (!w.isOk()) f.state = FileOutcome::State::kFailed, f.error = w;
-      }
-      if (!f.report.empty()) {
-        Status w = writeText(f.report, encodeReportJson(s, f.result, fingerprint));
-        if (!w.isOk()) f.state = FileOutcome::State::kFailed, f.error = w;
-      }
-    } else {
+    try {
+      encodeOne(job, s, fingerprint, device, progress, hooks, f);
+    } catch (...) {  // the input fails, as a report entry; the batch goes on
+      f.has_result = false;
       f.state = FileOutcome::State::kFailed;
-      f.error = result.status();
+      f.error = statusFromException().withContext(f.input);
     }
     f.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     progress.clear();

@@ -45,6 +45,8 @@ std::string outputName(const std::string& pattern, const std::string& input);
 // Hex fingerprint of what determines an output's bytes, for resume.
 std::string settingsFingerprint(const EncodeSettings& settings);
 
-Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options);
+// `hooks`: tests only (jobs/pipeline.h). An exception while one input is encoded (out of memory, a bug) fails that
+// input, as a report entry; the others still run and the summary is written.
+Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options, const PipelineHooks* hooks = nullptr);
 
 }  // namespace scanpress

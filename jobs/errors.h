@@ -17,4 +17,8 @@ ErrorCode errnoErrorCode(int err);
 // Pass errno as read right after the failing call (later calls may overwrite it).
 Status errnoStatus(int err, const std::string& path, std::string_view what);
 
+// The exception being handled (call it inside a catch block) as a Status, so that it stops at a task or file
+// boundary: std::bad_alloc is kIo ("out of memory": the environment), anything else kInternal.
+Status statusFromException();
+
 }  // namespace scanpress

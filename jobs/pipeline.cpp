@@ -20,6 +20,7 @@
 #include "engine/metro.h"
 #include "engine/octahedral.h"
 #include "engine/tile.h"
+#include "jobs/errors.h"
 #include "jobs/file_io.h"
 #include "jobs/process.h"
 #include "jobs/scan_store.h"
@@ -260,18 +261,6 @@ struct TileResult {
   uint32_t input_vertices = 0, input_faces = 0;  // of the tile as built (a failed tile reports what it lost)
   ErrorAccumulator forward, backward;
 };
-
-Status statusFromException() {
-  try {
-    throw;
-  } catch (const std::bad_alloc&) {
-    return makeError(ErrorCode::kIo, "out of memory");
-  } catch (const std::exception& e) {
-    return makeError(ErrorCode::kInternal, e.what());
-  } catch (...) {
-    return makeError(ErrorCode::kInternal, "unknown exception");
-  }
-}
 
 // Measures one tile: its original triangles against the decoded tile, both ways. Near tile borders the other
 // tile's surface is not considered, which can only make a distance larger (never hide an error).
@@ -629,6 +618,7 @@ Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progr
   for (const StageSpec& st : s.stages)
     if (!findStage(st.kind)) return makeError(ErrorCode::kInvalidArgument, "unknown stage");
   SP_RETURN_IF_ERROR(checkOutputPath(s.output, {s.input}));  // before reading: `encode X X` must not replace X
+  if (hooks && hooks->before_survey) hooks->before_survey(s.input);
   ScanEncoder encoder(s, *codec, progress, std::move(device), hooks);
   SP_RETURN_IF_ERROR(encoder.survey());
   SP_RETURN_IF_ERROR(encoder.checkDrops());

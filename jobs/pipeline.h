@@ -116,6 +116,8 @@ struct PipelineHooks {
   std::function<Result<StagedTile>(const TileContext& ctx, const TileView& tile, uint32_t tile_id)> extra_stage;
   // Fault injection: a tile for which this returns an error fails with it.
   std::function<Status(uint32_t tile_id)> fail_tile;
+  // Fault injection outside the tile tasks: called before a scan is read; may throw.
+  std::function<void(const std::string& input)> before_survey;
 };
 
 // Encodes one scan: survey, ingest, tile, encode tiles, finish (jobs/pipeline.cpp). The container is written

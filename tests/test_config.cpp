@@ -6,6 +6,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <stdexcept>
 
 #include "jobs/batch.h"
 #include "jobs/config.h"
@@ -265,6 +266,43 @@ TEST(Batch, OutputNames) {
 
 // /strict: an input holding what the container would not keep fails (exit 2, naming it); the others run; the
 // setting is part of the resume fingerprint (a complete output made without it is redone, and fails).
+// An exception while one input is encoded (here thrown before its survey; in the field, out of memory or a bug)
+// fails that input as a summary entry: the other inputs still run and the summary is written (it used to leave
+// runJob and end the whole batch without a summary).
+TEST(Batch, ExceptionInOneInputFailsOnlyThatInput) {
+  testing::TempDir dir;
+  fs::create_directories(dir.file("scans"));
+  for (const char* name : {"a", "b", "c"})
+    ASSERT_TRUE(writeObj(dir.file(std::string("scans/") + name + ".obj"), testing::octahedron()).isOk());
+  testing::writeBytes(dir.file("job.json"), R"({"inputs": ["scans"], "output": {"directory": "out"}})");
+  auto job = loadJobConfig(dir.file("job.json"));
+  ASSERT_TRUE(job.isOk()) << job.status().toString();
+  PipelineHooks hooks;
+  hooks.before_survey = [](const std::string& input) {
+    if (fs::path(input).filename() == "b.obj") throw std::runtime_error("injected exception (test)");
+  };
+  RunOptions options;
+  options.quiet = true;
+  auto batch = runJob(*job, options, &hooks);
+  ASSERT_TRUE(batch.isOk()) << batch.status().toString();
+  ASSERT_EQ(batch->files.size(), 3u);
+  for (const auto& f : batch->files) {
+    const std::string name = fs::path(f.input).filename();
+    if (name == "b.obj") {
+      EXPECT_EQ(f.state, FileOutcome::State::kFailed);
+      EXPECT_EQ(f.error.code(), ErrorCode::kInternal);
+      EXPECT_NE(f.error.toString().find("injected exception (test)"), std::string::npos) << f.error.toString();
+      EXPECT_NE(f.error.toString().find("b.obj"), std::string::npos) << f.error.toString();
+    } else {
+      EXPECT_EQ(f.state, FileOutcome::State::kOk) << name;
+      EXPECT_TRUE(fs::exists(f.output)) << name;
+    }
+  }
+  EXPECT_EQ(batch->exitCode(), 4);
+  const auto summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  EXPECT_EQ(summary["files"].size(), 3u);
+}
+
 TEST(Batch, StrictFailsInputsThatWouldDropData) {
   testing::TempDir dir;
   fs::create_directories(dir.file("scans"));
