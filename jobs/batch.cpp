@@ -233,6 +233,8 @@ static void encodeOne(const JobSettings& job, const EncodeSettings& s, const std
   if (result.isOk()) {
     f.has_result = true;
     f.result = std::move(result).value();
+    f.counts = FileOutcome::Counts{f.result.vertices, f.result.faces, f.result.bytes, f.result.tiles.size(),
+                                   f.result.failed_tiles};
     f.state = f.result.failed_tiles == 0 ? FileOutcome::State::kOk : FileOutcome::State::kFailed;
     if (f.result.failed_tiles)
       for (const auto& t : f.result.tiles)
@@ -249,6 +251,7 @@ static void encodeOne(const JobSettings& job, const EncodeSettings& s, const std
     }
     if (!f.report.empty()) {
       Status w = writeText(f.report, encodeReportJson(s, f.result, fingerprint));
+      f.report_written = w.isOk();
       if (!w.isOk()) f.state = FileOutcome::State::kFailed, f.error = w;
     }
   } else {
@@ -285,9 +288,12 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options, co
     if (options.threads >= 0) s.threads = options.threads;
     const std::string fingerprint = settingsFingerprint(s);
     const auto start = std::chrono::steady_clock::now();
-    if (job.resume && !options.force && !f.report.empty() && completeReportFingerprint(f.report) == fingerprint &&
-        verifiedContainer(f.output)) {
+    const std::optional<CompleteReport> previous =
+        job.resume && !options.force && !f.report.empty() ? readCompleteReport(f.report) : std::nullopt;
+    if (previous && previous->fingerprint == fingerprint && verifiedContainer(f.output)) {
       f.state = FileOutcome::State::kSkipped;
+      f.counts = FileOutcome::Counts{previous->vertices, previous->faces, previous->bytes, previous->tiles, 0};
+      f.report_written = true;
       batch.files.push_back(std::move(f));
       continue;
     }

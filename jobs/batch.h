@@ -4,6 +4,7 @@
 // plus the input's path, size and modification time) is skipped; `force` redoes it.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -26,6 +27,12 @@ struct FileOutcome {
   bool has_result = false;
   EncodeResult result;
   double seconds = 0;
+  // What the container holds: from this run's result, or from the report of an output resume skipped.
+  struct Counts {
+    uint64_t vertices = 0, faces = 0, bytes = 0, tiles = 0, failed_tiles = 0;
+  };
+  std::optional<Counts> counts;
+  bool report_written = false;  // `report` exists and describes this output (written now, or skipped complete)
 };
 
 struct BatchResult {

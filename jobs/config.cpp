@@ -357,16 +357,23 @@ Result<std::vector<StageSpec>> parseStagesOption(const std::string& text, const 
   return out;
 }
 
-std::string completeReportFingerprint(const std::string& report_path) {
+std::optional<CompleteReport> readCompleteReport(const std::string& report_path) {
   std::ifstream f(report_path, std::ios::binary);
-  if (!f) return {};
+  if (!f) return std::nullopt;
   try {
     const json j = json::parse(f);
-    if (!j.is_object() || !j.value("complete", false)) return {};
+    if (!j.is_object() || !j.value("complete", false)) return std::nullopt;
     auto it = j.find("fingerprint");
-    return it != j.end() && it->is_string() ? it->get<std::string>() : std::string();
+    if (it == j.end() || !it->is_string() || it->get<std::string>().empty()) return std::nullopt;
+    CompleteReport r;
+    r.fingerprint = it->get<std::string>();
+    r.vertices = j.value("vertices", uint64_t(0));
+    r.faces = j.value("faces", uint64_t(0));
+    r.bytes = j.value("bytes", uint64_t(0));
+    r.tiles = j.value("tiles", json::array()).size();
+    return r;
   } catch (const std::exception&) {
-    return {};
+    return std::nullopt;
   }
 }
 

@@ -6,6 +6,7 @@
 // relative to the directory of the job file. configs/REFERENCE.md lists every key with its default and meaning.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -40,8 +41,13 @@ Result<std::vector<StageSpec>> parseStagesOption(const std::string& text, const 
 // Every key the parser knows, as JSON pointers (for the reference test).
 std::vector<std::string> knownConfigKeys();
 
-// The fingerprint stored in an encode report when it describes a complete output; empty when the report is
+// What an encode report says of a complete output: the settings fingerprint and what the container holds.
+struct CompleteReport {
+  std::string fingerprint;
+  uint64_t vertices = 0, faces = 0, bytes = 0, tiles = 0;
+};
+// The report at `report_path` when it describes a complete output and carries a fingerprint; nothing when it is
 // missing, unreadable, incomplete or has none (resume then redoes the file).
-std::string completeReportFingerprint(const std::string& report_path);
+std::optional<CompleteReport> readCompleteReport(const std::string& report_path);
 
 }  // namespace scanpress

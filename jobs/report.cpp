@@ -156,7 +156,8 @@ std::string batchSummaryJson(const std::string& config_path, const BatchResult& 
   uint64_t ok = 0, skipped = 0, failed = 0, bytes = 0, vertices = 0;
   double seconds = 0;
   for (const auto& f : batch.files) {
-    json e = {{"input", f.input}, {"output", f.output}, {"report", f.report}, {"seconds", f.seconds}};
+    json e = {{"input", f.input}, {"output", f.output}, {"seconds", f.seconds}};
+    if (f.report_written) e["report"] = f.report;  // only a report that exists
     switch (f.state) {
       case FileOutcome::State::kOk: e["status"] = "ok", ++ok; break;
       case FileOutcome::State::kSkipped: e["status"] = "skipped", ++skipped; break;
@@ -166,15 +167,16 @@ std::string batchSummaryJson(const std::string& config_path, const BatchResult& 
       e["error"] = f.error.toString();
       e["exit_code"] = exitCodeFor(f.error.code());
     }
-    if (f.has_result) {
-      e["vertices"] = f.result.vertices;
-      e["faces"] = f.result.faces;
-      e["bytes"] = f.result.bytes;
-      e["bpv"] = f.result.bitsPerVertex();
-      e["tiles"] = f.result.tiles.size();
-      e["failed_tiles"] = f.result.failed_tiles;
-      bytes += f.result.bytes;
-      vertices += f.result.vertices;
+    if (f.counts) {  // this run's result, or a skipped output's report: totals cover both
+      const FileOutcome::Counts& c = *f.counts;
+      e["vertices"] = c.vertices;
+      e["faces"] = c.faces;
+      e["bytes"] = c.bytes;
+      e["bpv"] = c.vertices ? 8.0 * c.bytes / c.vertices : 0.0;
+      e["tiles"] = c.tiles;
+      e["failed_tiles"] = c.failed_tiles;
+      bytes += c.bytes;
+      vertices += c.vertices;
     }
     seconds += f.seconds;
     files.push_back(std::move(e));

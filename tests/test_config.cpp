@@ -210,10 +210,14 @@ TEST(Batch, BadFileIsReportedOthersCompleteResumeSkipsForceRedoes) {
     if (f["status"] == "failed") {
       EXPECT_NE(f["error"].get<std::string>().find("broken.ply"), std::string::npos);
       EXPECT_EQ(f["exit_code"], 2);
+      EXPECT_FALSE(f.contains("report")) << "the summary names a report that was never written";
     } else {
       EXPECT_GT(f["bpv"].get<double>(), 0);
+      EXPECT_TRUE(fs::exists(f["report"].get<std::string>()));
     }
   }
+  const auto first_totals = summary["totals"];
+  EXPECT_GT(first_totals["bytes"].get<uint64_t>(), 0u);
   EXPECT_TRUE(fs::exists(dir.file("out/bunny.spz")));
   EXPECT_TRUE(fs::exists(dir.file("out/octa.report.json")));
   EXPECT_FALSE(fs::exists(dir.file("out/broken.spz")));
@@ -225,8 +229,14 @@ TEST(Batch, BadFileIsReportedOthersCompleteResumeSkipsForceRedoes) {
   for (const auto& f : summary["files"]) {
     if (fs::path(f["input"].get<std::string>()).filename() != "broken.ply") {
       EXPECT_EQ(f["status"], "skipped");
+      EXPECT_GT(f["bpv"].get<double>(), 0);  // from the skipped output's report
+      EXPECT_TRUE(f.contains("report"));
     }
   }
+  // A resumed run's totals count the skipped outputs: the same bytes and vertices as the run that made them.
+  EXPECT_EQ(summary["totals"]["bytes"], first_totals["bytes"]);
+  EXPECT_EQ(summary["totals"]["vertices"], first_totals["vertices"]);
+  EXPECT_EQ(summary["totals"]["bpv"], first_totals["bpv"]);
   EXPECT_EQ(fs::last_write_time(dir.file("out/bunny.spz")), first_time);
 
   // A truncated container is not complete: it is redone.
