@@ -323,6 +323,13 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options, co
   }
   if (!job.summary_name.empty()) {
     const std::string path = (fs::path(job.output_directory) / job.summary_name).string();
+    // Another job's summary in this directory is replaced, but not without a word (a warning even under --quiet:
+    // that job's record is lost).
+    if (const auto other = summaryJobPath(path); other && *other != job.config_path)
+      std::fprintf(stderr,
+                   "scanpress: warning: %s: replacing the summary of another job (%s); give each job its own "
+                   "/output/summary or directory\n",
+                   path.c_str(), other->c_str());
     SP_RETURN_IF_ERROR(writeText(path, batchSummaryJson(job.config_path, batch)));
   }
   return batch;

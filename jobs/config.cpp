@@ -377,6 +377,19 @@ std::optional<CompleteReport> readCompleteReport(const std::string& report_path)
   }
 }
 
+std::optional<std::string> summaryJobPath(const std::string& summary_path) {
+  std::ifstream f(summary_path, std::ios::binary);
+  if (!f) return std::nullopt;
+  try {
+    const json j = json::parse(f);
+    auto it = j.find("job");
+    if (!j.is_object() || it == j.end() || !it->is_string()) return std::nullopt;
+    return it->get<std::string>();
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+}
+
 Result<JobSettings> loadJobConfig(const std::string& path) {
   // A directory opens as a stream on Linux and reads as nothing ("invalid JSON: byte 1"): say what it is.
   std::error_code ec;

@@ -50,4 +50,7 @@ struct CompleteReport {
 // missing, unreadable, incomplete or has none (resume then redoes the file).
 std::optional<CompleteReport> readCompleteReport(const std::string& report_path);
 
+// The job file named by the batch summary at `summary_path` ("job"), when there is a readable one.
+std::optional<std::string> summaryJobPath(const std::string& summary_path);
+
 }  // namespace scanpress

@@ -313,6 +313,24 @@ TEST(Batch, ExceptionInOneInputFailsOnlyThatInput) {
   EXPECT_EQ(summary["files"].size(), 3u);
 }
 
+// Two jobs writing into one directory: the second replaces the first's summary, and says so.
+TEST(Batch, ReplacingAnotherJobsSummaryIsWarned) {
+  testing::TempDir dir;
+  fs::create_directories(dir.file("scans"));
+  ASSERT_TRUE(writeObj(dir.file("scans/octa.obj"), testing::octahedron()).isOk());
+  const std::string first = dir.file("first.json"), second = dir.file("second.json");
+  testing::writeBytes(first, R"({"inputs": ["scans"], "output": {"directory": "out"}})");
+  testing::writeBytes(second, R"({"inputs": ["scans"], "output": {"directory": "out", "name": "{stem}.2.spz",
+                                  "report": "{stem}.2.report.json"}})");
+  std::string out;
+  ASSERT_EQ(run("run '" + first + "' --quiet", &out), 0) << out;
+  ASSERT_EQ(run("run '" + first + "' --quiet", &out), 0) << out;  // its own summary: no word
+  EXPECT_EQ(out.find("replacing the summary"), std::string::npos) << out;
+  ASSERT_EQ(run("run '" + second + "' --quiet", &out), 0) << out;
+  EXPECT_NE(out.find("replacing the summary of another job (" + first + ")"), std::string::npos) << out;
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir.file("out/summary.json")))["job"], second);
+}
+
 TEST(Batch, StrictFailsInputsThatWouldDropData) {
   testing::TempDir dir;
   fs::create_directories(dir.file("scans"));
