@@ -1,0 +1,71 @@
+// Shape-preserving QEM simplification (engine/simplify/simplify.cpp).
+//
+// Based on Ahn, Chang, Ho, "Shape-preserving progressive coding of 3-D models" (../shared/papers/
+// shape-preserving-progressive-qem.md), section 2, on Garland and Heckbert's quadric error metric: edge collapses
+// ordered by weighted quadric error, with the paper's weights (complex edges by their number of incident triangles;
+// an edge with one boundary vertex collapses the interior vertex onto the boundary one, weighted by the boundary
+// vertex's incident edges; boundary edges by 1 + the larger cosine of the dihedral angles at their ends; interior
+// edges 1). Where this departs from the paper is written at the top of simplify.cpp.
+//
+// Pure and deterministic: the same mesh, flags and options give the same collapses, on any machine and thread
+// count. Positions stay on the scan's integer grid (a placement is rounded to the grid).
+#pragma once
+
+#include <cstdint>
+#include <limits>
+#include <span>
+#include <vector>
+
+#include "engine/mesh.h"
+#include "engine/status.h"
+
+namespace scanpress {
+
+enum class SimplifyWeights : uint8_t {
+  kShapePreserving = 1,  // the paper's weights (section 2)
+  kPlain = 2,            // plain Garland-Heckbert: every edge weight 1 (for comparison)
+};
+
+struct SimplifyOptions {
+  SimplifyWeights weights = SimplifyWeights::kShapePreserving;
+  // Stop conditions; simplification stops at the first one met (or when no legal collapse is left).
+  uint64_t target_faces = 0;  // stop when the mesh has at most this many faces (0: no face target)
+  double max_error = std::numeric_limits<double>::infinity();  // grid cells: no collapse whose error exceeds it
+  // Collapses are made in passes; within a pass no two collapses touch the same vertex or its neighbours (their
+  // closed one-rings are disjoint), so the vertex splits that undo a pass are independent and can be coded as one
+  // batch. A pass ends when it has removed this share of the faces the mesh had at its start, or when the cheapest
+  // remaining collapse touches a vertex already used in the pass.
+  double pass_fraction = 0.25;
+};
+
+// One edge collapse (v_s, v_r) -> v'_s in the paper's notation: `removed` (v_r) disappears, `kept` (v_s) moves to
+// `position` (v'_s). Vertex indices are the input mesh's. Applying a collapse to a mesh: delete every face that uses
+// both vertices, replace `removed` by `kept` in every other face, set kept's position.
+struct EdgeCollapse {
+  uint32_t kept = 0;
+  uint32_t removed = 0;
+  Vec3u position{};
+  uint8_t placement = 0;  // the paper's index: 0 kept's old position, 1 removed's position, 2 another position
+  float error = 0;        // the collapse's error estimate, grid cells (sqrt of the unweighted quadric error)
+};
+
+struct Simplification {
+  std::vector<EdgeCollapse> collapses;  // in the order they were applied
+  // collapses[pass_ends[i-1], pass_ends[i]) are pass i (pass_ends[-1] = 0); the last entry is collapses.size().
+  std::vector<uint32_t> pass_ends;
+  // After each pass: the largest error estimate of any collapse so far (grid cells), and the face count.
+  std::vector<float> pass_errors;
+  std::vector<uint64_t> pass_faces;
+  // The simplified mesh, with the input's vertex indices (removed vertices stay in `positions`, unused).
+  QuantizedMesh mesh;
+};
+
+// Simplifies `mesh` (triangles only; normals and colors are ignored and not in the result). `locked` is empty or
+// has one flag per vertex: a locked vertex never moves or disappears, and an edge between two locked vertices that
+// is a border edge (one incident triangle, or more than two) is never collapsed. Never flips a triangle's normal,
+// never makes a manifold edge non-manifold or creates a duplicate or degenerate triangle (two corners in one grid
+// cell). Input triangles that are degenerate or repeat a vertex are kept as they are.
+Result<Simplification> simplify(const QuantizedMesh& mesh, std::span<const uint8_t> locked,
+                                const SimplifyOptions& options);
+
+}  // namespace scanpress
