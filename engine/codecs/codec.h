@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "engine/mesh.h"
+#include "engine/simplify/simplify.h"
 #include "engine/status.h"
 
 namespace scanpress {
@@ -21,6 +22,8 @@ enum class CodecId : uint16_t {
   kStore = 1,
   kKdtree = 2,
   kOctree = 3,
+  kPm = 4,          // engine/codecs/pm.cpp (issue 19)
+  kEdgebreaker = 5,  // engine/codecs/edgebreaker.cpp (issue 20)
 };
 
 // What every tile of a container shares: the grid's bits and the attribute layout (from the container header).
@@ -45,8 +48,20 @@ struct OctreeOptions {
   // decodable. Not reachable from the CLI or job files.
   bool contexts = true;
 };
+// `pm` (engine/codecs/pm.cpp): the tile is simplified (engine/simplify/simplify.h) to its last level, and further to
+// a base mesh; the payload is the base mesh and the vertex splits back to the last level, in batches (the levels).
+// The defaults keep the tile as it is at the last level (lossless after quantization). The error targets of
+// jobs/ (--max-error, --max-bytes) set max_error or ratio per tile.
+struct PmOptions {
+  SimplifyWeights weights = SimplifyWeights::kShapePreserving;
+  // The last level: collapses of error estimate at most max_error grid cells (< 0: none, the tile as it is), down to
+  // at least ratio of the tile's faces (1: no face target).
+  double max_error = -1;
+  double ratio = 1.0;
+};
 struct CodecOptions {
   OctreeOptions octree;
+  PmOptions pm;
 };
 
 // What a level means, as its codec states it (see CodecLevel).
