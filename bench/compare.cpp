@@ -27,6 +27,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/compare.h"
 #include "engine/codecs/codec.h"
 #include "engine/quantize.h"
 #include "jobs/measure.h"
@@ -39,20 +40,8 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
-struct Row {
-  std::string scan, codec;
-  int bits = 0;
-  uint64_t vertices = 0, triangles = 0, bytes = 0;
-  double encode_mtri = 0, decode_mtri = 0;
-  bool lossless = false;
-  double rms_rel = -1, max_rel = -1;  // symmetric error relative to the diagonal (--rd)
-};
-
-struct Options {
-  int runs = 5;
-  bool rd = false;
-  std::shared_ptr<EmbreeDevice> device;
-};
+using Row = CompareRow;
+using Options = CompareOptions;
 
 // Sorted triangles over positions, each rotated to start at its smallest corner.
 std::vector<std::array<Vec3u, 3>> canonical(const std::vector<Vec3u>& pos, const std::vector<Triangle>& tris) {
@@ -96,15 +85,10 @@ void measureRow(const Mesh& original, const Grid& grid, const std::vector<Vec3u>
   Mesh decoded;
   for (const auto& p : pos) decoded.positions.push_back(grid.dequantize(p));
   decoded.triangles = tris;
-  MeasureSettings ms;
-  ms.samples_per_triangle = 1;
-  auto r = measureMeshes(original, decoded, ms, opt.device);
-  if (!r.isOk()) return;
-  row.rms_rel = r->symmetric.rms / r->diagonal;
-  row.max_rel = r->symmetric.max / r->diagonal;
+  measureDecoded(original, decoded, opt, row);
 }
 
-void runScan(const std::string& path, int bits, const Options& opt, std::vector<Row>& rows) {
+void runScan(const std::string& path, int bits, int first_bits, const Options& opt, std::vector<Row>& rows) {
   const int runs = opt.runs;
   auto mesh = readMeshFile(path);
   if (!mesh.isOk()) {
@@ -147,6 +131,8 @@ void runScan(const std::string& path, int bits, const Options& opt, std::vector<
     measureRow(*mesh, grid, out.positions, out.triangles, opt, row);
     rows.push_back(row);
   }
+
+  runPmSweep(scan, *mesh, grid, q, opt, rows);
 
   // Draco: cell centers in, its own quantization at the same bits.
   draco::Mesh dm;
@@ -253,6 +239,7 @@ void runScan(const std::string& path, int bits, const Options& opt, std::vector<
       rows.push_back(row);
     }
   }
+  if (opt.rd && bits == first_bits) runAnchors(scan, *mesh, opt, rows);
 }
 
 }  // namespace
@@ -262,6 +249,7 @@ int main(int argc, char** argv) {
   using namespace scanpress;
   std::string data = SCANPRESS_SHARED_DATA, json_path = "compare.json", md_path = "compare.md", plot_dir;
   std::vector<int> bits = {12, 14};
+  std::string only;  // comma-separated name prefixes (igea,horse): only those scans
   Options opt;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -272,6 +260,7 @@ int main(int argc, char** argv) {
     else if (a == "--runs") opt.runs = std::max(1, std::atoi(next().c_str()));
     else if (a == "--rd") opt.rd = true;
     else if (a == "--plots") plot_dir = next();
+    else if (a == "--scans") only = next();
     else if (a == "--bits") {
       bits.clear();
       std::string list = next();
@@ -284,7 +273,9 @@ int main(int argc, char** argv) {
       std::fprintf(
           stderr,
           "usage: scanpress-compare [--data DIR] [--bits 12,14] [--runs 5] [--json F] [--markdown F]\n"
-          "                         [--rd [--plots DIR]]   rate-distortion: error per result, bpv-error plots\n");
+          "                         [--scans igea,horse] [--rd [--plots DIR]]\n"
+          "  --rd: rate-distortion: the error of every result, the lossy anchors (Draco -qp 8..12, meshoptimizer's\n"
+          "        simplifier + Draco, gltfpack -si R -cc), pm's points against their envelope, bpv-error plots\n");
       return 1;
     }
   }
@@ -292,7 +283,16 @@ int main(int argc, char** argv) {
   std::error_code ec;
   for (const auto& e : fs::directory_iterator(data, ec))
     if (e.is_regular_file() && formatFromName(e.path().filename().string()) != MeshFormat::kUnknown)
-      scans.push_back(e.path().string());
+      if (only.empty() || [&] {
+            const std::string name = e.path().filename().string();
+            for (size_t p = 0; p <= only.size();) {
+              const size_t c = std::min(only.find(',', p), only.size());
+              if (c > p && name.rfind(only.substr(p, c - p), 0) == 0) return true;
+              p = c + 1;
+            }
+            return false;
+          }())
+        scans.push_back(e.path().string());
   std::sort(scans.begin(), scans.end());
   if (scans.empty()) {
     std::fprintf(stderr, "no scans in %s\n", data.c_str());
@@ -307,12 +307,13 @@ int main(int argc, char** argv) {
   for (const auto& s : scans)
     for (int b : bits) {
       std::fprintf(stderr, "%s at %d bits\n", fs::path(s).filename().c_str(), b);
-      runScan(s, b, opt, rows);
+      runScan(s, b, bits.front(), opt, rows);
     }
   nlohmann::json j = nlohmann::json::array();
   for (const auto& r : rows)
     j.push_back({{"scan", r.scan},
                  {"codec", r.codec},
+                 {"family", r.family},
                  {"bits", r.bits},
                  {"vertices", r.vertices},
                  {"triangles", r.triangles},
@@ -336,7 +337,8 @@ int main(int argc, char** argv) {
   // Median bpv per codec and bits, over the scans.
   md << "\n| codec | bits | median bpv | median encode Mtri/s | median decode Mtri/s | all lossless |\n|---|---:|---:|---:|---:|---|\n";
   std::map<std::pair<std::string, int>, std::vector<const Row*>> by;
-  for (const auto& r : rows) by[{r.codec, r.bits}].push_back(&r);
+  for (const auto& r : rows)
+    if (r.family.empty()) by[{r.codec, r.bits}].push_back(&r);
   for (const auto& [key, v] : by) {
     std::vector<double> bpv, enc, dec;
     bool all = true;
@@ -354,27 +356,39 @@ int main(int argc, char** argv) {
                     r.bits, 8.0 * r.bytes / r.vertices, r.rms_rel, r.max_rel);
       md << line;
     }
+    writeEnvelopeTable(md, rows);
     if (!plot_dir.empty()) {
+      // Per scan, bits per original vertex against the symmetric RMS and against the symmetric max (Hausdorff).
       fs::create_directories(plot_dir);
       std::map<std::string, std::map<std::string, std::vector<const Row*>>> series;
-      for (const auto& r : rows) series[r.scan][r.codec].push_back(&r);
+      for (const auto& r : rows) series[r.scan][r.family.empty() ? r.codec : r.family].push_back(&r);
       const std::string script = plot_dir + "/rd.gp";
       std::ofstream gp(script);
-      for (const auto& [scan, codecs] : series) {
-        gp << "set terminal pngcairo size 900,600\nset output '" << plot_dir << "/" << scan << ".rd.png'\n"
-           << "set title 'Rate-distortion: " << scan << "'\nset logscale x\nset xlabel 'symmetric RMS error / "
-           << "bounding-box diagonal'\nset ylabel 'bits per vertex'\nset key outside right\nset grid\nplot ";
-        bool first = true;
-        for (const auto& [codec, pts] : codecs) {
-          const std::string dat = plot_dir + "/" + scan + "." + std::to_string(std::hash<std::string>()(codec)) +
-                                  ".dat";
-          std::ofstream d(dat);
-          for (const Row* r : pts) d << r->rms_rel << " " << 8.0 * r->bytes / r->vertices << "\n";
-          gp << (first ? "" : ", ") << "'" << dat << "' with linespoints title '" << codec << "'";
-          first = false;
+      for (const auto& [scan, codecs] : series)
+        for (const bool hausdorff : {false, true}) {
+          const std::string what = hausdorff ? "max" : "rms";
+          gp << "set terminal pngcairo size 900,600\nset output '" << plot_dir << "/" << scan << ".rd-" << what
+             << ".png'\nset title 'Rate-distortion: " << scan << "'\nset logscale x\nset xlabel 'symmetric "
+             << (hausdorff ? "Hausdorff" : "RMS") << " error / bounding-box diagonal'\nset ylabel 'bits per original "
+             << "vertex'\nset key outside right\nset grid\nplot ";
+          bool first = true;
+          for (const auto& [codec, pts] : codecs) {
+            std::vector<const Row*> sorted(pts);
+            std::sort(sorted.begin(), sorted.end(), [&](auto* a, auto* b) {
+              return (hausdorff ? a->max_rel : a->rms_rel) < (hausdorff ? b->max_rel : b->rms_rel);
+            });
+            const std::string dat = plot_dir + "/" + scan + "." + what + "." +
+                                    std::to_string(std::hash<std::string>()(codec)) + ".dat";
+            std::ofstream d(dat);
+            for (const Row* r : sorted)
+              if ((hausdorff ? r->max_rel : r->rms_rel) > 0)
+                d << (hausdorff ? r->max_rel : r->rms_rel) << " " << 8.0 * r->bytes / r->vertices << "\n";
+            gp << (first ? "" : ", ") << "'" << dat << "' with "
+               << (codec == "meshopt + draco" ? "points" : "linespoints") << " title '" << codec << "'";
+            first = false;
+          }
+          gp << "\n";
         }
-        gp << "\n";
-      }
       gp.close();
       if (std::system(("command -v gnuplot >/dev/null && gnuplot '" + script + "'").c_str()) != 0)
         std::fprintf(stderr, "gnuplot not found (scripts/install-bench-deps.sh): wrote %s only\n", script.c_str());

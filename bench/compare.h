@@ -1,0 +1,49 @@
+// What scanpress-compare's parts share (bench/compare.cpp: lossless comparison; bench/compare_rd.cpp: the lossy
+// rate-distortion anchors and the pm sweep).
+#pragma once
+
+#include <memory>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "engine/mesh.h"
+#include "engine/quantize.h"
+#include "spatial/surface_index.h"
+
+namespace scanpress {
+
+struct CompareRow {
+  std::string scan, codec;
+  std::string family;   // rate-distortion series: "draco qp", "meshopt + draco", "gltfpack", "pm"; empty otherwise
+  bool anchor = false;  // a peer's point of the rate-distortion comparison (pm is measured against their envelope)
+  int bits = 0;
+  uint64_t vertices = 0, triangles = 0, bytes = 0;  // vertices and triangles of the original (bpv per original vertex)
+  double encode_mtri = 0, decode_mtri = 0;
+  bool lossless = false;
+  double rms_rel = -1, max_rel = -1;  // symmetric error relative to the diagonal (--rd)
+};
+
+struct CompareOptions {
+  int runs = 5;
+  bool rd = false;
+  std::shared_ptr<EmbreeDevice> device;
+};
+
+// Symmetric error of `decoded` against `original` (relative to the original's diagonal) into the row (--rd only).
+void measureDecoded(const Mesh& original, const Mesh& decoded, const CompareOptions& opt, CompareRow& row);
+
+// Lossy anchors on one scan (once per scan, independent of --bits): Draco -cl 10 at -qp 8..12; meshoptimizer's
+// simplifier to 50/25/10/5% of the triangles followed by Draco -cl 10 at -qp 10..12; gltfpack -si R -cc (the size
+// of its .glb; when gltfpack is installed).
+void runAnchors(const std::string& scan, const Mesh& mesh, const CompareOptions& opt, std::vector<CompareRow>& rows);
+
+// pm (when this build has it) on the scan quantized at `bits`, as one tile, at several error bounds.
+void runPmSweep(const std::string& scan, const Mesh& mesh, const Grid& grid, const QuantizedMesh& q,
+                const CompareOptions& opt, std::vector<CompareRow>& rows);
+
+// The issue-19 rate-distortion table: per scan, pm's bits per original vertex against the lower envelope of the
+// anchors (interpolated in log RMS) at symmetric RMS between 5e-5 and 3e-4 of the diagonal; the median ratio.
+void writeEnvelopeTable(std::ostream& md, const std::vector<CompareRow>& rows);
+
+}  // namespace scanpress
