@@ -13,6 +13,54 @@
 namespace scanpress {
 namespace {
 
+// The tiles whose bounds meet `box` (the bounds are closed: a tile touching the box is chosen).
+Result<std::vector<const TileEntry*>> tilesInBox(const ContainerFile& file, const std::string& path,
+                                                 const std::array<double, 6>& box) {
+  for (int a = 0; a < 3; ++a)
+    if (!(box[a] <= box[a + 3]))
+      return makeError(ErrorCode::kInvalidArgument, "--box: min must not exceed max on every axis");
+  std::vector<const TileEntry*> chosen;
+  for (const auto& e : file.tiles()) {
+    if (e.vertices == 0) continue;
+    const auto b = tileWorldBounds(e, file.header().grid);
+    bool meets = true;
+    for (int a = 0; a < 3; ++a) meets &= b[a] <= box[a + 3] && box[a] <= b[a + 3];
+    if (meets) chosen.push_back(&e);
+  }
+  if (chosen.empty())
+    return makeError(ErrorCode::kInvalidArgument, path + ": no tile meets the box (`info` lists the tiles' bounds)");
+  return chosen;
+}
+
+// Keeps the triangles wholly inside `box` (a point cloud: the points inside) and the vertices they use.
+QuantizedMesh cropToBox(const QuantizedMesh& q, const Grid& grid, const std::array<double, 6>& box) {
+  std::vector<uint8_t> inside(q.positions.size());
+  for (size_t v = 0; v < q.positions.size(); ++v) {
+    const Vec3d p = grid.dequantize(q.positions[v]);
+    inside[v] = p[0] >= box[0] && p[1] >= box[1] && p[2] >= box[2] && p[0] <= box[3] && p[1] <= box[4] &&
+                p[2] <= box[5];
+  }
+  std::vector<uint32_t> remap(q.positions.size(), UINT32_MAX);
+  QuantizedMesh out;
+  auto keep = [&](uint32_t v) {
+    if (remap[v] == UINT32_MAX) {
+      remap[v] = static_cast<uint32_t>(out.positions.size());
+      out.positions.push_back(q.positions[v]);
+      if (!q.normals.empty()) out.normals.push_back(q.normals[v]);
+      if (!q.colors.empty()) out.colors.push_back(q.colors[v]);
+    }
+    return remap[v];
+  };
+  if (q.triangles.empty()) {
+    for (uint32_t v = 0; v < q.positions.size(); ++v)
+      if (inside[v]) keep(v);
+    return out;
+  }
+  for (const auto& t : q.triangles)
+    if (inside[t[0]] && inside[t[1]] && inside[t[2]]) out.triangles.push_back({keep(t[0]), keep(t[1]), keep(t[2])});
+  return out;
+}
+
 Result<std::vector<const TileEntry*>> chooseTiles(const ContainerFile& file, const std::string& path,
                                                   const std::optional<std::vector<uint32_t>>& tiles) {
   std::vector<const TileEntry*> chosen;
@@ -92,6 +140,15 @@ Result<QuantizedMesh> decodeContainer(const std::string& path, const std::option
   return decodeChosen(file, chosen, level);
 }
 
+std::array<double, 6> tileWorldBounds(const TileEntry& tile, const Grid& grid) {
+  std::array<double, 6> b{};
+  for (int a = 0; a < 3; ++a) {
+    b[a] = grid.origin[a] + tile.lo[a] * grid.cell;
+    b[a + 3] = grid.origin[a] + (double(tile.hi[a]) + 1) * grid.cell;
+  }
+  return b;
+}
+
 bool floatPositionsSuffice(const QuantizedMesh& mesh, const Grid& grid) {
   // One axis at a time through a float variable: GCC 12 -O3 vectorized the three-lane form of this check and
   // dropped two of the double->float roundings, so the check passed where float did not suffice.
@@ -110,7 +167,15 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     return makeError(ErrorCode::kInvalidArgument, "--level and --bytes choose the level two ways: give one of them");
   SP_RETURN_IF_ERROR(checkOutputPath(settings.output, {settings.input}));  // `decode X X` must not replace X
   SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(settings.input));
-  SP_ASSIGN_OR_RETURN(auto chosen, chooseTiles(file, settings.input, settings.tiles));
+  if (settings.box && settings.tiles)
+    return makeError(ErrorCode::kInvalidArgument, "--box and --tiles choose the tiles two ways: give one of them");
+  if (settings.crop && !settings.box) return makeError(ErrorCode::kInvalidArgument, "--crop needs --box");
+  std::vector<const TileEntry*> chosen;
+  if (settings.box) {
+    SP_ASSIGN_OR_RETURN(chosen, tilesInBox(file, settings.input, *settings.box));
+  } else {
+    SP_ASSIGN_OR_RETURN(chosen, chooseTiles(file, settings.input, settings.tiles));
+  }
   const ContainerHeader& header = file.header();
   DecodeResult result;
   std::optional<uint32_t> level = settings.level;
@@ -132,9 +197,10 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     result.level = level;
   }
   SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeChosen(file, chosen, level));
+  if (settings.crop) q = cropToBox(q, header.grid, *settings.box);
   result.vertices = q.positions.size();
   result.faces = q.triangles.size();
-  result.tiles = settings.tiles ? static_cast<uint32_t>(settings.tiles->size()) : header.tile_count;
+  result.tiles = static_cast<uint32_t>(chosen.size());
   result.double_positions = !floatPositionsSuffice(q, header.grid);
   const Mesh mesh = dequantizeMesh(q, header.grid, header.layout);
   SP_RETURN_IF_ERROR(writeMeshFile(settings.output, mesh, WriteOptions{result.double_positions}));

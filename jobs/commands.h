@@ -3,6 +3,7 @@
 // output, reports and exit codes.
 #pragma once
 
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
@@ -22,6 +23,11 @@ struct DecodeSettings {
   std::optional<uint32_t> level;               // progressive codecs: decode this level (grid bits = lossless)
   std::optional<uint64_t> bytes;               // progressive codecs: the finest level within this many payload bytes
                                                // (not with `level`)
+  // World units (xmin, ymin, zmin, xmax, ymax, zmax): decode only the tiles whose bounds meet the box (not with
+  // `tiles`); `crop` also drops every triangle not wholly inside it (and the vertices no triangle then uses; a point
+  // cloud keeps the points inside).
+  std::optional<std::array<double, 6>> box;
+  bool crop = false;
 };
 
 struct DecodeResult {
@@ -31,6 +37,9 @@ struct DecodeResult {
   std::optional<uint32_t> level;  // the level decoded, when one was asked for (directly or by bytes)
   uint64_t level_bytes = 0;       // payload bytes that level needs, over the decoded tiles
 };
+
+// A tile's bounds in world units: the outer faces of the cells its vertices occupy (min x, y, z, max x, y, z).
+std::array<double, 6> tileWorldBounds(const TileEntry& tile, const Grid& grid);
 
 // Decodes the selected tiles and welds them (in memory).
 // With a level, every tile is decoded at that level (progressive codecs only).

@@ -1,6 +1,7 @@
 #include "jobs/report.h"
 
 #include "jobs/batch.h"
+#include "jobs/commands.h"
 
 #include <nlohmann/json.hpp>
 
@@ -216,7 +217,11 @@ std::string containerInfoJson(const ContainerFile& file) {
     json e = {{"id", t.tile_id},        {"codec", codecName(t.codec)}, {"codec_version", t.codec_version},
               {"bytes", t.chunk_bytes}, {"offset", t.offset},          {"vertices", t.vertices},
               {"faces", t.faces}};
-    if (t.vertices > 0) e["bounds"] = {{t.lo[0], t.lo[1], t.lo[2]}, {t.hi[0], t.hi[1], t.hi[2]}};
+    if (t.vertices > 0) {
+      e["bounds"] = {{t.lo[0], t.lo[1], t.lo[2]}, {t.hi[0], t.hi[1], t.hi[2]}};
+      const auto w = tileWorldBounds(t, h.grid);
+      e["world_bounds"] = {{w[0], w[1], w[2]}, {w[3], w[4], w[5]}};
+    }
     auto levels = file.tileLevels(t);
     if (!levels.isOk()) {
       e["levels_error"] = levels.status().toString();
@@ -263,6 +268,10 @@ std::string containerInfoText(const ContainerFile& file) {
   for (const auto& t : file.tiles()) {
     os << "    tile " << t.tile_id << ": " << codecName(t.codec) << " v" << t.codec_version << ", " << t.vertices
        << " vertices, " << t.faces << " faces, " << t.chunk_bytes << " bytes";
+    if (t.vertices > 0) {
+      const auto w = tileWorldBounds(t, h.grid);
+      os << ", box " << w[0] << "," << w[1] << "," << w[2] << "," << w[3] << "," << w[4] << "," << w[5];
+    }
     // Progressive tiles: their levels, first and last, with what they mean.
     auto levels = file.tileLevels(t);
     if (levels.isOk() && !levels->empty())

@@ -2,10 +2,12 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <array>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "jobs/mesh_io/mesh_reader.h"
 #include "jobs_util.h"
 
 namespace scanpress {
@@ -305,6 +307,80 @@ TEST(Cli, InfoAndReportSayWhichVertexCountTheyUse) {
   EXPECT_TRUE(info["counts"].contains("vertices"));
   ASSERT_EQ(run("info '" + spz + "'", &out), 0) << out;
   EXPECT_NE(out.find(" (decoded, summed over tiles: a border vertex once per tile)"), std::string::npos) << out;
+}
+
+// decode --box: exactly the tiles whose world bounds (from `info --json`) meet the box; --crop: exactly the triangles
+// of the full decode that lie wholly inside it (brute force over the full decode); tile bounds hold their vertices.
+TEST(Cli, DecodeByBoxInWorldUnits) {
+  testing::TempDir dir;
+  std::string out;
+  const std::string spz = dir.file("b.spz");
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + spz + "' --tile-triangles 8000 --quiet", &out), 0) << out;
+  ASSERT_EQ(run("info '" + spz + "' --json", &out), 0) << out;
+  const auto info = nlohmann::json::parse(out);
+  ASSERT_GT(info["tiles"].size(), 3u);
+  std::vector<std::array<double, 6>> bounds;
+  for (const auto& t : info["tiles"]) {
+    const auto& w = t["world_bounds"];
+    bounds.push_back({w[0][0], w[0][1], w[0][2], w[1][0], w[1][1], w[1][2]});
+  }
+  // Every decoded vertex of tile 1 lies in its bounds.
+  ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("t1.ply") + "' --tiles 1 --quiet", &out), 0) << out;
+  auto t1 = readMeshFile(dir.file("t1.ply"));
+  ASSERT_TRUE(t1.isOk());
+  for (const auto& p : t1->positions)
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_GE(p[a], bounds[1][a]);
+      EXPECT_LE(p[a], bounds[1][a + 3]);
+    }
+  // A box around the middle of tile 1's bounds.
+  std::array<double, 6> box;
+  for (int a = 0; a < 3; ++a) {
+    const double c = (bounds[1][a] + bounds[1][a + 3]) / 2, h = (bounds[1][a + 3] - bounds[1][a]) / 3;
+    box[a] = c - h;
+    box[a + 3] = c + h;
+  }
+  size_t meeting = 0;
+  for (const auto& b : bounds) {
+    bool meets = true;
+    for (int a = 0; a < 3; ++a) meets &= b[a] <= box[a + 3] && box[a] <= b[a + 3];
+    meeting += meets;
+  }
+  ASSERT_LT(meeting, bounds.size());
+  char arg[512];
+  std::snprintf(arg, sizeof arg, "%.17g,%.17g,%.17g,%.17g,%.17g,%.17g", box[0], box[1], box[2], box[3], box[4], box[5]);
+  ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("box.ply") + "' --box " + arg, &out), 0) << out;
+  EXPECT_NE(out.find("from " + std::to_string(meeting) + " tile(s)"), std::string::npos) << out;
+  // --crop against brute force over the full decode.
+  ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("all.ply") + "' --quiet", &out), 0) << out;
+  ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("crop.ply") + "' --quiet --crop --box " + arg, &out), 0) << out;
+  auto all = readMeshFile(dir.file("all.ply"));
+  auto crop = readMeshFile(dir.file("crop.ply"));
+  ASSERT_TRUE(all.isOk() && crop.isOk());
+  auto inside = [&](const Vec3d& p) {
+    for (int a = 0; a < 3; ++a)
+      if (p[a] < box[a] || p[a] > box[a + 3]) return false;
+    return true;
+  };
+  size_t expected = 0;
+  for (const auto& t : all->triangles)
+    expected += inside(all->positions[t[0]]) && inside(all->positions[t[1]]) && inside(all->positions[t[2]]);
+  EXPECT_GT(expected, 0u);
+  EXPECT_EQ(crop->triangles.size(), expected);
+  for (const auto& p : crop->positions) EXPECT_TRUE(inside(p));
+  // Wrong uses.
+  EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --box " + arg + " --tiles 1", &out), 1);
+  EXPECT_NE(out.find("--box and --tiles"), std::string::npos) << out;
+  EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --crop", &out), 1);
+  EXPECT_NE(out.find("--crop needs --box"), std::string::npos) << out;
+  EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --box 1,1,1,0,0,0", &out), 1);
+  EXPECT_NE(out.find("min must not exceed max"), std::string::npos) << out;
+  EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --box 1e9,1e9,1e9,2e9,2e9,2e9", &out), 1);
+  EXPECT_NE(out.find("no tile meets the box"), std::string::npos) << out;
+  EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("x.ply") + "' --box 1,2,3", &out), 1);
+  EXPECT_FALSE(fs::exists(dir.file("x.ply")));
+  ASSERT_EQ(run("info '" + spz + "'", &out), 0) << out;
+  EXPECT_NE(out.find(", box "), std::string::npos) << out;
 }
 
 // --quiet prints nothing, whatever the thread count (oneTBB warned about more threads than cores).

@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <exception>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -143,6 +144,10 @@ centers of the container's grid; they are written as float, or as double when fl
 
 options:
   --tiles ID,ID,...   decode only these tiles (welded together)
+  --box X0,Y0,Z0,X1,Y1,Z1
+                      decode only the tiles whose bounds meet this box, in world units (`info` prints each tile's
+                      box); not with --tiles
+  --crop              with --box: keep only the triangles wholly inside the box
   --level L           progressive codecs: every tile at level L, as its codec numbers levels (`info` lists each
                       level and what it means; kdtree, octree: cells of 2^(bits-L) grid cells as vertices at their
                       centers with that level's triangles, L = grid bits is lossless)
@@ -326,7 +331,8 @@ int runEncode(int argc, char** argv) {
 int runDecode(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {"--tiles", "--level", "--bytes"}, {"--quiet", "--help"}, args, error))
+  if (!parseArgs(argc, argv, 2, {"--tiles", "--level", "--bytes", "--box"}, {"--quiet", "--crop", "--help"}, args,
+                 error))
     return usage(error, "decode");
   if (args.has("--help")) return std::fputs(kDecodeHelp, stdout), 0;
   if (args.positional.size() != 2) return usage("decode needs IN.spz and OUT", "decode");
@@ -338,6 +344,13 @@ int runDecode(int argc, char** argv) {
     if (!ids.isOk()) return usage(ids.status().message(), "decode");
     s.tiles.emplace(ids->begin(), ids->end());
   }
+  if (const auto* b = args.get("--box")) {
+    auto v = parseNumberList(*b, -std::numeric_limits<double>::max(), std::numeric_limits<double>::max(), 6, "--box");
+    if (!v.isOk()) return usage(v.status().message(), "decode");
+    s.box.emplace();
+    std::copy(v->begin(), v->end(), s.box->begin());
+  }
+  s.crop = args.has("--crop");
   if (!unsignedOption(args, "--level", UINT32_MAX, s.level, error) ||
       !unsignedOption(args, "--bytes", UINT64_MAX, s.bytes, error))
     return usage(error, "decode");
