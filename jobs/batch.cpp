@@ -58,7 +58,7 @@ Status renderErrorPicture(const EncodeSettings& s, const std::string& png, std::
 // report, error picture, summary) that is one of the inputs (by path, or by device and inode: hard links,
 // symlinks), that another output of the job writes too, or that exists as a FIFO, device or socket. The error
 // names the JSON pointer of the name that makes the output (exit 1).
-Status checkJobOutputs(const JobSettings& job, const std::vector<std::string>& inputs) {
+Status checkJobOutputs(const JobSettings& job, const std::vector<JobInput>& inputs) {
   const std::string where = job.config_path.empty() ? "" : job.config_path + ": ";
   auto canonical = [](const std::string& p) {
     std::error_code ec;
@@ -67,7 +67,7 @@ Status checkJobOutputs(const JobSettings& job, const std::vector<std::string>& i
   };
   std::map<std::string, std::string> input_paths;            // canonical path -> input
   std::map<std::pair<dev_t, ino_t>, std::string> input_ids;  // existing inputs' identities -> input
-  for (const std::string& in : inputs) {
+  for (const auto& [in, in_dir] : inputs) {
     input_paths.emplace(canonical(in), in);
     struct stat st {};
     if (::stat(in.c_str(), &st) == 0) input_ids.emplace(std::make_pair(st.st_dev, st.st_ino), in);
@@ -93,12 +93,12 @@ Status checkJobOutputs(const JobSettings& job, const std::vector<std::string>& i
     return kind.isOk() ? kind : Status(kind.code(), where + pointer + ": " + kind.message());
   };
   const fs::path dir(job.output_directory);
-  for (const std::string& in : inputs) {
-    SP_RETURN_IF_ERROR(plan((dir / outputName(job.output_name, in)).string(), "/output/name"));
+  for (const auto& [in, sub] : inputs) {
+    SP_RETURN_IF_ERROR(plan((dir / outputName(job.output_name, in, sub)).string(), "/output/name"));
     if (!job.report_name.empty())
-      SP_RETURN_IF_ERROR(plan((dir / outputName(job.report_name, in)).string(), "/output/report"));
+      SP_RETURN_IF_ERROR(plan((dir / outputName(job.report_name, in, sub)).string(), "/output/report"));
     if (job.encode.measure.enabled && job.encode.measure.render)
-      SP_RETURN_IF_ERROR(plan((dir / outputName(kErrorPictureName, in)).string(), "/measure/render"));
+      SP_RETURN_IF_ERROR(plan((dir / outputName(kErrorPictureName, in, sub)).string(), "/measure/render"));
   }
   if (!job.summary_name.empty()) SP_RETURN_IF_ERROR(plan((dir / job.summary_name).string(), "/output/summary"));
   return Status::ok();
@@ -122,32 +122,79 @@ int BatchResult::exitCode() const {
   return worst;
 }
 
-Result<std::vector<std::string>> expandInputs(const JobSettings& job) {
-  std::set<std::string> files;
+namespace {
+
+// Adds to `out` the files under `base` that match components [i, end) of a glob (see expandInputs).
+void globWalk(const fs::path& base, const std::vector<std::string>& comps, size_t i, std::vector<fs::path>& out) {
+  std::error_code ec;
+  if (i == comps.size()) {
+    if (fs::is_regular_file(base, ec)) out.push_back(base);
+    return;
+  }
+  const std::string& c = comps[i];
+  if (c == "**") {
+    globWalk(base, comps, i + 1, out);  // no directory
+    for (fs::directory_iterator it(base, ec), end; !ec && it != end; it.increment(ec))
+      if (it->is_directory(ec) && !it->is_symlink(ec) && it->path().filename().string()[0] != '.')
+        globWalk(it->path(), comps, i, out);
+    return;
+  }
+  if (!hasWildcard(c)) return globWalk(base / c, comps, i + 1, out);
+  std::vector<fs::path> entries;  // sorted, so that the walk is deterministic
+  for (fs::directory_iterator it(base, ec), end; !ec && it != end; it.increment(ec))
+    if (::fnmatch(c.c_str(), it->path().filename().c_str(), FNM_PERIOD) == 0) entries.push_back(it->path());
+  std::sort(entries.begin(), entries.end());
+  for (const auto& e : entries) globWalk(e, comps, i + 1, out);
+}
+
+// The subfolder of `file` under `root` ("" when it is directly in it).
+std::string subfolder(const fs::path& file, const fs::path& root) {
+  const fs::path rel = file.parent_path().lexically_relative(root);
+  const std::string s = rel.lexically_normal().string();
+  return s == "." || s.empty() ? "" : s;
+}
+
+}  // namespace
+
+Result<std::vector<JobInput>> expandInputs(const JobSettings& job) {
+  std::map<std::string, std::string> files;  // path -> subfolder
   const std::string where = job.config_path.empty() ? "inputs" : job.config_path;
   for (size_t i = 0; i < job.inputs.size(); ++i) {
     const std::string& in = job.inputs[i];
     const std::string pointer = where + ": /inputs/" + std::to_string(i);
     std::error_code ec;
-    const fs::path p(in);
+    const fs::path p = fs::path(in).lexically_normal();
     size_t found = 0;
-    if (hasWildcard(p.filename().string())) {
-      if (hasWildcard(p.parent_path().string()))
-        return makeError(ErrorCode::kInvalidArgument, pointer + ": wildcards are allowed in the file name only");
-      const fs::path dir = p.has_parent_path() ? p.parent_path() : fs::path(".");
-      for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-        if (!it->is_regular_file(ec)) continue;
-        if (::fnmatch(p.filename().c_str(), it->path().filename().c_str(), 0) == 0) {
-          files.insert(it->path().lexically_normal().string());
-          ++found;
+    if (hasWildcard(in)) {
+      // The root: the components before the first wildcard.
+      std::vector<std::string> comps;
+      fs::path root;
+      bool wild = false;
+      for (const auto& c : p) {
+        const std::string s = c.string();
+        if (!wild && (hasWildcard(s) || s == "**")) wild = true;
+        if (wild) {
+          if (s == "..") return makeError(ErrorCode::kInvalidArgument, pointer + ": no '..' after a wildcard");
+          comps.push_back(s);
+        } else {
+          root /= c;
         }
+      }
+      if (comps.back() == "**")
+        return makeError(ErrorCode::kInvalidArgument, pointer + ": '**' must be followed by a file name pattern");
+      if (root.empty()) root = ".";
+      std::vector<fs::path> matched;
+      globWalk(root, comps, 0, matched);
+      for (const auto& m : matched) {
+        files.emplace(m.lexically_normal().string(), subfolder(m, root));
+        ++found;
       }
       if (found == 0) return makeError(ErrorCode::kInvalidArgument, pointer + ": '" + in + "' matches no file");
     } else if (fs::is_directory(p, ec)) {
       auto add = [&](const fs::directory_entry& e) {
         std::error_code e2;
         if (e.is_regular_file(e2) && isMeshFile(e.path())) {
-          files.insert(e.path().lexically_normal().string());
+          files.emplace(e.path().lexically_normal().string(), subfolder(e.path(), p));
           ++found;
         }
       };
@@ -159,13 +206,15 @@ Result<std::vector<std::string>> expandInputs(const JobSettings& job) {
       if (found == 0)
         return makeError(ErrorCode::kInvalidArgument, pointer + ": directory '" + in + "' holds no mesh file");
     } else {
-      files.insert(p.lexically_normal().string());  // a missing file fails as its own entry
+      files.emplace(p.string(), "");  // a missing file fails as its own entry
     }
   }
-  return std::vector<std::string>(files.begin(), files.end());
+  std::vector<JobInput> out;
+  for (auto& [path, dir] : files) out.push_back({path, dir});
+  return out;
 }
 
-std::string outputName(const std::string& pattern, const std::string& input) {
+std::string outputName(const std::string& pattern, const std::string& input, const std::string& dir) {
   const std::string name = fs::path(input).filename().string();
   std::string stem = name;
   auto strip = [&](const char* ext) {
@@ -185,7 +234,9 @@ std::string outputName(const std::string& pattern, const std::string& input) {
     if (strip(ext)) break;
   std::string out;
   for (size_t i = 0; i < pattern.size(); ++i) {
-    if (pattern.compare(i, 6, "{stem}") == 0) out += stem, i += 5;
+    if (pattern.compare(i, 6, "{dir}/") == 0 && dir.empty()) i += 5;
+    else if (pattern.compare(i, 5, "{dir}") == 0) out += dir, i += 4;
+    else if (pattern.compare(i, 6, "{stem}") == 0) out += stem, i += 5;
     else if (pattern.compare(i, 6, "{name}") == 0) out += name, i += 5;
     else out += pattern[i];
   }
@@ -244,9 +295,8 @@ static void encodeOne(const JobSettings& job, const EncodeSettings& s, const std
           break;
         }
     if (s.measure.render && f.state == FileOutcome::State::kOk) {
-      Status w = renderErrorPicture(s,
-                                    (fs::path(job.output_directory) / outputName(kErrorPictureName, f.input)).string(),
-                                    device);
+      Status w = renderErrorPicture(
+          s, (fs::path(job.output_directory) / outputName(kErrorPictureName, f.input, f.subfolder)).string(), device);
       if (!w.isOk()) f.state = FileOutcome::State::kFailed, f.error = w;
     }
     if (!f.report.empty()) {
@@ -261,7 +311,7 @@ static void encodeOne(const JobSettings& job, const EncodeSettings& s, const std
 }
 
 Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options, const PipelineHooks* hooks) {
-  SP_ASSIGN_OR_RETURN(std::vector<std::string> inputs, expandInputs(job));
+  SP_ASSIGN_OR_RETURN(std::vector<JobInput> inputs, expandInputs(job));
   SP_RETURN_IF_ERROR(checkJobOutputs(job, inputs));
   std::error_code ec;
   fs::create_directories(job.output_directory, ec);
@@ -278,10 +328,14 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options, co
   }
   for (size_t i = 0; i < inputs.size(); ++i) {
     FileOutcome f;
-    f.input = inputs[i];
-    f.output = (fs::path(job.output_directory) / outputName(job.output_name, f.input)).string();
+    f.input = inputs[i].path;
+    f.subfolder = inputs[i].dir;
+    f.output = (fs::path(job.output_directory) / outputName(job.output_name, f.input, inputs[i].dir)).string();
     if (!job.report_name.empty())
-      f.report = (fs::path(job.output_directory) / outputName(job.report_name, f.input)).string();
+      f.report = (fs::path(job.output_directory) / outputName(job.report_name, f.input, inputs[i].dir)).string();
+    // {dir} names subfolders of the output directory: created as needed (a failure fails this input).
+    for (const std::string* path : {&f.output, &f.report})
+      if (!path->empty()) fs::create_directories(fs::path(*path).parent_path(), ec);
     EncodeSettings s = job.encode;
     s.input = f.input;
     s.output = f.output;

@@ -22,6 +22,7 @@ struct RunOptions {
 struct FileOutcome {
   enum class State { kOk, kSkipped, kFailed };
   std::string input, output, report;
+  std::string subfolder;  // the input's subfolder ({dir} in output names)
   State state = State::kFailed;
   Status error;
   bool has_result = false;
@@ -41,13 +42,25 @@ struct BatchResult {
   int exitCode() const;
 };
 
-// Files named by the job's inputs, sorted, without duplicates. Errors (kInvalidArgument, naming /inputs/N) for
-// a glob or directory that yields no mesh file; a plain file name is taken as it is (a missing file fails later,
-// as that file's entry).
-Result<std::vector<std::string>> expandInputs(const JobSettings& job);
+// One file named by a job's inputs, with its subfolder: the directory that holds it relative to the root of the
+// input that named it (a directory input: that directory; a glob: its components before the first wildcard; a
+// plain file: none, ""). Never absolute, never holding `..`.
+struct JobInput {
+  std::string path;
+  std::string dir;
+};
 
-// `{stem}` / `{name}` substitution; stem is the file name without .zst and the mesh extension.
-std::string outputName(const std::string& pattern, const std::string& input);
+// Files named by the job's inputs, sorted, without duplicates (the first input that names a file gives its
+// subfolder). Globs may have wildcards (`*`, `?`, `[...]`) in any component, and `**` as a whole component
+// matches any number of directories (symlinked directories are not followed); as in the shell, no wildcard matches
+// a name that starts with a dot. Errors (kInvalidArgument, naming
+// /inputs/N) for a glob or directory that yields no mesh file; a plain file name is taken as it is (a missing file
+// fails later, as that file's entry).
+Result<std::vector<JobInput>> expandInputs(const JobSettings& job);
+
+// `{stem}` / `{name}` / `{dir}` substitution; stem is the file name without .zst and the mesh extension, dir the
+// input's subfolder (`{dir}/` vanishes when it has none).
+std::string outputName(const std::string& pattern, const std::string& input, const std::string& dir = "");
 
 // Hex fingerprint of what determines an output's bytes, for resume.
 std::string settingsFingerprint(const EncodeSettings& settings);

@@ -193,7 +193,7 @@ bool validPattern(const std::string& p) {
       const size_t e = p.find('}', i);
       if (e == std::string::npos) return false;
       const std::string name = p.substr(i + 1, e - i - 1);
-      if (name != "stem" && name != "name") return false;
+      if (name != "stem" && name != "name" && name != "dir") return false;
       i = e;
     }
   return true;
@@ -256,15 +256,23 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     o.string("summary", s.summary_name);
     o.finish();
     if (error.isOk() && !validPattern(s.output_name))
-      o.fail("/output/name", "unknown placeholder (use {stem} or {name})");
+      o.fail("/output/name", "unknown placeholder (use {stem}, {name} or {dir})");
     if (error.isOk() && !validPattern(s.report_name))
-      o.fail("/output/report", "unknown placeholder (use {stem} or {name})");
-    // Names of files inside the output directory: no '/', so none escapes it (`../x`) or names a directory.
+      o.fail("/output/report", "unknown placeholder (use {stem}, {name} or {dir})");
+    // Names of files inside the output directory: no '/' (so none escapes it, `../x`, or names a directory), except
+    // right after `{dir}`, the input's subfolder (which never holds `..`: see expandInputs).
     for (auto [pointer, name] : {std::pair<const char*, const std::string*>{"/output/name", &s.output_name},
                                  {"/output/report", &s.report_name},
-                                 {"/output/summary", &s.summary_name}})
-      if (error.isOk() && (name->find('/') != std::string::npos || *name == "." || *name == ".."))
-        o.fail(pointer, "must be a file name (no '/'): files are written inside /output/directory");
+                                 {"/output/summary", &s.summary_name}}) {
+      std::string plain = *name;
+      for (size_t at; (at = plain.find("{dir}/")) != std::string::npos;) plain.erase(at, 6);
+      if (error.isOk() && (plain.find('/') != std::string::npos || plain.empty() || plain == "." || plain == ".."))
+        o.fail(pointer, std::string("must be a file name (no '/'") +
+                            (*name == s.summary_name ? "" : " but after {dir}") +
+                            "): files are written inside /output/directory");
+      if (error.isOk() && name == &s.summary_name && name->find("{dir}") != std::string::npos)
+        o.fail(pointer, "must be a file name: the summary is one file for the whole job");
+    }
     if (error.isOk() && s.report_name == s.output_name)
       o.fail("/output/report", "must differ from /output/name: the report would replace the container");
   }

@@ -76,6 +76,11 @@ Result<std::unique_ptr<AtomicFile>> AtomicFile::create(const std::string& path) 
   name += "-";
   name += std::to_string(g_temp_counter++);
   const std::string temp = (directoryOf(target) / name).string();
+  // A missing output folder is created (as `mkdir -p`; it stays if the write then fails).
+  if (std::error_code ec; !fs::is_directory(directoryOf(target), ec)) {
+    fs::create_directories(directoryOf(target), ec);
+    if (ec) return errnoStatus(ec.value(), path, "cannot create the output's folder " + directoryOf(target).string());
+  }
   // Created under the cleanup registry's lock, so that a signal's cleanup either sees it or runs before it
   // exists.
   int fd = -1, err = 0;

@@ -26,6 +26,7 @@ namespace scanpress {
 
 class AtomicFile : public ByteSink {
  public:
+  // Creates the temporary next to `path` (and `path`'s folder when missing, as `mkdir -p`).
   static Result<std::unique_ptr<AtomicFile>> create(const std::string& path);
   ~AtomicFile() override;
   AtomicFile(const AtomicFile&) = delete;

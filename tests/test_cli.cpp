@@ -182,7 +182,14 @@ TEST(Cli, EnvironmentErrorsExitThree) {
   std::string out;
   EXPECT_EQ(run("encode '" + dir.file("missing.ply") + "' '" + dir.file("o.spz") + "'", &out), 3);
   EXPECT_NE(out.find("missing.ply"), std::string::npos);
-  EXPECT_EQ(run("encode '" + kBunny + "' '" + dir.file("no/such/dir/o.spz") + "'", &out), 3);
+  // A missing output folder is created (issue 24); one that cannot be (a file in the way) is an environment error.
+  EXPECT_EQ(run("encode '" + kBunny + "' '" + dir.file("new/dir/o.spz") + "' --quiet", &out), 0) << out;
+  EXPECT_TRUE(fs::is_regular_file(dir.file("new/dir/o.spz")));
+  EXPECT_EQ(run("decode '" + dir.file("new/dir/o.spz") + "' '" + dir.file("other/b.ply") + "' --quiet", &out), 0);
+  EXPECT_TRUE(fs::is_regular_file(dir.file("other/b.ply")));
+  testing::writeBytes(dir.file("file"), "x");
+  EXPECT_EQ(run("encode '" + kBunny + "' '" + dir.file("file/dir/o.spz") + "'", &out), 3);
+  EXPECT_NE(out.find("cannot create the output's folder"), std::string::npos) << out;
 }
 
 // A full disk, simulated with a file-size limit: the write fails, the exit code says environment, and neither

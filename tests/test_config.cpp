@@ -272,6 +272,55 @@ TEST(Batch, OutputNames) {
   EXPECT_EQ(outputName("{stem}.spz", "/a/b/SCAN.PLY"), "SCAN.spz");
   EXPECT_EQ(outputName("{name}.spz", "/a/b/scan.obj"), "scan.obj.spz");
   EXPECT_EQ(outputName("x-{stem}-{stem}.spz", "scan.stl"), "x-scan-scan.spz");
+  EXPECT_EQ(outputName("{dir}/{stem}.spz", "/a/b/scan.ply", "b"), "b/scan.spz");
+  EXPECT_EQ(outputName("{dir}/{stem}.spz", "/a/b/scan.ply", "a/b"), "a/b/scan.spz");
+  EXPECT_EQ(outputName("{dir}/{stem}.spz", "scan.ply", ""), "scan.spz");
+}
+
+// Archives are often scan_001/mesh.obj, scan_002/mesh.obj: `{dir}` mirrors the input's subfolder (created in the
+// output directory), globs match in directory components and `**` spans any depth; without `{dir}` such inputs
+// collide, which is an error before anything is written.
+TEST(Batch, SubfoldersMirrorInputsAndGlobsSpanDirectories) {
+  testing::TempDir dir;
+  for (const char* sub : {"archive/scan_001", "archive/scan_002", "archive/deep/x/scan_003", "archive/.hidden"}) {
+    fs::create_directories(dir.file(sub));
+    ASSERT_TRUE(writeObj(dir.file(std::string(sub) + "/mesh.obj"), testing::octahedron()).isOk());
+  }
+  const std::string job = dir.file("job.json");
+  std::string out;
+  auto runWith = [&](const std::string& inputs, const std::string& extra, const std::string& out_dir) {
+    testing::writeBytes(job, "{\"inputs\": " + inputs + ", \"output\": {\"directory\": \"" + out_dir +
+                                 "\", \"name\": \"{dir}/{stem}.spz\", \"report\": \"{dir}/{stem}.json\"}" + extra +
+                                 "}");
+    return run("run '" + job + "' --quiet", &out);
+  };
+  ASSERT_EQ(runWith("[\"archive/**/mesh.obj\"]", "", "o1"), 0) << out;
+  for (const char* f : {"o1/scan_001/mesh.spz", "o1/scan_002/mesh.spz", "o1/deep/x/scan_003/mesh.spz",
+                        "o1/scan_001/mesh.json", "o1/deep/x/scan_003/mesh.json"})
+    EXPECT_TRUE(fs::is_regular_file(dir.file(f))) << f;
+  EXPECT_FALSE(fs::exists(dir.file("o1/.hidden"))) << "wildcards do not match hidden names";
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir.file("o1/summary.json")))["files"].size(), 3u);
+  ASSERT_EQ(runWith("[\"archive/scan_*/mesh.obj\"]", "", "o2"), 0) << out;
+  EXPECT_TRUE(fs::is_regular_file(dir.file("o2/scan_002/mesh.spz")));
+  EXPECT_FALSE(fs::exists(dir.file("o2/deep")));
+  ASSERT_EQ(runWith("[\"archive\"]", ", \"recursive\": true", "o3"), 0) << out;
+  EXPECT_TRUE(fs::is_regular_file(dir.file("o3/deep/x/scan_003/mesh.spz")));
+  EXPECT_TRUE(fs::is_regular_file(dir.file("o3/.hidden/mesh.spz")));  // a directory input takes every mesh file
+  // Without {dir} the inputs collide.
+  testing::writeBytes(job, R"({"inputs": ["archive/**/mesh.obj"], "output": {"directory": "o4"}})");
+  EXPECT_EQ(run("run '" + job + "' --quiet", &out), 1);
+  EXPECT_NE(out.find("two inputs map to the output"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir.file("o4/mesh.spz")));
+  // `**` must lead to a file name; `{dir}` cannot smuggle `..` or a folder into the summary.
+  testing::writeBytes(job, R"({"inputs": ["archive/**"]})");
+  EXPECT_EQ(run("run '" + job + "' --quiet", &out), 1);
+  EXPECT_NE(out.find("'**' must be followed by a file name pattern"), std::string::npos) << out;
+  testing::writeBytes(job, R"({"inputs": ["archive"], "output": {"name": "{dir}/../{stem}.spz"}})");
+  EXPECT_EQ(run("run '" + job + "' --quiet", &out), 1);
+  EXPECT_NE(out.find("/output/name: must be a file name"), std::string::npos) << out;
+  testing::writeBytes(job, R"({"inputs": ["archive"], "output": {"summary": "{dir}/s.json"}})");
+  EXPECT_EQ(run("run '" + job + "' --quiet", &out), 1);
+  EXPECT_NE(out.find("/output/summary"), std::string::npos) << out;
 }
 
 // /strict: an input holding what the container would not keep fails (exit 2, naming it); the others run; the
