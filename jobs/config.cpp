@@ -7,6 +7,7 @@
 #include <set>
 #include <sstream>
 
+#include "jobs/file_io.h"
 #include "jobs/numbers.h"
 
 namespace scanpress {
@@ -257,6 +258,8 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     o.finish();
     if (error.isOk() && !validPattern(s.output_name))
       o.fail("/output/name", "unknown placeholder (use {stem}, {name} or {dir})");
+    if (error.isOk())
+      if (Status named = checkContainerName(s.output_name); !named.isOk()) o.fail("/output/name", named.message());
     if (error.isOk() && !validPattern(s.report_name))
       o.fail("/output/report", "unknown placeholder (use {stem}, {name} or {dir})");
     // Names of files inside the output directory: no '/' (so none escapes it, `../x`, or names a directory), except

@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cctype>
 #include <cerrno>
 #include <filesystem>
 
@@ -178,6 +179,23 @@ bool sameFile(const std::string& a, const std::string& b) {
   std::error_code ea, eb;
   const fs::path ca = fs::weakly_canonical(fs::absolute(a, ea), ea), cb = fs::weakly_canonical(fs::absolute(b, eb), eb);
   return !ea && !eb && ca == cb;
+}
+
+std::string lowerExtension(const std::string& path) {
+  std::string ext = fs::path(path).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
+}
+
+Status checkContainerName(const std::string& path) {
+  std::string name = path;
+  if (lowerExtension(name) == ".zst") name.resize(name.size() - 4);
+  const std::string ext = lowerExtension(name);
+  for (const char* other : {".ply", ".obj", ".stl", ".off", ".glb", ".gltf", ".png", ".jpg", ".jpeg", ".json"})
+    if (ext == other)
+      return makeError(ErrorCode::kInvalidArgument, path + ": a scanpress container would be written under a " + ext +
+                                                        " name; name it .spz (decode writes meshes)");
+  return Status::ok();
 }
 
 Status checkOutputPath(const std::string& output, const std::vector<std::string>& inputs, const std::string& what) {

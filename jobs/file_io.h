@@ -67,6 +67,12 @@ bool sameFile(const std::string& a, const std::string& b);
 // Refuses an output that would destroy something, before any work: one of `inputs` (sameFile;
 // kInvalidArgument), an existing FIFO, device or socket (after following symlinks; kInvalidArgument), a
 // directory (kIo). `what` names the output in the message (e.g. "output", "report").
+// The extension of `path`, lowercased, with its dot (".png"; "" when none).
+std::string lowerExtension(const std::string& path);
+// A container's name must not claim another format: kInvalidArgument for a mesh, glTF, image or JSON extension
+// (`encode X out.glb` would write a container under a glTF name).
+Status checkContainerName(const std::string& path);
+
 Status checkOutputPath(const std::string& output, const std::vector<std::string>& inputs,
                        const std::string& what = "output");
 

@@ -16,6 +16,7 @@ namespace {
 namespace fs = std::filesystem;
 
 int run(const std::string& args, std::string* out = nullptr) { return testing::runScanpress(args, out); }
+std::string slurp(const std::string& path) { return testing::readText(path); }
 
 // Files in `dir` whose names contain ".tmp-" (left-over temporaries).
 int temporaries(const std::string& dir) {
@@ -388,6 +389,62 @@ TEST(Cli, DecodeByBoxInWorldUnits) {
   EXPECT_FALSE(fs::exists(dir.file("x.ply")));
   ASSERT_EQ(run("info '" + spz + "'", &out), 0) << out;
   EXPECT_NE(out.find(", box "), std::string::npos) << out;
+}
+
+// `-` is stdin or stdout for encode and decode (and --report): through pipes, the bytes equal those of the same
+// commands on files; messages go to stderr; failures leave nothing in the temporary directory and name <stdin>.
+// Names that claim another format are refused.
+TEST(Cli, StdinAndStdoutThroughPipes) {
+  testing::TempDir dir;
+  fs::create_directories(dir.file("tmp"));
+  const std::string bin = std::string("TMPDIR='") + dir.file("tmp") + "' '" + SCANPRESS_BIN + "'";
+  auto sh = [&](const std::string& cmd) {
+    const int status = std::system(cmd.c_str());
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  };
+  std::string out;
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + dir.file("file.spz") + "' --codec kdtree --quiet", &out), 0) << out;
+  ASSERT_EQ(run("decode '" + dir.file("file.spz") + "' '" + dir.file("file.ply") + "' --quiet", &out), 0) << out;
+  ASSERT_EQ(sh("cat '" + kBunny + "' | " + bin + " encode - - --format ply.zst --codec kdtree 2>'" +
+               dir.file("err.txt") + "' > '" + dir.file("pipe.spz") + "'"),
+            0);
+  EXPECT_EQ(slurp(dir.file("pipe.spz")), slurp(dir.file("file.spz")));
+  EXPECT_NE(slurp(dir.file("err.txt")).find("<stdin> -> <stdout>"), std::string::npos) << slurp(dir.file("err.txt"));
+  ASSERT_EQ(sh(bin + " decode - - --format ply --quiet < '" + dir.file("pipe.spz") + "' > '" + dir.file("pipe.ply") +
+               "'"),
+            0);
+  EXPECT_EQ(slurp(dir.file("pipe.ply")), slurp(dir.file("file.ply")));
+  // The report on stdout, the container to a file.
+  ASSERT_EQ(sh(bin + " encode '" + kBunny + "' '" + dir.file("r.spz") + "' --report - > '" + dir.file("r.json") +
+               "' 2>/dev/null"),
+            0);
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir.file("r.json")))["faces"], 69451);
+  // Failures: a clear message naming <stdin>, exit 2, nothing on stdout, nothing left in the temporary directory.
+  EXPECT_EQ(sh("printf garbage | " + bin + " encode - - --format ply > '" + dir.file("bad.spz") + "' 2>'" +
+               dir.file("err.txt") + "'"),
+            2);
+  EXPECT_NE(slurp(dir.file("err.txt")).find("<stdin>:1: not a PLY file"), std::string::npos)
+      << slurp(dir.file("err.txt"));
+  EXPECT_EQ(fs::file_size(dir.file("bad.spz")), 0u);
+  EXPECT_EQ(sh("printf garbage | " + bin + " decode - '" + dir.file("x.ply") + "' 2>/dev/null"), 2);
+  EXPECT_TRUE(fs::is_empty(dir.file("tmp")));
+  // Wrong uses.
+  EXPECT_EQ(run("encode - o.spz", &out), 1);
+  EXPECT_NE(out.find("needs --format"), std::string::npos) << out;
+  EXPECT_EQ(run("encode '" + kBunny + "' o.spz --format ply", &out), 1);
+  EXPECT_NE(out.find("--format is for a mesh on stdin"), std::string::npos) << out;
+  EXPECT_EQ(run("encode - - --format ply --report -", &out), 1);
+  EXPECT_NE(out.find("cannot both be -"), std::string::npos) << out;
+  EXPECT_EQ(run("decode '" + dir.file("file.spz") + "' -", &out), 1);
+  EXPECT_NE(out.find("needs --format ply|obj"), std::string::npos) << out;
+  for (const char* name : {"x.glb", "x.ply", "X.OBJ", "x.ply.zst", "x.png"}) {
+    EXPECT_EQ(run("encode '" + kBunny + "' '" + dir.file(name) + "'", &out), 1) << name;
+    EXPECT_NE(out.find("name it .spz"), std::string::npos) << out;
+    EXPECT_FALSE(fs::exists(dir.file(name)));
+  }
+  EXPECT_EQ(run("render '" + dir.file("file.ply") + "' '" + dir.file("x.jpg") + "'", &out), 1);
+  EXPECT_NE(out.find("OUT must end in .png"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir.file("x.jpg")));
 }
 
 // --quiet prints nothing, whatever the thread count (oneTBB warned about more threads than cores).

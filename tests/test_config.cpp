@@ -20,12 +20,7 @@ namespace fs = std::filesystem;
 
 int run(const std::string& args, std::string* out = nullptr) { return testing::runScanpress(args, out); }
 
-std::string slurp(const std::string& path) {
-  std::ifstream f(path);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+std::string slurp(const std::string& path) { return testing::readText(path); }
 
 struct BadConfig {
   const char* name;

@@ -26,10 +26,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string readAll(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
+std::string readAll(const fs::path& p) { return testing::readText(p.string()); }
 
 // Starts `scanpress run JOB --quiet` in its own process group (so that a kill reaches whatever it starts),
 // output discarded.

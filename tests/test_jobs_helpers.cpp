@@ -31,7 +31,8 @@ TEST(ErrnoStatus, FilesReportThroughIt) {
   ASSERT_FALSE(missing.isOk());
   EXPECT_EQ(missing.status().code(), ErrorCode::kIo);
   EXPECT_NE(missing.status().message().find(std::strerror(ENOENT)), std::string::npos) << missing.status().message();
-  auto no_dir = AtomicFile::create(dir.file("no/such/dir/a.spz"));
+  testing::writeBytes(dir.file("file"), "x");  // a missing folder is created, one under a file cannot be
+  auto no_dir = AtomicFile::create(dir.file("file/dir/a.spz"));
   ASSERT_FALSE(no_dir.isOk());
   EXPECT_EQ(no_dir.status().code(), ErrorCode::kIo);
   // /dev/full fails every write with ENOSPC.

@@ -146,7 +146,9 @@ TEST(Outputs, EncodeOrDecodeOntoTheInputIsRefused) {
 
   // decode IN OUT where OUT is IN: a container that happens to have a mesh extension, and a link to a
   // container.
-  ASSERT_EQ(run("encode " + quoted(scan) + " " + quoted(dir.file("c.ply")) + " --quiet", &out), 0) << out;
+  // (encode refuses to write a container under a mesh name, but one can be renamed.)
+  ASSERT_EQ(run("encode " + quoted(scan) + " " + quoted(dir.file("c.spz")) + " --quiet", &out), 0) << out;
+  fs::rename(dir.file("c.spz"), dir.file("c.ply"));
   const std::string container = slurp(dir.file("c.ply"));
   EXPECT_EQ(run("decode " + quoted(dir.file("c.ply")) + " " + quoted(dir.file("c.ply")), &out), 1) << out;
   fs::create_symlink("c.ply", dir.file("link.ply"));

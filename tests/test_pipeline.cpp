@@ -345,7 +345,8 @@ TEST(Pipeline, ScratchFilesAreRemovedWhenAnEncodeFails) {
   fs::create_directories(dir.file("scratch"));
   EncodeSettings s;
   s.input = synth.output;
-  s.output = dir.file("missing/dir/s.spz");  // fails after the bins are written
+  testing::writeBytes(dir.file("file"), "x");
+  s.output = dir.file("file/dir/s.spz");  // fails after the bins are written (no folder can be made under a file)
   s.memory_budget = 16u << 20;
   s.scratch_dir = dir.file("scratch");
   auto r = encodeFile(s);

@@ -27,6 +27,7 @@
 #include "jobs/progress.h"
 #include "jobs/render.h"
 #include "jobs/report.h"
+#include "jobs/stdio.h"
 #include "jobs/synth.h"
 #include "spatial/surface_index.h"
 
@@ -55,7 +56,9 @@ exit codes: 0 ok, 1 usage or config error, 2 bad input data, 3 environment (I/O,
 
 constexpr const char* kEncodeHelp = R"(usage: scanpress encode IN OUT.spz [options]
 
-Compresses the mesh IN into the container OUT.spz. The output appears complete or not at all.
+Compresses the mesh IN into the container OUT.spz. The output appears complete or not at all. IN `-` reads the
+mesh from stdin (with --format), OUT `-` writes the container to stdout (messages go to stderr). A missing output
+folder is created; an OUT named like a mesh, glTF, image or JSON file is refused.
 
 options:
   --codec NAME        tile codec (default store; available: %s)
@@ -79,7 +82,9 @@ options:
   --scratch-dir DIR   where scratch files go (default: the system temp directory)
   --measure           measure the error of the decoded result (per tile and overall) into the report
   --samples-per-triangle X   measurement sampling density (default 2)
-  --report R.json     write a JSON report (counts, bytes, bits per vertex, seconds per stage, tiles, error)
+  --report R.json     write a JSON report (counts, bytes, bits per vertex, seconds per stage, tiles, error);
+                      `-` for stdout (not with OUT `-`)
+  --format F          the format of a mesh on stdin: ply, obj, stl or off, with .zst when compressed (ply.zst)
   --quiet             print nothing on success, warnings included (progress shows only on a terminal anyway)
 )";
 
@@ -140,7 +145,8 @@ options:
 constexpr const char* kDecodeHelp = R"(usage: scanpress decode IN.spz OUT.(ply|obj) [options]
 
 Decompresses a container into a mesh file (PLY binary little endian or OBJ, by extension). Positions are cell
-centers of the container's grid; they are written as float, or as double when float cannot hold the grid.
+centers of the container's grid; they are written as float, or as double when float cannot hold the grid. IN `-`
+reads the container from stdin, OUT `-` writes the mesh to stdout in the --format given (messages go to stderr).
 
 options:
   --tiles ID,ID,...   decode only these tiles (welded together)
@@ -148,6 +154,7 @@ options:
                       decode only the tiles whose bounds meet this box, in world units (`info` prints each tile's
                       box); not with --tiles
   --crop              with --box: keep only the triangles wholly inside the box
+  --format ply|obj    the format of a mesh written to stdout (OUT `-`)
   --level L           progressive codecs: every tile at level L, as its codec numbers levels (`info` lists each
                       level and what it means; kdtree, octree: cells of 2^(bits-L) grid cells as vertices at their
                       centers with that level's triangles, L = grid bits is lossless)
@@ -168,6 +175,15 @@ options:
 int fail(const Status& s) {
   std::fprintf(stderr, "scanpress: error: %s\n", s.toString().c_str());
   return exitCodeFor(s.code());
+}
+
+// fail() for a command with `-` files: the spool's paths (jobs/stdio.h) are named <stdin> and <stdout>.
+int failStdio(const Status& s, const std::string& spooled_in, const std::string& spooled_out) {
+  std::string m = s.message();
+  for (const auto& [path, name] : {std::pair{spooled_in, "<stdin>"}, std::pair{spooled_out, "<stdout>"}})
+    if (!path.empty())
+      for (size_t at; (at = m.find(path)) != std::string::npos;) m.replace(at, path.size(), name);
+  return fail(Status(s.code(), m));
 }
 
 int usage(const std::string& message, const char* help_hint) {
@@ -254,7 +270,7 @@ int runEncode(int argc, char** argv) {
   std::string error;
   if (!parseArgs(argc, argv, 2,
                  {"--codec", "--stages", "--bits", "--normal-bits", "--report", "--tile-triangles", "--threads",
-                  "--memory-budget", "--scratch-dir", "--samples-per-triangle"},
+                  "--memory-budget", "--scratch-dir", "--samples-per-triangle", "--format"},
                  {"--no-normals", "--no-colors", "--allow-degenerate", "--strict", "--measure", "--quiet", "--help"},
                  args, error))
     return usage(error, "encode");
@@ -291,35 +307,72 @@ int runEncode(int argc, char** argv) {
   s.measure.enabled = args.has("--measure");
   if (!numberOption(args, "--samples-per-triangle", 1e-6, 1e6, s.measure.samples_per_triangle, error))
     return usage(error, "encode");
-  if (const auto* report = args.get("--report")) {
+  // `-`: stdin and stdout (jobs/stdio.h); messages then go to stderr only.
+  const auto* report = args.get("--report");
+  const bool in_stdin = isStdio(s.input), out_stdout = isStdio(s.output), report_stdout = report && isStdio(*report);
+  if (out_stdout && report_stdout) return usage("OUT and --report cannot both be - (stdout)", "encode");
+  const std::string in_name = in_stdin ? "<stdin>" : s.input, out_name = out_stdout ? "<stdout>" : s.output;
+  FILE* say = out_stdout || report_stdout ? stderr : stdout;
+  const auto* format = args.get("--format");
+  if (in_stdin && !format)
+    return usage("a mesh on stdin (IN = -) needs --format ply|obj|stl|off (compressed: ply.zst, ...)", "encode");
+  if (format && !in_stdin) return usage("--format is for a mesh on stdin (IN = -)", "encode");
+  if (format && formatFromName("x." + *format) == MeshFormat::kUnknown)
+    return usage("--format: must be ply, obj, stl or off, optionally with .zst, got '" + *format + "'", "encode");
+  if (!out_stdout) {
+    // Replacing the input is refused first (exit 1 either way); then a name that claims another format.
+    if (Status ok = checkOutputPath(s.output, {s.input}); !ok.isOk()) return fail(ok);
+    if (Status ok = checkContainerName(s.output); !ok.isOk()) return usage(ok.message(), "encode");
+  }
+  if (report && !report_stdout) {
     // The report must not replace the input nor the container it describes.
     Status ok = checkOutputPath(*report, {s.input, s.output}, "report");
     if (!ok.isOk()) return fail(ok);
   }
+  std::optional<StdioSpool> spool;
+  if (in_stdin || out_stdout) {
+    auto created = StdioSpool::create(s.scratch_dir);
+    if (!created.isOk()) return fail(created.status());
+    spool.emplace(std::move(created).value());
+    if (in_stdin) {
+      auto copied = spool->readStdin("stdin." + *format);
+      if (!copied.isOk()) return fail(copied.status());
+      s.input = *copied;
+    }
+    if (out_stdout) s.output = spool->path("stdout.spz");
+  }
   TerminalProgress progress(args.has("--quiet"));
-  if (progress.enabled()) progress.file(0, 1, s.input);
+  if (progress.enabled()) progress.file(0, 1, in_name);
   auto result = encodeFile(s, progress.enabled() ? &progress : nullptr);
   progress.clear();
-  if (!result.isOk()) return fail(result.status());
+  const std::string spooled_in = in_stdin ? s.input : "", spooled_out = out_stdout ? s.output : "";
+  if (!result.isOk()) return failStdio(result.status(), spooled_in, spooled_out);
+  if (out_stdout)
+    if (Status w = spool->writeStdout("stdout.spz"); !w.isOk()) return failStdio(w, spooled_in, spooled_out);
   if (!args.has("--quiet") && !result->read.dropped.empty())
     std::fprintf(stderr, "scanpress: warning: dropped %s (not kept by scanpress; --strict fails instead)\n",
                  describeDropped(result->read.dropped).c_str());
-  if (const auto* report = args.get("--report")) {
+  if (report) {
     const std::string text = encodeReportJson(s, *result, settingsFingerprint(s));
-    Status w = writeFileAtomically(*report, std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
-    if (!w.isOk()) return fail(w);
+    if (report_stdout) {
+      if (std::fwrite(text.data(), 1, text.size(), stdout) != text.size() || std::fflush(stdout) != 0)
+        return fail(makeError(ErrorCode::kIo, "<stdout>: cannot write the report"));
+    } else {
+      Status w = writeFileAtomically(*report, std::span(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+      if (!w.isOk()) return fail(w);
+    }
   }
   if (!args.has("--quiet") && result->measured) {
     const ErrorStats sym = symmetricOf(statsOf(result->forward), statsOf(result->backward));
     const double d = result->diagonal > 0 ? result->diagonal : 1;
-    std::printf("error (symmetric): mean %.3e d, rms %.3e d, max %.3e d (d = %.6g)\n", sym.mean / d, sym.rms / d,
-                sym.max / d, result->diagonal);
+    std::fprintf(say, "error (symmetric): mean %.3e d, rms %.3e d, max %.3e d (d = %.6g)\n", sym.mean / d, sym.rms / d,
+                 sym.max / d, result->diagonal);
   }
   if (!args.has("--quiet"))
-    std::printf("%s -> %s: %llu vertices, %llu faces, %llu bytes, %.3f bpv (%s, %d bits, %zu tiles)\n",
-                s.input.c_str(), s.output.c_str(), static_cast<unsigned long long>(result->vertices),
-                static_cast<unsigned long long>(result->faces), static_cast<unsigned long long>(result->bytes),
-                result->bitsPerVertex(), result->codec.c_str(), s.bits, result->tiles.size());
+    std::fprintf(say, "%s -> %s: %llu vertices, %llu faces, %llu bytes, %.3f bpv (%s, %d bits, %zu tiles)\n",
+                 in_name.c_str(), out_name.c_str(), static_cast<unsigned long long>(result->vertices),
+                 static_cast<unsigned long long>(result->faces), static_cast<unsigned long long>(result->bytes),
+                 result->bitsPerVertex(), result->codec.c_str(), s.bits, result->tiles.size());
   if (result->failed_tiles > 0) {
     for (const auto& t : result->tiles)
       if (!t.status.isOk()) std::fprintf(stderr, "scanpress: error: tile %u: %s\n", t.id, t.status.toString().c_str());
@@ -331,8 +384,8 @@ int runEncode(int argc, char** argv) {
 int runDecode(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {"--tiles", "--level", "--bytes", "--box"}, {"--quiet", "--crop", "--help"}, args,
-                 error))
+  if (!parseArgs(argc, argv, 2, {"--tiles", "--level", "--bytes", "--box", "--format"},
+                 {"--quiet", "--crop", "--help"}, args, error))
     return usage(error, "decode");
   if (args.has("--help")) return std::fputs(kDecodeHelp, stdout), 0;
   if (args.positional.size() != 2) return usage("decode needs IN.spz and OUT", "decode");
@@ -354,14 +407,39 @@ int runDecode(int argc, char** argv) {
   if (!unsignedOption(args, "--level", UINT32_MAX, s.level, error) ||
       !unsignedOption(args, "--bytes", UINT64_MAX, s.bytes, error))
     return usage(error, "decode");
+  // `-`: stdin and stdout (jobs/stdio.h); messages then go to stderr.
+  const bool in_stdin = isStdio(s.input), out_stdout = isStdio(s.output);
+  const std::string in_name = in_stdin ? "<stdin>" : s.input, out_name = out_stdout ? "<stdout>" : s.output;
+  const auto* format = args.get("--format");
+  if (out_stdout && !format) return usage("a mesh on stdout (OUT = -) needs --format ply|obj", "decode");
+  if (format && !out_stdout) return usage("--format is for a mesh on stdout (OUT = -)", "decode");
+  if (format && *format != "ply" && *format != "obj")
+    return usage("--format: must be ply or obj, got '" + *format + "'", "decode");
+  std::optional<StdioSpool> spool;
+  if (in_stdin || out_stdout) {
+    auto created = StdioSpool::create();
+    if (!created.isOk()) return fail(created.status());
+    spool.emplace(std::move(created).value());
+    if (in_stdin) {
+      auto copied = spool->readStdin("stdin.spz");
+      if (!copied.isOk()) return fail(copied.status());
+      s.input = *copied;
+    }
+    if (out_stdout) s.output = spool->path("stdout." + *format);
+  }
   auto result = decodeFile(s);
-  if (!result.isOk()) return fail(result.status());
+  const std::string spooled_in = in_stdin ? s.input : "", spooled_out = out_stdout ? s.output : "";
+  if (!result.isOk()) return failStdio(result.status(), spooled_in, spooled_out);
+  if (out_stdout)
+    if (Status w = spool->writeStdout("stdout." + *format); !w.isOk()) return failStdio(w, spooled_in, spooled_out);
+  FILE* say = out_stdout ? stderr : stdout;
   if (!args.has("--quiet"))
-    std::printf("%s -> %s: %llu vertices, %llu faces from %u tile(s)%s\n", s.input.c_str(), s.output.c_str(),
-                static_cast<unsigned long long>(result->vertices), static_cast<unsigned long long>(result->faces),
-                result->tiles, result->double_positions ? " (double positions)" : "");
+    std::fprintf(say, "%s -> %s: %llu vertices, %llu faces from %u tile(s)%s\n", in_name.c_str(), out_name.c_str(),
+                 static_cast<unsigned long long>(result->vertices), static_cast<unsigned long long>(result->faces),
+                 result->tiles, result->double_positions ? " (double positions)" : "");
   if (!args.has("--quiet") && result->level)
-    std::printf("level %u: %llu payload bytes\n", *result->level, static_cast<unsigned long long>(result->level_bytes));
+    std::fprintf(say, "level %u: %llu payload bytes\n", *result->level,
+                 static_cast<unsigned long long>(result->level_bytes));
   return 0;
 }
 
@@ -445,6 +523,8 @@ int runRender(int argc, char** argv) {
     return usage(error, "render");
   if (args.has("--help")) return std::fputs(kRenderHelp, stdout), 0;
   if (args.positional.size() != 2) return usage("render needs MESH and OUT.png", "render");
+  if (const std::string ext = lowerExtension(args.positional[1]); ext != ".png")
+    return usage("render writes PNG: OUT must end in .png, got '" + args.positional[1] + "'", "render");
   RenderSettings s;
   if (const auto* v = args.get("--view")) {
     auto view = parseNumberList(*v, -360, 360, 2, "--view");
@@ -549,6 +629,9 @@ int main(int argc, char** argv) {
   // Both before any thread starts, so that every thread inherits them.
   ::signal(SIGXFSZ, SIG_IGN);
   scanpress::installInterruptCleanup();
+  // A closed stdout (`scanpress decode X - --format ply | head`) is a write error that cleans up and exits 3, not a
+  // SIGPIPE that would end the process before its temporaries are removed.
+  ::signal(SIGPIPE, SIG_IGN);
   try {
     return finish(scanpress::run(argc, argv));
   } catch (const std::bad_alloc&) {
