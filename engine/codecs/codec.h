@@ -22,7 +22,7 @@ enum class CodecId : uint16_t {
   kStore = 1,
   kKdtree = 2,
   kOctree = 3,
-  kPm = 4,          // engine/codecs/pm.cpp (issue 19)
+  kPm = 4,           // engine/codecs/pm.cpp (issue 19)
   kEdgebreaker = 5,  // engine/codecs/edgebreaker.cpp (issue 20)
 };
 
