@@ -31,6 +31,9 @@ struct FileOutcome {
   // What the container holds: from this run's result, or from the report of an output resume skipped.
   struct Counts {
     uint64_t vertices = 0, faces = 0, bytes = 0, tiles = 0, failed_tiles = 0;
+    uint64_t input_bytes = 0;  // the input file's size on disk (compressed if it is)
+    // The measured symmetric error relative to the diagonal, when measured (else < 0).
+    double rms_relative = -1, max_relative = -1;
   };
   std::optional<Counts> counts;
   bool report_written = false;  // `report` exists and describes this output (written now, or skipped complete)

@@ -382,6 +382,11 @@ std::optional<CompleteReport> readCompleteReport(const std::string& report_path)
     r.faces = j.value("faces", uint64_t(0));
     r.bytes = j.value("bytes", uint64_t(0));
     r.tiles = j.value("tiles", json::array()).size();
+    r.input_bytes = j.value("input_bytes", uint64_t(0));
+    if (auto e = j.find("error"); e != j.end() && e->is_object() && e->contains("symmetric")) {
+      r.rms_relative = (*e)["symmetric"].value("rms_relative", -1.0);
+      r.max_relative = (*e)["symmetric"].value("max_relative", -1.0);
+    }
     return r;
   } catch (const std::exception&) {
     return std::nullopt;

@@ -45,6 +45,8 @@ std::vector<std::string> knownConfigKeys();
 struct CompleteReport {
   std::string fingerprint;
   uint64_t vertices = 0, faces = 0, bytes = 0, tiles = 0;
+  uint64_t input_bytes = 0;
+  double rms_relative = -1, max_relative = -1;  // symmetric, when the report has a measurement
 };
 // The report at `report_path` when it describes a complete output and carries a fingerprint; nothing when it is
 // missing, unreadable, incomplete or has none (resume then redoes the file).

@@ -5,6 +5,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <filesystem>
 #include <sstream>
 
 namespace scanpress {
@@ -82,6 +83,10 @@ nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& 
   if (!fingerprint.empty()) j["fingerprint"] = fingerprint;
   j["input"] = settings.input;
   j["output"] = settings.output;
+  std::error_code ec;
+  const uint64_t input_bytes = std::filesystem::file_size(settings.input, ec);
+  j["input_bytes"] = ec ? 0 : input_bytes;
+  j["ratio"] = !ec && r.bytes ? double(input_bytes) / r.bytes : 0.0;  // input file size / container size
   j["format"] = r.read.format_detail;
   j["codec"] = r.codec;
   j["stages"] = r.stages;
@@ -154,8 +159,8 @@ std::string batchSummaryJson(const std::string& config_path, const BatchResult& 
   json j;
   j["job"] = config_path;
   json files = json::array();
-  uint64_t ok = 0, skipped = 0, failed = 0, bytes = 0, vertices = 0;
-  double seconds = 0;
+  uint64_t ok = 0, skipped = 0, failed = 0, bytes = 0, vertices = 0, input_bytes = 0;
+  double seconds = 0, worst_rms = -1, worst_max = -1;
   for (const auto& f : batch.files) {
     json e = {{"input", f.input}, {"output", f.output}, {"seconds", f.seconds}};
     if (f.report_written) e["report"] = f.report;  // only a report that exists
@@ -174,10 +179,19 @@ std::string batchSummaryJson(const std::string& config_path, const BatchResult& 
       e["faces"] = c.faces;
       e["bytes"] = c.bytes;
       e["bpv"] = c.vertices ? 8.0 * c.bytes / c.vertices : 0.0;
+      e["input_bytes"] = c.input_bytes;
+      e["ratio"] = c.bytes ? double(c.input_bytes) / c.bytes : 0.0;
+      if (c.rms_relative >= 0) {
+        e["error_rms_relative"] = c.rms_relative;
+        e["error_max_relative"] = c.max_relative;
+        worst_rms = std::max(worst_rms, c.rms_relative);
+        worst_max = std::max(worst_max, c.max_relative);
+      }
       e["tiles"] = c.tiles;
       e["failed_tiles"] = c.failed_tiles;
       bytes += c.bytes;
       vertices += c.vertices;
+      input_bytes += c.input_bytes;
     }
     seconds += f.seconds;
     files.push_back(std::move(e));
@@ -190,7 +204,13 @@ std::string batchSummaryJson(const std::string& config_path, const BatchResult& 
                  {"bytes", bytes},
                  {"vertices", vertices},
                  {"bpv", vertices ? 8.0 * bytes / vertices : 0.0},
+                 {"input_bytes", input_bytes},
+                 {"ratio", bytes ? double(input_bytes) / bytes : 0.0},
                  {"seconds", seconds}};
+  if (worst_rms >= 0) {  // the largest of the files' measured errors
+    j["totals"]["worst_error_rms_relative"] = worst_rms;
+    j["totals"]["worst_error_max_relative"] = worst_max;
+  }
   j["exit_code"] = batch.exitCode();
   return j.dump(2) + "\n";
 }

@@ -318,6 +318,49 @@ TEST(Batch, SubfoldersMirrorInputsAndGlobsSpanDirectories) {
   EXPECT_NE(out.find("/output/summary"), std::string::npos) << out;
 }
 
+// What people read of a batch: one line per file with the ratio to the input's size and the measured error, a
+// totals line; the summary carries per file the input size, the ratio and the error, and totals. A resumed run
+// reports the same figures for the files it skips (from their reports).
+TEST(Batch, ResultsPeopleRead) {
+  testing::TempDir dir;
+  fs::create_directories(dir.file("scans"));
+  fs::copy_file(std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst", dir.file("scans/bunny.ply.zst"));
+  ASSERT_TRUE(writeObj(dir.file("scans/octa.obj"), testing::octahedron()).isOk());
+  const std::string job = dir.file("job.json");
+  testing::writeBytes(job, R"({"inputs": ["scans"], "output": {"directory": "out"}, "codec": {"name": "kdtree",
+                              "bits": 12}, "measure": {"enabled": true}})");
+  std::string out;
+  ASSERT_EQ(run("run '" + job + "'", &out), 0) << out;
+  EXPECT_NE(out.find("bunny.spz: 69451 triangles"), std::string::npos) << out;
+  EXPECT_NE(out.find(":1), "), std::string::npos) << out;
+  EXPECT_NE(out.find(", error rms "), std::string::npos) << out;
+  EXPECT_NE(out.find("2 files: 2 ok, 0 skipped, 0 failed; "), std::string::npos) << out;
+  auto check = [&](const nlohmann::json& summary) {
+    uint64_t total_in = 0;
+    for (const auto& f : summary["files"]) {
+      const uint64_t in = fs::file_size(f["input"].get<std::string>());
+      EXPECT_EQ(f["input_bytes"], in);
+      EXPECT_DOUBLE_EQ(f["ratio"].get<double>(), double(in) / f["bytes"].get<double>());
+      EXPECT_EQ(f["bytes"], fs::file_size(f["output"].get<std::string>()));
+      EXPECT_GT(f["error_rms_relative"].get<double>(), 0);  // 12 bits: quantization error
+      EXPECT_LE(f["error_rms_relative"].get<double>(), f["error_max_relative"].get<double>());
+      EXPECT_LT(f["error_max_relative"].get<double>(), 1.0 / 4096);
+      total_in += in;
+    }
+    EXPECT_EQ(summary["totals"]["input_bytes"], total_in);
+    EXPECT_GT(summary["totals"]["worst_error_max_relative"].get<double>(), 0);
+  };
+  const auto first = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  check(first);
+  ASSERT_EQ(run("run '" + job + "'", &out), 0) << out;
+  EXPECT_NE(out.find("2 files: 0 ok, 2 skipped, 0 failed; "), std::string::npos) << out;
+  const auto resumed = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  check(resumed);
+  for (size_t i = 0; i < 2; ++i)
+    EXPECT_EQ(resumed["files"][i]["error_rms_relative"], first["files"][i]["error_rms_relative"]);
+  EXPECT_EQ(resumed["totals"]["ratio"], first["totals"]["ratio"]);
+}
+
 // /strict: an input holding what the container would not keep fails (exit 2, naming it); the others run; the
 // setting is part of the resume fingerprint (a complete output made without it is redone, and fails).
 // An exception while one input is encoded (here thrown before its survey; in the field, out of memory or a bug)
