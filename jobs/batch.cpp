@@ -363,7 +363,16 @@ static void encodeOne(const JobSettings& job, const EncodeSettings& s, const std
 
 Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options, const PipelineHooks* hooks) {
   SP_ASSIGN_OR_RETURN(std::vector<JobInput> inputs, expandInputs(job));
-  SP_RETURN_IF_ERROR(checkJobOutputs(job, inputs));
+  SP_RETURN_IF_ERROR(checkJobOutputs(job, inputs));  // the whole job's: every shard refuses the same mistakes
+  if (options.shard) {
+    std::vector<uint64_t> sizes;
+    for (const auto& in : inputs) {
+      std::error_code e;
+      const uint64_t size = fs::file_size(in.path, e);
+      sizes.push_back(e ? 0 : size);
+    }
+    inputs = shardInputs(inputs, sizes, *options.shard);
+  }
   std::error_code ec;
   fs::create_directories(job.output_directory, ec);
   if (ec) return makeError(ErrorCode::kIo, job.output_directory + ": cannot create output directory: " + ec.message());
@@ -426,7 +435,8 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options, co
   }
   if (!options.quiet && !batch.files.empty()) std::printf("%s\n", totalsLine(batch).c_str());
   if (!job.summary_name.empty()) {
-    const std::string path = (fs::path(job.output_directory) / job.summary_name).string();
+    const std::string name = options.shard ? shardSummaryName(job.summary_name, *options.shard) : job.summary_name;
+    const std::string path = (fs::path(job.output_directory) / name).string();
     // Another job's summary in this directory is replaced, but not without a word (a warning even under --quiet:
     // that job's record is lost).
     if (const auto other = summaryJobPath(path); other && *other != job.config_path)
@@ -434,9 +444,49 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options, co
                    "scanpress: warning: %s: replacing the summary of another job (%s); give each job its own "
                    "/output/summary or directory\n",
                    path.c_str(), other->c_str());
-    SP_RETURN_IF_ERROR(writeText(path, batchSummaryJson(job.config_path, batch)));
+    SP_RETURN_IF_ERROR(writeText(path,
+                                 batchSummaryJson(job.config_path, batch, options.shard ? &*options.shard : nullptr)));
   }
   return batch;
+}
+
+Result<MergedSummary> mergeJobShards(const JobSettings& job) {
+  if (job.summary_name.empty())
+    return makeError(ErrorCode::kInvalidArgument, job.config_path + ": /output/summary is \"\": nothing to merge");
+  // The shard summaries present: NAME.shard-I-of-N.EXT.
+  const Shard probe{0, 1};
+  const std::string sample = shardSummaryName(job.summary_name, probe);  // NAME.shard-0-of-1.EXT
+  const size_t tag = sample.find(".shard-0-of-1");
+  const std::string prefix = sample.substr(0, tag) + ".shard-", suffix = sample.substr(tag + 13);
+  std::set<uint32_t> counts;
+  std::error_code ec;
+  for (fs::directory_iterator it(job.output_directory, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.size() <= prefix.size() + suffix.size() || name.rfind(prefix, 0) != 0 ||
+        name.compare(name.size() - suffix.size(), suffix.size(), suffix) != 0)
+      continue;
+    std::string middle = name.substr(prefix.size(), name.size() - prefix.size() - suffix.size());  // I-of-N
+    if (const size_t of = middle.find("-of-"); of != std::string::npos) middle.replace(of, 4, "/");
+    if (auto shard = parseShard(middle, name); shard.isOk()) counts.insert(shard->count);
+  }
+  if (counts.empty())
+    return makeError(ErrorCode::kInvalidArgument, job.output_directory + ": no shard summaries (" + prefix + "I-of-N" +
+                                                      suffix + ") to merge: run the shards first");
+  if (counts.size() > 1)
+    return makeError(ErrorCode::kInvalidArgument, job.output_directory + ": shard summaries of several splits (of " +
+                                                      std::to_string(*counts.begin()) + " and of " +
+                                                      std::to_string(*counts.rbegin()) +
+                                                      "): remove those of the split not used");
+  const uint32_t n = *counts.begin();
+  std::vector<std::string> paths;
+  for (uint32_t i = 0; i < n; ++i)
+    paths.push_back((fs::path(job.output_directory) / shardSummaryName(job.summary_name, Shard{i, n})).string());
+  SP_ASSIGN_OR_RETURN(std::vector<JobInput> inputs, expandInputs(job));
+  std::vector<std::string> expected;
+  for (const auto& in : inputs) expected.push_back(in.path);
+  SP_ASSIGN_OR_RETURN(MergedSummary merged, mergeShardSummaries(job.config_path, paths, expected));
+  SP_RETURN_IF_ERROR(writeText((fs::path(job.output_directory) / job.summary_name).string(), merged.json));
+  return merged;
 }
 
 }  // namespace scanpress

@@ -9,14 +9,17 @@
 #include <vector>
 
 #include "jobs/commands.h"
+#include "jobs/report.h"
 #include "jobs/config.h"
+#include "jobs/shard.h"
 
 namespace scanpress {
 
 struct RunOptions {
   bool force = false;
   bool quiet = false;
-  int threads = -1;  // >= 0 overrides the job's threads
+  int threads = -1;            // >= 0 overrides the job's threads
+  std::optional<Shard> shard;  // run only this shard's inputs and write its own summary (jobs/shard.h)
 };
 
 struct FileOutcome {
@@ -71,5 +74,10 @@ std::string settingsFingerprint(const EncodeSettings& settings);
 // `hooks`: tests only (jobs/pipeline.h). An exception while one input is encoded (out of memory, a bug) fails that
 // input, as a report entry; the others still run and the summary is written.
 Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options, const PipelineHooks* hooks = nullptr);
+
+// `run --merge`: joins the summaries its shards wrote in the output directory (all from one split: i/N for every
+// i < N) into the job's summary. Errors: no shard summary, summaries of two splits, a shard's missing (its task did
+// not finish: kIo, naming it). Inputs of the job that no shard covered are listed (`missing`, exit code 3).
+Result<MergedSummary> mergeJobShards(const JobSettings& job);
 
 }  // namespace scanpress

@@ -1,12 +1,15 @@
 #include "jobs/report.h"
 
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
 #include "jobs/batch.h"
 #include "jobs/commands.h"
-
-#include <nlohmann/json.hpp>
-
-#include <filesystem>
-#include <sstream>
+#include "jobs/shard.h"
 
 namespace scanpress {
 namespace {
@@ -155,19 +158,54 @@ std::string measureJson(const MeasureResult& r) {
   return j.dump(2) + "\n";
 }
 
-std::string batchSummaryJson(const std::string& config_path, const BatchResult& batch) {
-  json j;
-  j["job"] = config_path;
-  json files = json::array();
+namespace {
+
+json summaryTotals(const json& files) {
   uint64_t ok = 0, skipped = 0, failed = 0, bytes = 0, vertices = 0, input_bytes = 0;
   double seconds = 0, worst_rms = -1, worst_max = -1;
+  for (const auto& e : files) {
+    const std::string status = e.value("status", "");
+    ok += status == "ok";
+    skipped += status == "skipped";
+    failed += status == "failed";
+    bytes += e.value("bytes", uint64_t(0));
+    vertices += e.value("vertices", uint64_t(0));
+    input_bytes += e.value("input_bytes", uint64_t(0));
+    seconds += e.value("seconds", 0.0);
+    worst_rms = std::max(worst_rms, e.value("error_rms_relative", -1.0));
+    worst_max = std::max(worst_max, e.value("error_max_relative", -1.0));
+  }
+  json t = {{"files", files.size()},
+            {"ok", ok},
+            {"skipped", skipped},
+            {"failed", failed},
+            {"bytes", bytes},
+            {"vertices", vertices},
+            {"bpv", vertices ? 8.0 * bytes / vertices : 0.0},
+            {"input_bytes", input_bytes},
+            {"ratio", bytes ? double(input_bytes) / bytes : 0.0},
+            {"seconds", seconds}};
+  if (worst_rms >= 0) {  // the largest of the files' measured errors
+    t["worst_error_rms_relative"] = worst_rms;
+    t["worst_error_max_relative"] = worst_max;
+  }
+  return t;
+}
+
+}  // namespace
+
+std::string batchSummaryJson(const std::string& config_path, const BatchResult& batch, const Shard* shard) {
+  json j;
+  j["job"] = config_path;
+  if (shard) j["shard"] = {{"index", shard->index}, {"count", shard->count}};
+  json files = json::array();
   for (const auto& f : batch.files) {
     json e = {{"input", f.input}, {"output", f.output}, {"seconds", f.seconds}};
     if (f.report_written) e["report"] = f.report;  // only a report that exists
     switch (f.state) {
-      case FileOutcome::State::kOk: e["status"] = "ok", ++ok; break;
-      case FileOutcome::State::kSkipped: e["status"] = "skipped", ++skipped; break;
-      case FileOutcome::State::kFailed: e["status"] = "failed", ++failed; break;
+      case FileOutcome::State::kOk: e["status"] = "ok"; break;
+      case FileOutcome::State::kSkipped: e["status"] = "skipped"; break;
+      case FileOutcome::State::kFailed: e["status"] = "failed"; break;
     }
     if (!f.error.isOk()) {
       e["error"] = f.error.toString();
@@ -184,35 +222,73 @@ std::string batchSummaryJson(const std::string& config_path, const BatchResult& 
       if (c.rms_relative >= 0) {
         e["error_rms_relative"] = c.rms_relative;
         e["error_max_relative"] = c.max_relative;
-        worst_rms = std::max(worst_rms, c.rms_relative);
-        worst_max = std::max(worst_max, c.max_relative);
       }
       e["tiles"] = c.tiles;
       e["failed_tiles"] = c.failed_tiles;
-      bytes += c.bytes;
-      vertices += c.vertices;
-      input_bytes += c.input_bytes;
     }
-    seconds += f.seconds;
     files.push_back(std::move(e));
   }
+  j["totals"] = summaryTotals(files);
   j["files"] = std::move(files);
-  j["totals"] = {{"files", batch.files.size()},
-                 {"ok", ok},
-                 {"skipped", skipped},
-                 {"failed", failed},
-                 {"bytes", bytes},
-                 {"vertices", vertices},
-                 {"bpv", vertices ? 8.0 * bytes / vertices : 0.0},
-                 {"input_bytes", input_bytes},
-                 {"ratio", bytes ? double(input_bytes) / bytes : 0.0},
-                 {"seconds", seconds}};
-  if (worst_rms >= 0) {  // the largest of the files' measured errors
-    j["totals"]["worst_error_rms_relative"] = worst_rms;
-    j["totals"]["worst_error_max_relative"] = worst_max;
-  }
   j["exit_code"] = batch.exitCode();
   return j.dump(2) + "\n";
+}
+
+Result<MergedSummary> mergeShardSummaries(const std::string& config_path, const std::vector<std::string>& shard_paths,
+                                          const std::vector<std::string>& expected_inputs) {
+  json files = json::array();
+  int exit_code = 0;
+  std::set<std::string> seen;
+  for (size_t i = 0; i < shard_paths.size(); ++i) {
+    const std::string& path = shard_paths[i];
+    const std::string which = "shard " + std::to_string(i) + " of " + std::to_string(shard_paths.size());
+    std::ifstream f(path, std::ios::binary);
+    if (!f)
+      return makeError(ErrorCode::kIo, path + ": no summary of " + which +
+                                           ": its task did not finish (run it again "
+                                           "with --shard " +
+                                           std::to_string(i) + "/" + std::to_string(shard_paths.size()) + ")");
+    json j;
+    try {
+      j = json::parse(f);
+    } catch (const std::exception& e) {
+      return makeError(ErrorCode::kMalformed, path + ": the summary of " + which + " is not valid JSON: " + e.what());
+    }
+    const json* shard = j.is_object() && j.contains("shard") ? &j["shard"] : nullptr;
+    if (!shard || !shard->is_object() || shard->value("index", -1) != static_cast<int>(i) ||
+        shard->value("count", -1) != static_cast<int>(shard_paths.size()) || !j.contains("files") ||
+        !j["files"].is_array())
+      return makeError(ErrorCode::kMalformed, path + ": not the summary of " + which);
+    if (j.value("job", "") != config_path)
+      return makeError(ErrorCode::kInvalidArgument, path + ": the summary of " + which +
+                                                        " was written by another job (" + j.value("job", "") + ")");
+    exit_code = std::max(exit_code, j.value("exit_code", 0));
+    for (const auto& e : j["files"]) {
+      if (!e.is_object() || !e.contains("input") || !e["input"].is_string())
+        return makeError(ErrorCode::kMalformed, path + ": a file entry without an input");
+      if (!seen.insert(e["input"].get<std::string>()).second)
+        return makeError(ErrorCode::kMalformed, path + ": " + e["input"].get<std::string>() +
+                                                    " is in two shard summaries (shards of different splits?)");
+      files.push_back(e);
+    }
+  }
+  std::sort(files.begin(), files.end(), [](const json& a, const json& b) {
+    return a["input"].get<std::string>() < b["input"].get<std::string>();
+  });
+  MergedSummary m;
+  for (const auto& in : expected_inputs)
+    if (!seen.count(in)) m.missing.push_back(in);
+  json j;
+  j["job"] = config_path;
+  j["shards"] = shard_paths.size();
+  j["totals"] = summaryTotals(files);
+  if (!m.missing.empty()) j["missing"] = m.missing;
+  m.files = files.size();
+  j["files"] = std::move(files);
+  m.exit_code = m.missing.empty() ? exit_code : std::max(exit_code, 3);
+  j["exit_code"] = m.exit_code;
+  m.json = j.dump(2) + "\n";
+  return m;
 }
 
 std::string containerInfoJson(const ContainerFile& file) {

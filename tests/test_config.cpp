@@ -10,6 +10,7 @@
 
 #include "jobs/batch.h"
 #include "jobs/config.h"
+#include "jobs/shard.h"
 #include "jobs/mesh_io/mesh_writer.h"
 #include "jobs_util.h"
 
@@ -359,6 +360,93 @@ TEST(Batch, ResultsPeopleRead) {
   for (size_t i = 0; i < 2; ++i)
     EXPECT_EQ(resumed["files"][i]["error_rms_relative"], first["files"][i]["error_rms_relative"]);
   EXPECT_EQ(resumed["totals"]["ratio"], first["totals"]["ratio"]);
+}
+
+TEST(Shards, ParseNameAndSplit) {
+  EXPECT_EQ(parseShard("2/4", "--shard")->index, 2u);
+  EXPECT_EQ(parseShard("2/4", "--shard")->count, 4u);
+  for (const char* bad : {"4/4", "1", "-1/3", "1/0", "a/b", "1/65537", "1/3/4"})
+    EXPECT_FALSE(parseShard(bad, "--shard").isOk()) << bad;
+  EXPECT_EQ(shardSummaryName("summary.json", Shard{2, 4}), "summary.shard-2-of-4.json");
+  EXPECT_EQ(shardSummaryName("summary", Shard{0, 1}), "summary.shard-0-of-1");
+  // Every input in exactly one shard; loads within the largest input of each other.
+  std::vector<JobInput> inputs;
+  std::vector<uint64_t> sizes;
+  for (int i = 0; i < 37; ++i) {
+    inputs.push_back({std::to_string(100 + i), ""});
+    sizes.push_back(uint64_t(1000 + (i * 7919) % 5000));
+  }
+  for (uint32_t n : {1u, 2u, 3u, 8u, 50u}) {
+    std::map<std::string, int> seen;
+    uint64_t lo = UINT64_MAX, hi = 0;
+    for (uint32_t i = 0; i < n; ++i) {
+      uint64_t load = 0;
+      for (const auto& in : shardInputs(inputs, sizes, Shard{i, n})) {
+        ++seen[in.path];
+        load += sizes[std::stoi(in.path) - 100];
+      }
+      lo = std::min(lo, load), hi = std::max(hi, load);
+    }
+    EXPECT_EQ(seen.size(), inputs.size()) << n;
+    for (const auto& [path, times] : seen) EXPECT_EQ(times, 1) << path;
+    if (n <= inputs.size()) {
+      EXPECT_LE(hi - lo, *std::max_element(sizes.begin(), sizes.end())) << n;
+    }
+  }
+}
+
+// A job split over three array tasks (by --shard and by Slurm's environment) writes the same containers as one
+// process, and --merge gives the same summary entries; a missing shard or an input no shard covered is an error.
+TEST(Shards, ArrayTasksAndMergeEqualOneProcess) {
+  testing::TempDir dir;
+  fs::create_directories(dir.file("scans"));
+  fs::copy_file(std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst", dir.file("scans/bunny.ply.zst"));
+  for (int i = 0; i < 5; ++i)
+    ASSERT_TRUE(writeObj(dir.file("scans/octa" + std::to_string(i) + ".obj"), testing::octahedron()).isOk());
+  auto writeJob = [&](const std::string& name, const std::string& out_dir) {
+    testing::writeBytes(dir.file(name), "{\"inputs\": [\"scans\"], \"output\": {\"directory\": \"" + out_dir +
+                                            "\"}, \"codec\": {\"name\": \"kdtree\", \"bits\": 12}}");
+    return dir.file(name);
+  };
+  const std::string whole = writeJob("whole.json", "whole"), split = writeJob("split.json", "split");
+  std::string out;
+  ASSERT_EQ(run("run '" + whole + "' --quiet", &out), 0) << out;
+  ASSERT_EQ(run("run '" + split + "' --quiet --shard 0/3", &out), 0) << out;
+  ASSERT_EQ(testing::runScanpress("run '" + split + "' --quiet", &out,
+                                  "SLURM_ARRAY_TASK_ID=5 SLURM_ARRAY_TASK_MIN=4 SLURM_ARRAY_TASK_COUNT=3"),
+            0)
+      << out;
+  EXPECT_TRUE(fs::exists(dir.file("split/summary.shard-1-of-3.json")));
+  // Before the last shard ran, merging names it.
+  EXPECT_EQ(run("run '" + split + "' --merge", &out), 3);
+  EXPECT_NE(out.find("no summary of shard 2 of 3"), std::string::npos) << out;
+  ASSERT_EQ(run("run '" + split + "' --quiet --shard 2/3", &out), 0) << out;
+  ASSERT_EQ(run("run '" + split + "' --merge", &out), 0) << out;
+  EXPECT_NE(out.find("merged 6 files"), std::string::npos) << out;
+  const auto a = nlohmann::json::parse(slurp(dir.file("whole/summary.json")));
+  const auto b = nlohmann::json::parse(slurp(dir.file("split/summary.json")));
+  ASSERT_EQ(a["files"].size(), 6u);
+  ASSERT_EQ(b["files"].size(), 6u);
+  for (size_t i = 0; i < 6; ++i) {
+    EXPECT_EQ(a["files"][i]["input"], b["files"][i]["input"]);
+    EXPECT_EQ(a["files"][i]["bytes"], b["files"][i]["bytes"]);
+    const std::string name = fs::path(a["files"][i]["output"].get<std::string>()).filename();
+    EXPECT_EQ(slurp(dir.file("whole/" + name)), slurp(dir.file("split/" + name))) << name;
+  }
+  EXPECT_EQ(a["totals"]["bytes"], b["totals"]["bytes"]);
+  EXPECT_EQ(b["shards"], 3);
+  // An input added after the shards ran is in no shard's summary.
+  ASSERT_TRUE(writeObj(dir.file("scans/late.obj"), testing::octahedron()).isOk());
+  EXPECT_EQ(run("run '" + split + "' --merge", &out), 3);
+  EXPECT_NE(out.find("late.obj: in no shard's summary"), std::string::npos) << out;
+  // Wrong uses.
+  EXPECT_EQ(run("run '" + split + "' --shard 3/3", &out), 1);
+  EXPECT_EQ(testing::runScanpress("run '" + split + "'", &out, "JOB_COMPLETION_INDEX=1"), 1);
+  EXPECT_NE(out.find("--shard-count"), std::string::npos) << out;
+  EXPECT_EQ(testing::runScanpress("run '" + split + "' --quiet --shard-count 3", &out, "JOB_COMPLETION_INDEX=1"), 0)
+      << out;
+  EXPECT_EQ(testing::runScanpress("run '" + split + "'", &out, "SLURM_ARRAY_TASK_ID=7 SLURM_ARRAY_TASK_COUNT=3"), 1);
+  EXPECT_NE(out.find("not in [SLURM_ARRAY_TASK_MIN"), std::string::npos) << out;
 }
 
 // /strict: an input holding what the container would not keep fails (exit 2, naming it); the others run; the

@@ -96,9 +96,15 @@ finished job skips outputs that are complete and were made with the same setting
 every key.
 
 options:
-  --threads N   override the job's thread count
-  --force       redo every input, even complete ones
-  --quiet       no progress and no per-file lines
+  --threads N       override the job's thread count
+  --force           redo every input, even complete ones
+  --quiet           no progress and no per-file lines
+  --shard i/N       run shard i (0-based) of N: a deterministic share of the inputs, balanced by size, with its
+                    own summary (SUMMARY.shard-i-of-N.json). Without it, a job array's index is read from
+                    SLURM_ARRAY_TASK_ID / SLURM_ARRAY_TASK_COUNT, or JOB_COMPLETION_INDEX with --shard-count N
+  --shard-count N   the number of shards when the environment does not say (Kubernetes indexed jobs)
+  --merge           join the shards' summaries into the job's summary; names inputs no shard covered
+                    (configs/slurm-array.sbatch shows an array and its merge)
 exit codes: 0 all ok, 1 invalid job file, else the most severe failure (2 bad data, 3 environment, 4 internal)
 )";
 
@@ -464,7 +470,8 @@ int runInfo(int argc, char** argv) {
 int runJobCommand(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {"--threads"}, {"--force", "--quiet", "--help"}, args, error))
+  if (!parseArgs(argc, argv, 2, {"--threads", "--shard", "--shard-count"}, {"--force", "--quiet", "--merge", "--help"},
+                 args, error))
     return usage(error, "run");
   if (args.has("--help")) return std::fputs(kRunHelp, stdout), 0;
   if (args.positional.size() != 1) return usage("run needs one JOB.json", "run");
@@ -473,8 +480,37 @@ int runJobCommand(int argc, char** argv) {
   options.quiet = args.has("--quiet");
   if (!integerOption(args, "--threads", 0, 4096, options.threads, error)) return usage(error, "run");
   if (!args.has("--threads")) options.threads = -1;
+  if (const auto* sh = args.get("--shard")) {
+    if (args.has("--shard-count")) return usage("--shard and --shard-count: give one of them", "run");
+    auto shard = parseShard(*sh, "--shard");
+    if (!shard.isOk()) return usage(shard.status().message(), "run");
+    options.shard = *shard;
+  } else if (!args.has("--merge")) {
+    std::optional<uint32_t> count;
+    if (const auto* c = args.get("--shard-count")) {
+      auto n = parseInteger(*c, 1, 65536, "--shard-count");
+      if (!n.isOk()) return usage(n.status().message(), "run");
+      count = static_cast<uint32_t>(*n);
+    }
+    auto shard = shardFromEnvironment(count);
+    if (!shard.isOk()) return usage(shard.status().message(), "run");
+    options.shard = *shard;
+  }
   auto job = loadJobConfig(args.positional[0]);
   if (!job.isOk()) return fail(job.status());
+  if (args.has("--merge")) {
+    if (args.has("--shard") || args.has("--shard-count")) return usage("--merge runs no shard", "run");
+    auto merged = mergeJobShards(*job);
+    if (!merged.isOk()) return fail(merged.status());
+    for (const auto& in : merged->missing)
+      std::fprintf(stderr, "scanpress: error: %s: in no shard's summary (was the job or its inputs changed?)\n",
+                   in.c_str());
+    if (!options.quiet)
+      std::printf("merged %llu files into %s\n", static_cast<unsigned long long>(merged->files),
+                  (job->output_directory + "/" + job->summary_name).c_str());
+    return merged->exit_code;
+  }
+  if (options.shard && !options.quiet) std::printf("shard %u of %u\n", options.shard->index, options.shard->count);
   auto batch = runJob(*job, options);
   if (!batch.isOk()) return fail(batch.status());
   return batch->exitCode();
