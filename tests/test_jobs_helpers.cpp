@@ -9,6 +9,7 @@
 #include "jobs/numbers.h"
 #include "jobs/scan_store.h"
 #include "jobs_util.h"
+#include "jobs/progress.h"
 #include "test_util.h"
 
 namespace scanpress {
@@ -133,6 +134,38 @@ TEST(Numbers, Lists) {
     EXPECT_NE(error(parseIntegerList(bad, 0, UINT32_MAX, 0, "x")), "") << bad;
   EXPECT_NE(error(parseNumberList("1,2,3", -360, 360, 2, "x")), "");
   EXPECT_NE(error(parseNumberList("400,0", -360, 360, 2, "x")), "");
+}
+
+}  // namespace
+}  // namespace scanpress
+
+namespace scanpress {
+namespace {
+
+// Off a terminal (a batch log), progress is a plain line per interval with tiles, Mtri/s and an ETA; never the
+// terminal's carriage returns; nothing when quiet.
+TEST(Progress, LogLinesOffATerminal) {
+  auto text = [](bool quiet) {
+    FILE* f = std::tmpfile();
+    {
+      TerminalProgress p(quiet, f, /*terminal=*/false, /*log_interval=*/0);
+      p.file(1, 3, "scan.ply");
+      p.stage("encode");
+      p.tiles(1, 4, 1000);
+      p.tiles(4, 4, 4000);
+    }
+    std::rewind(f);
+    std::string s;
+    for (int c; (c = std::fgetc(f)) != EOF;) s += static_cast<char>(c);
+    std::fclose(f);
+    return s;
+  };
+  const std::string log = text(false);
+  EXPECT_NE(log.find("[2/3] scan.ply: encode, tiles 1/4, "), std::string::npos) << log;
+  EXPECT_NE(log.find(", ETA "), std::string::npos) << log;
+  EXPECT_NE(log.find("tiles 4/4"), std::string::npos) << log;
+  EXPECT_EQ(log.find('\r'), std::string::npos) << log;
+  EXPECT_EQ(text(true), "");
 }
 
 }  // namespace
