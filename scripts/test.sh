@@ -3,6 +3,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
+bash scripts/install-test-tools.sh
 bash scripts/build.sh
 dir=build
 if [ "${SANITIZE:-0}" = "1" ]; then dir=build-asan; fi

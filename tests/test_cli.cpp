@@ -2,7 +2,9 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <array>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -445,6 +447,90 @@ TEST(Cli, StdinAndStdoutThroughPipes) {
   EXPECT_EQ(run("render '" + dir.file("file.ply") + "' '" + dir.file("x.jpg") + "'", &out), 1);
   EXPECT_NE(out.find("OUT must end in .png"), std::string::npos) << out;
   EXPECT_FALSE(fs::exists(dir.file("x.jpg")));
+}
+
+// decode writes every format it names: PLY, OBJ, STL, OFF (each also through zstd) read back to the same triangles
+// over the same positions as the PLY; glTF (.glb and .gltf) passes the Khronos validator with no errors and no
+// warnings, and its accessors hold the decoded counts and bounds.
+TEST(Cli, DecodeToEveryFormat) {
+  testing::TempDir dir;
+  std::string out;
+  const std::string spz = dir.file("b.spz");
+  ASSERT_EQ(run("encode '" + kBunny + "' '" + spz + "' --bits 12 --quiet", &out), 0) << out;
+  ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("ref.ply") + "' --quiet", &out), 0) << out;
+  auto ref = readMeshFile(dir.file("ref.ply"));
+  ASSERT_TRUE(ref.isOk());
+  auto triangles = [](const Mesh& m) {  // triangles over float positions, rotated to their smallest corner
+    std::vector<std::array<std::array<float, 3>, 3>> t;
+    for (const auto& tri : m.triangles) {
+      std::array<std::array<float, 3>, 3> c;
+      for (int k = 0; k < 3; ++k)
+        for (int a = 0; a < 3; ++a) c[k][a] = static_cast<float>(m.positions[tri[k]][a]);
+      std::rotate(c.begin(), std::min_element(c.begin(), c.end()), c.end());
+      t.push_back(c);
+    }
+    std::sort(t.begin(), t.end());
+    return t;
+  };
+  const auto want = triangles(*ref);
+  for (const char* name : {"b.obj", "b.stl", "b.off", "b.ply.zst", "b.obj.zst", "b.stl.zst", "b.off.zst"}) {
+    SCOPED_TRACE(name);
+    ASSERT_EQ(run("decode '" + spz + "' '" + dir.file(name) + "' --quiet", &out), 0) << out;
+    auto back = readMeshFile(dir.file(name));
+    ASSERT_TRUE(back.isOk()) << back.status().toString();
+    EXPECT_EQ(triangles(*back), want);
+  }
+  EXPECT_EQ(run("decode '" + spz + "' '" + dir.file("b.xyz") + "'", &out), 1);
+  EXPECT_NE(out.find(".glb or .gltf"), std::string::npos) << out;
+  for (const char* name : {"b.glb", "b.gltf"}) {
+    SCOPED_TRACE(name);
+    ASSERT_EQ(run("decode '" + spz + "' '" + dir.file(name) + "' --quiet", &out), 0) << out;
+    // The document: from the JSON chunk of the .glb, or the .gltf itself.
+    std::string text = slurp(dir.file(name));
+    if (text.compare(0, 4, "glTF") == 0) {
+      uint32_t len = 0;
+      std::memcpy(&len, text.data() + 12, 4);
+      text = text.substr(20, len);
+    }
+    const auto doc = nlohmann::json::parse(text);
+    const auto& prim = doc["meshes"][0]["primitives"][0];
+    const auto& pos = doc["accessors"][prim["attributes"]["POSITION"].get<int>()];
+    EXPECT_EQ(pos["count"], ref->positions.size());
+    EXPECT_EQ(doc["accessors"][prim["indices"].get<int>()]["count"], 3 * ref->triangles.size());
+    for (int a = 0; a < 3; ++a) {
+      double lo = 1e300, hi = -1e300;
+      for (const auto& p : ref->positions) lo = std::min(lo, p[a]), hi = std::max(hi, p[a]);
+      const double t = doc["nodes"][0]["translation"][a];
+      EXPECT_NEAR(pos["min"][a].get<double>() + t, lo, 1e-6);
+      EXPECT_NEAR(pos["max"][a].get<double>() + t, hi, 1e-6);
+    }
+    // The Khronos validator, when node has it (scripts/install-test-tools.sh).
+    if (std::system("command -v node >/dev/null 2>&1") != 0) {
+      std::printf("[  SKIPPED ] no node: %s not validated\n", name);
+      continue;
+    }
+    const std::string script = dir.file("validate.js");
+    testing::writeBytes(script, R"(const fs = require('fs');
+let v;
+try { v = require('gltf-validator'); } catch (e) { console.log('NO-VALIDATOR'); process.exit(0); }
+v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[2])), {externalResourceFunction: () => Promise.reject('none')})
+  .then((r) => console.log('errors=' + r.issues.numErrors + ' warnings=' + r.issues.numWarnings + ' ' +
+                           JSON.stringify(r.issues.messages.slice(0, 3))))
+  .catch((e) => console.log('exception ' + e));
+)");
+    FILE* p =
+        ::popen(("NODE_PATH=\"$(npm root -g 2>/dev/null)\" node '" + script + "' '" + dir.file(name) + "' 2>&1").c_str(),
+                "r");
+    std::string result;
+    for (int c; (c = std::fgetc(p)) != EOF;) result += static_cast<char>(c);
+    ::pclose(p);
+    if (result.find("NO-VALIDATOR") != std::string::npos) {
+      std::printf("[  SKIPPED ] gltf-validator not installed (scripts/install-test-tools.sh): %s not validated\n",
+                  name);
+      continue;
+    }
+    EXPECT_NE(result.find("errors=0 warnings=0"), std::string::npos) << result;
+  }
 }
 
 // --quiet prints nothing, whatever the thread count (oneTBB warned about more threads than cores).

@@ -43,7 +43,7 @@ usage: scanpress <command> [options]
 commands:
   run      run a JSON job file: many scans, one container and report each, a batch summary
   encode   compress a mesh file (PLY, OBJ, STL, OFF; optionally .zst) into a .spz container
-  decode   decompress a container (or some of its tiles) into a PLY or OBJ file
+  decode   decompress a container (or some of its tiles) into PLY, OBJ, STL, OFF (optionally .zst) or glTF
   info     describe a container
   measure  surface distance between two meshes (Metro-style, both directions, Embree)
   render   a PNG picture of a mesh, optionally colored by its distance to the original
@@ -148,10 +148,12 @@ options:
   --quiet         print nothing on success
 )";
 
-constexpr const char* kDecodeHelp = R"(usage: scanpress decode IN.spz OUT.(ply|obj) [options]
+constexpr const char* kDecodeHelp = R"(usage: scanpress decode IN.spz OUT [options]
 
-Decompresses a container into a mesh file (PLY binary little endian or OBJ, by extension). Positions are cell
-centers of the container's grid; they are written as float, or as double when float cannot hold the grid. IN `-`
+Decompresses a container into a mesh file, by OUT's extension: .ply (binary little endian), .obj, .stl (binary,
+geometry only), .off, each optionally .zst-compressed (.ply.zst), or glTF 2.0 (.glb, .gltf). Positions are cell
+centers of the container's grid; they are written as float, or as double when float cannot hold the grid (PLY,
+OBJ, OFF; glTF keeps float precision with a node translation). IN `-`
 reads the container from stdin, OUT `-` writes the mesh to stdout in the --format given (messages go to stderr).
 
 options:

@@ -1,13 +1,69 @@
 #include "jobs/mesh_io/mesh_writer.h"
 
+#include <zstd.h>
+
 #include <charconv>
+#include <cmath>
 #include <cstring>
 #include <vector>
 
 #include "jobs/file_io.h"
+#include "jobs/mesh_io/gltf_writer.h"
 
 namespace scanpress {
 namespace {
+
+bool endsWith(const std::string& path, const char* ext) {
+  const size_t n = std::strlen(ext);
+  if (path.size() < n) return false;
+  for (size_t i = 0; i < n; ++i)
+    if (std::tolower(static_cast<unsigned char>(path[path.size() - n + i])) != ext[i]) return false;
+  return true;
+}
+
+// Where a writer's bytes go: an AtomicFile, through zstd when the name ends in .zst (level 3: about as fast as the
+// writers, and what `zstd` itself defaults to). Appears complete or not at all.
+class MeshOutput {
+ public:
+  static Result<std::unique_ptr<MeshOutput>> create(const std::string& path) {
+    SP_ASSIGN_OR_RETURN(auto file, AtomicFile::create(path));
+    auto out = std::unique_ptr<MeshOutput>(new MeshOutput(std::move(file)));
+    if (endsWith(path, ".zst")) {
+      out->cctx_ = ZSTD_createCCtx();
+      if (!out->cctx_) return makeError(ErrorCode::kIo, path + ": out of memory for zstd");
+      ZSTD_CCtx_setParameter(out->cctx_, ZSTD_c_compressionLevel, 3);
+      out->zbuf_.resize(ZSTD_CStreamOutSize());
+    }
+    return out;
+  }
+  ~MeshOutput() { ZSTD_freeCCtx(cctx_); }
+  Status append(std::span<const uint8_t> bytes) { return compress(bytes, ZSTD_e_continue); }
+  Status append(std::string_view text) {
+    return append(std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
+  }
+  Status commit() {
+    SP_RETURN_IF_ERROR(compress({}, ZSTD_e_end));
+    return file_->commit();
+  }
+
+ private:
+  explicit MeshOutput(std::unique_ptr<AtomicFile> file) : file_(std::move(file)) {}
+  Status compress(std::span<const uint8_t> bytes, ZSTD_EndDirective mode) {
+    if (!cctx_) return mode == ZSTD_e_end ? Status::ok() : file_->append(bytes);
+    ZSTD_inBuffer in{bytes.data(), bytes.size(), 0};
+    for (;;) {
+      ZSTD_outBuffer out{zbuf_.data(), zbuf_.size(), 0};
+      const size_t left = ZSTD_compressStream2(cctx_, &out, &in, mode);
+      if (ZSTD_isError(left))
+        return makeError(ErrorCode::kInternal, file_->path() + ": zstd: " + ZSTD_getErrorName(left));
+      SP_RETURN_IF_ERROR(file_->append(std::span<const uint8_t>(zbuf_.data(), out.pos)));
+      if (mode == ZSTD_e_end ? left == 0 : in.pos == in.size) return Status::ok();
+    }
+  }
+  std::unique_ptr<AtomicFile> file_;
+  ZSTD_CCtx* cctx_ = nullptr;
+  std::vector<uint8_t> zbuf_;
+};
 
 template <typename T>
 void putLe(std::vector<uint8_t>& out, T v) {
@@ -22,7 +78,7 @@ Status checkMesh(const std::string& path, const Mesh& mesh) {
   if (!mesh.colors.empty() && mesh.colors.size() != mesh.positions.size())
     return makeError(ErrorCode::kInternal, path + ": colors do not match vertices");
   if (mesh.triangles.size() > 0x7FFFFFFF || mesh.positions.size() > 0x7FFFFFFF)
-    return makeError(ErrorCode::kLimitExceeded, path + ": mesh too large for an int32-indexed PLY/OBJ");
+    return makeError(ErrorCode::kLimitExceeded, path + ": mesh too large for an int32-indexed PLY/OBJ/OFF");
   return Status::ok();
 }
 
@@ -30,7 +86,7 @@ Status checkMesh(const std::string& path, const Mesh& mesh) {
 
 Status writePly(const std::string& path, const Mesh& mesh, const WriteOptions& options) {
   SP_RETURN_IF_ERROR(checkMesh(path, mesh));
-  SP_ASSIGN_OR_RETURN(auto file, AtomicFile::create(path));
+  SP_ASSIGN_OR_RETURN(auto file, MeshOutput::create(path));
   const bool normals = !mesh.normals.empty();
   const bool colors = !mesh.colors.empty();
   const bool alpha = colors && mesh.color_channels == 4;
@@ -73,7 +129,7 @@ Status writePly(const std::string& path, const Mesh& mesh, const WriteOptions& o
 
 Status writeObj(const std::string& path, const Mesh& mesh, const WriteOptions& options) {
   SP_RETURN_IF_ERROR(checkMesh(path, mesh));
-  SP_ASSIGN_OR_RETURN(auto file, AtomicFile::create(path));
+  SP_ASSIGN_OR_RETURN(auto file, MeshOutput::create(path));
   std::string buf;
   buf.reserve(1u << 20);
   char num[64];
@@ -119,17 +175,81 @@ Status writeObj(const std::string& path, const Mesh& mesh, const WriteOptions& o
   return file->commit();
 }
 
+Status writeStl(const std::string& path, const Mesh& mesh, const WriteOptions& /*options*/) {
+  SP_RETURN_IF_ERROR(checkMesh(path, mesh));
+  if (mesh.triangles.size() > UINT32_MAX)
+    return makeError(ErrorCode::kLimitExceeded, path + ": more triangles than binary STL can count");
+  SP_ASSIGN_OR_RETURN(auto file, MeshOutput::create(path));
+  // Binary STL: an 80-byte header (which must not start with "solid", or readers take it for ASCII), the count,
+  // then per triangle its facet normal, three corners (float) and a zero attribute word. Only geometry survives.
+  std::vector<uint8_t> buf(80, ' ');
+  const char title[] = "binary STL written by scanpress";
+  std::memcpy(buf.data(), title, sizeof title - 1);
+  putLe(buf, static_cast<uint32_t>(mesh.triangles.size()));
+  for (const auto& t : mesh.triangles) {
+    const Vec3d& a = mesh.positions[t[0]];
+    const Vec3d& b = mesh.positions[t[1]];
+    const Vec3d& c = mesh.positions[t[2]];
+    const Vec3d u{b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v{c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    Vec3d n{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+    const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    for (double x : n) putLe(buf, static_cast<float>(len > 0 ? x / len : 0.0));
+    for (uint32_t i : t)
+      for (double x : mesh.positions[i]) putLe(buf, static_cast<float>(x));
+    putLe(buf, uint16_t{0});
+    if (buf.size() >= (1u << 20)) {
+      SP_RETURN_IF_ERROR(file->append(buf));
+      buf.clear();
+    }
+  }
+  SP_RETURN_IF_ERROR(file->append(buf));
+  return file->commit();
+}
+
+Status writeOff(const std::string& path, const Mesh& mesh, const WriteOptions& options) {
+  SP_RETURN_IF_ERROR(checkMesh(path, mesh));
+  SP_ASSIGN_OR_RETURN(auto file, MeshOutput::create(path));
+  // COFF when the mesh has colors (RGBA per vertex, as integers), OFF otherwise.
+  const bool colors = !mesh.colors.empty();
+  std::string buf = std::string(colors ? "COFF\n" : "OFF\n") + std::to_string(mesh.positions.size()) + " " +
+                    std::to_string(mesh.triangles.size()) + " 0\n";
+  char num[64];
+  for (size_t i = 0; i < mesh.positions.size(); ++i) {
+    for (int k = 0; k < 3; ++k) {
+      const auto r = options.double_positions
+                         ? std::to_chars(num, num + sizeof num, mesh.positions[i][k])
+                         : std::to_chars(num, num + sizeof num, static_cast<float>(mesh.positions[i][k]));
+      buf.append(num, r.ptr);
+      buf += k < 2 ? ' ' : (colors ? ' ' : '\n');
+    }
+    if (colors)
+      buf += std::to_string(mesh.colors[i][0]) + " " + std::to_string(mesh.colors[i][1]) + " " +
+             std::to_string(mesh.colors[i][2]) + " " + std::to_string(mesh.colors[i][3]) + "\n";
+    if (buf.size() >= (1u << 20)) {
+      SP_RETURN_IF_ERROR(file->append(buf));
+      buf.clear();
+    }
+  }
+  for (const auto& t : mesh.triangles) {
+    buf += "3 " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " + std::to_string(t[2]) + "\n";
+    if (buf.size() >= (1u << 20)) {
+      SP_RETURN_IF_ERROR(file->append(buf));
+      buf.clear();
+    }
+  }
+  SP_RETURN_IF_ERROR(file->append(buf));
+  return file->commit();
+}
+
 Status writeMeshFile(const std::string& path, const Mesh& mesh, const WriteOptions& options) {
-  auto ends = [&](const char* ext) {
-    const size_t n = std::strlen(ext);
-    if (path.size() < n) return false;
-    for (size_t i = 0; i < n; ++i)
-      if (std::tolower(static_cast<unsigned char>(path[path.size() - n + i])) != ext[i]) return false;
-    return true;
-  };
-  if (ends(".ply")) return writePly(path, mesh, options);
-  if (ends(".obj")) return writeObj(path, mesh, options);
-  return makeError(ErrorCode::kInvalidArgument, path + ": output must end in .ply or .obj");
+  const std::string base = endsWith(path, ".zst") ? path.substr(0, path.size() - 4) : path;
+  if (endsWith(base, ".ply")) return writePly(path, mesh, options);
+  if (endsWith(base, ".obj")) return writeObj(path, mesh, options);
+  if (endsWith(base, ".stl")) return writeStl(path, mesh, options);
+  if (endsWith(base, ".off")) return writeOff(path, mesh, options);
+  if (base == path && (endsWith(path, ".glb") || endsWith(path, ".gltf"))) return writeGltf(path, mesh, options);
+  return makeError(ErrorCode::kInvalidArgument,
+                   path + ": output must end in .ply, .obj, .stl or .off (optionally .zst), .glb or .gltf");
 }
 
 }  // namespace scanpress

@@ -1,5 +1,7 @@
-// Mesh writers: PLY binary little endian (with normals and colors when present) and OBJ. Both write through
-// AtomicFile: the output appears complete or not at all.
+// Mesh writers: PLY binary little endian (with normals and colors when present), OBJ (normals, colors as the
+// common `v x y z r g b` extension), binary STL (geometry only), OFF (COFF with colors), each optionally through
+// zstd (a name ending in .zst), and glTF 2.0 (jobs/mesh_io/gltf_writer.h). All write through AtomicFile: the
+// output appears complete or not at all.
 #pragma once
 
 #include <string>
@@ -16,7 +18,10 @@ struct WriteOptions {
 
 Status writePly(const std::string& path, const Mesh& mesh, const WriteOptions& options = {});
 Status writeObj(const std::string& path, const Mesh& mesh, const WriteOptions& options = {});
-// By extension (.ply or .obj); anything else is kInvalidArgument.
+Status writeStl(const std::string& path, const Mesh& mesh, const WriteOptions& options = {});
+Status writeOff(const std::string& path, const Mesh& mesh, const WriteOptions& options = {});
+// By extension: .ply, .obj, .stl, .off (each optionally followed by .zst), .glb, .gltf; anything else is
+// kInvalidArgument.
 Status writeMeshFile(const std::string& path, const Mesh& mesh, const WriteOptions& options = {});
 
 }  // namespace scanpress
