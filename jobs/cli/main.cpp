@@ -162,7 +162,7 @@ options:
                       decode only the tiles whose bounds meet this box, in world units (`info` prints each tile's
                       box); not with --tiles
   --crop              with --box: keep only the triangles wholly inside the box
-  --format ply|obj    the format of a mesh written to stdout (OUT `-`)
+  --format F          the format of a mesh written to stdout (OUT `-`): ply, obj, stl, off, glb or gltf
   --level L           progressive codecs: every tile at level L, as its codec numbers levels (`info` lists each
                       level and what it means; kdtree, octree: cells of 2^(bits-L) grid cells as vertices at their
                       centers with that level's triangles, L = grid bits is lossless)
@@ -419,10 +419,12 @@ int runDecode(int argc, char** argv) {
   const bool in_stdin = isStdio(s.input), out_stdout = isStdio(s.output);
   const std::string in_name = in_stdin ? "<stdin>" : s.input, out_name = out_stdout ? "<stdout>" : s.output;
   const auto* format = args.get("--format");
-  if (out_stdout && !format) return usage("a mesh on stdout (OUT = -) needs --format ply|obj", "decode");
+  if (out_stdout && !format)
+    return usage("a mesh on stdout (OUT = -) needs --format ply|obj|stl|off|glb|gltf", "decode");
   if (format && !out_stdout) return usage("--format is for a mesh on stdout (OUT = -)", "decode");
-  if (format && *format != "ply" && *format != "obj")
-    return usage("--format: must be ply or obj, got '" + *format + "'", "decode");
+  if (format && *format != "ply" && *format != "obj" && *format != "stl" && *format != "off" && *format != "glb" &&
+      *format != "gltf")
+    return usage("--format: must be ply, obj, stl, off, glb or gltf, got '" + *format + "'", "decode");
   std::optional<StdioSpool> spool;
   if (in_stdin || out_stdout) {
     auto created = StdioSpool::create();
