@@ -136,6 +136,7 @@ void runScan(const std::string& path, int bits, const Options& opt, std::vector<
         [&] {
       auto e = encodeMesh(codec, ctx, q);
       if (e.isOk()) encoded = std::move(e).value();
+      else std::fprintf(stderr, "%s: %s\n", std::string(codec.name).c_str(), e.status().toString().c_str());
       return encoded.payload.size();
         },
         [&] {

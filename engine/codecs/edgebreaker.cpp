@@ -24,7 +24,9 @@
 //    that share glued edges form fans; every fan becomes its own cut vertex, so the cut mesh is an oriented
 //    manifold. Each boundary loop of the cut mesh is closed by a fan around a dummy vertex (as Isenburg &
 //    Snoeyink and Draco's hole handling do). Every vertex the traversal meets first is coded as a new point, a
-//    dummy, or a copy of an earlier point (its index): how the cut pieces glue back.
+//    dummy, or a copy of an earlier point (its index): how the cut pieces glue back. A cut edge whose ends stay
+//    joined around other triangles leaves two edges between one pair of cut vertices, so border loops of two
+//    half-edges are legal (the papers' manifolds have none).
 //  - Orientation and multiplicity of the input triangles are then coded exactly as kdtree codes them (hierarchy.h
 //    codeFaceCopies over the sorted keys), so the decoded triangle set equals the input's.
 //  - Geometry: after connectivity, the points in decode order; each is predicted by the mean of every
@@ -420,7 +422,7 @@ class Engine {
             break;
           }
           case kL: {
-            if (len < 4) return malformed("L on a loop of three");
+            if (len < 3) return malformed("L on a loop of two");
             c = hv_[p];
             setTwin(t1, p);
             link(prv_[p], t2);
@@ -430,7 +432,7 @@ class Engine {
             break;
           }
           case kR: {
-            if (len < 4) return malformed("R on a loop of three");
+            if (len < 3) return malformed("R on a loop of two");
             c = hv_[nxt_[nx]];
             setTwin(t2, nx);
             link(p, t1);
@@ -440,7 +442,7 @@ class Engine {
             break;
           }
           case kE: {
-            if (len != 3 && len < 6) return malformed("E on a short loop");
+            if (len != 3 && len < 5) return malformed("E on a short loop");
             c = hv_[p];
             if (hv_[nxt_[nx]] != c) return malformed("E does not close");
             setTwin(t1, p);
@@ -456,7 +458,7 @@ class Engine {
             break;
           }
           case kS: {
-            if (len < 5) return malformed("S on a short loop");
+            if (len < 3) return malformed("S on a short loop");
             u32 dist = 0;
             int forward = 1;
             if (truth_) {
@@ -467,7 +469,7 @@ class Engine {
             forward = io_.bit(models_.direction, forward);
             dist = codeDistance(dist);
             const u32 d = forward ? dist : len - std::min(dist, len);
-            if (d < 2 || d > len - 3) return malformed("S lands outside its loop");
+            if (d < 1 || d > len - 2) return malformed("S lands outside its loop");
             q = walk(e, std::min(dist, len), forward);
             const u32 s = nxt_[q];
             c = hv_[s];
