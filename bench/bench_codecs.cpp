@@ -109,7 +109,7 @@ void BM_Tiling(benchmark::State& state, std::string scan) {
   state.counters["tiles"] = double(tiles);
 }
 
-// Where a progressive codec's bits go on every scan: connectivity and geometry per vertex (kdtree's paper, Table 2)
+// Where a codec's bits go on every scan: connectivity and geometry per vertex (kdtree's paper, Table 2)
 // and connectivity per triangle (EMC's paper, Table 1).
 using StatsEncoder =
     std::function<Status(const TileContext&, const QuantizedMesh&, std::vector<uint8_t>&, CodecStats*)>;
@@ -147,6 +147,7 @@ int registerAll() {
       ->Arg(131072)
       ->Unit(benchmark::kMillisecond);
   const StatsEncoder kdtree = &kdtreeEncodeWithStats;
+  const StatsEncoder edgebreaker = &edgebreakerEncodeWithStats;
   const StatsEncoder octree = [](const TileContext& c, const QuantizedMesh& m, std::vector<uint8_t>& o,
                                  CodecStats* s) { return octreeEncodeWithStats(c, m, o, s, OctreeOptions{true}); };
   // Without contexts (one adaptive model per symbol kind): what the contexts gain. Not decodable.
@@ -159,6 +160,12 @@ int registerAll() {
                                  std::string(scan), 12)
         ->Iterations(1)
         ->Unit(benchmark::kMillisecond);
+    for (int bits : {12, 16}) {
+      benchmark::RegisterBenchmark(("EdgebreakerBits/" + std::string(scan) + "/" + std::to_string(bits)).c_str(),
+                                   BM_Bits, edgebreaker, std::string(scan), bits)
+          ->Iterations(1)
+          ->Unit(benchmark::kMillisecond);
+    }
     for (int bits : {12, 24}) {
       const std::string suffix = std::string(scan) + "/" + std::to_string(bits);
       benchmark::RegisterBenchmark(("OctreeBits/" + suffix).c_str(), BM_Bits, octree, std::string(scan), bits)

@@ -120,6 +120,7 @@ void runScan(const std::string& path, int bits, int first_bits, const Options& o
         [&] {
       auto e = encodeMesh(codec, ctx, q);
       if (e.isOk()) encoded = std::move(e).value();
+      else std::fprintf(stderr, "%s: %s\n", std::string(codec.name).c_str(), e.status().toString().c_str());
       return encoded.payload.size();
         },
         [&] {

@@ -114,6 +114,10 @@ TEST_P(DataRoundTrip, OctreeIsLosslessAfterQuantization) {
   expectLosslessAfterQuantization(GetParam(), CodecId::kOctree, {12, 16, 24});
 }
 
+TEST_P(DataRoundTrip, EdgebreakerIsLosslessAfterQuantization) {
+  expectLosslessAfterQuantization(GetParam(), CodecId::kEdgebreaker, {12, 16});
+}
+
 // Every level of both progressive codecs decodes within the limits the index sets (a coarse octree level shows the
 // cliques of its vertex graph, bounded by the index's counts: see octree.cpp), and says what it means.
 TEST_P(DataRoundTrip, EveryLevelDecodesWithinTheIndexLimits) {

@@ -1,4 +1,4 @@
-// The progressive codecs `kdtree` and `octree`: lossless round trips on meshes of every kind (manifold,
+// The lossless codecs: the progressive `kdtree` and `octree` and the single-rate `edgebreaker`: lossless round trips on meshes of every kind (manifold,
 // boundaries, non-manifold, soups, duplicates, isolated and coincident vertices), every progressive level decodes
 // to a valid mesh, truncated and corrupted payloads fail cleanly (decoded here without the container's checksums).
 #include <gtest/gtest.h>
@@ -172,6 +172,7 @@ TEST_P(Progressive, LargeFanAndAttributes) {
 // Every level of a small mesh decodes, from a payload cut at that level's end, to a valid mesh: vertices on the
 // grid, triangles with three distinct corners; vertex counts grow with the level; the last level is lossless.
 TEST_P(Progressive, EveryLevelDecodesToAValidMesh) {
+  if (!codec().progressive()) GTEST_SKIP() << "single-rate codec: no levels";
   const TileContext ctx{12, {12, 0}};
   Mesh sphere = icosphere(4);
   for (const auto& p : sphere.positions) sphere.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
@@ -262,7 +263,7 @@ TEST_P(Progressive, RandomCorruptionsNeverCrash) {
     const int flips = 1 + trial % 4;
     for (int f = 0; f < flips; ++f) b[rng() % b.size()] ^= uint8_t(1 + rng() % 255);
     const uint32_t level = trial % 3 == 0 ? uint32_t(rng() % 13) : 12u;
-    auto d = codec().decode_level(ctx, 1, b, level, lim);
+    auto d = codec().progressive() ? codec().decode_level(ctx, 1, b, level, lim) : codec().decode(ctx, 1, b, lim);
     if (!d.isOk()) {
       ++failures;
     } else {
@@ -284,6 +285,11 @@ TEST_P(Progressive, RejectsWhatItCannotCode) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Codecs, Progressive, ::testing::Values(CodecId::kKdtree, CodecId::kOctree),
+                         [](const ::testing::TestParamInfo<CodecId>& info) {
+  return std::string(findCodec(info.param)->name);
+});
+
+INSTANTIATE_TEST_SUITE_P(SingleRate, Progressive, ::testing::Values(CodecId::kEdgebreaker),
                          [](const ::testing::TestParamInfo<CodecId>& info) {
   return std::string(findCodec(info.param)->name);
 });

@@ -17,10 +17,15 @@ namespace {
 constexpr PayloadFloor kStoreFloor{1.0, 3.0, 64};
 constexpr PayloadFloor kHierarchyFloor{8.0 / 1024, 8.0 / (1024 * 64), 1024};
 
-constexpr std::array<CodecInfo, 3> kCodecs = {{
+// edgebreaker: every point codes three residual classes and every face a symbol, each at least the cost of a
+// model's likeliest symbol (a width of 2^15 less one per other symbol); the slack covers the header and flush.
+constexpr PayloadFloor kEdgebreakerFloor{8.0 / 2048, 8.0 / 65536, 1024};
+
+constexpr std::array<CodecInfo, 4> kCodecs = {{
     {CodecId::kStore, "store", 1, kStoreFloor, &storeEncode, &storeDecode},
     {CodecId::kKdtree, "kdtree", 1, kHierarchyFloor, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel},
     {CodecId::kOctree, "octree", 1, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel},
+    {CodecId::kEdgebreaker, "edgebreaker", 1, kEdgebreakerFloor, &edgebreakerEncode, &edgebreakerDecode},
 }};
 
 }  // namespace

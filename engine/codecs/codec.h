@@ -194,7 +194,13 @@ Result<std::vector<CodecLevel>> octreeLevels(const TileContext& ctx, uint16_t ve
 Result<QuantizedMesh> octreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         uint32_t level, const DecodeLimits& limits);
 
-// What a progressive encoding (kdtree, octree) spent, in bits (ideal arithmetic-coding costs; the bytes add flushes and headers).
+// `edgebreaker`: single-rate lossless coding, Edgebreaker connectivity and parallelogram prediction
+// (edgebreaker.cpp). Like kdtree it merges vertices that share position and attributes.
+Result<EncodedTile> edgebreakerEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options);
+Result<QuantizedMesh> edgebreakerDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                        const DecodeLimits& limits);
+
+// What an encoding (kdtree, octree, edgebreaker) spent, in bits (ideal arithmetic-coding costs; the bytes add flushes and headers).
 struct CodecStats {
   uint64_t points = 0;           // distinct coded vertices
   uint64_t triangles = 0;        // triangles coded (with multiplicity)
@@ -207,6 +213,9 @@ struct CodecStats {
 };
 Status kdtreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
                              CodecStats* stats);
+// edgebreaker: `splits` and `edge_expansions` stay zero.
+Status edgebreakerEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
+                                  CodecStats* stats);
 Status octreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
                              CodecStats* stats, const OctreeOptions& options = {});
 
