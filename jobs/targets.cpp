@@ -98,7 +98,7 @@ class TargetSearch {
     switch (s_.target.kind) {
       case TargetKind::kMaxError: {
         const double e = errorOf(r, s_.target.metric);
-        if (e < 0 || e > s_.target.max_error) return false;
+        if (e < 0 || e > (1 - measureMargin(s_.target.metric)) * s_.target.max_error) return false;
         for (const TileReport& t : r.tiles)
           if (!t.target_met) return false;
         return true;
@@ -116,7 +116,7 @@ class TargetSearch {
   Status searchError() {
     const double e = s_.target.max_error;
     const double share = knob_ ? kKnobQuantizationShare : 1.0;
-    const double tile_error = knob_ ? e : 0;
+    const double tile_error = knob_ ? (1 - measureMargin(s_.target.metric)) * e : 0;
     if (!device_) {  // one device for every pass
       SP_ASSIGN_OR_RETURN(device_, EmbreeDevice::create());
     }
@@ -239,7 +239,8 @@ class TargetSearch {
     report_.bits = result.grid.bits;
     report_.met = met;
     report_.error = errorOf(result, s_.target.metric);
-    if (knob_ && s_.target.kind == TargetKind::kMaxError) report_.tile_error = s_.target.max_error * result.diagonal;
+    if (knob_ && s_.target.kind == TargetKind::kMaxError)
+      report_.tile_error = (1 - measureMargin(s_.target.metric)) * s_.target.max_error * result.diagonal;
     if (s_.target.kind == TargetKind::kMaxError)
       for (TileReport& t : result.tiles) {
         const ErrorStats sym = symmetricOf(t.forward, t.backward);
@@ -292,6 +293,8 @@ class TargetSearch {
 };
 
 }  // namespace
+
+double measureMargin(ErrorMetric metric) { return metric == ErrorMetric::kMax ? 0.06 : 0.02; }
 
 int predictBits(double max_error, ErrorMetric metric, double extent_over_diagonal, double share) {
   // RMS: a surface sample's displacement blends its triangle's three independent vertex displacements with its

@@ -87,16 +87,28 @@ void checkErrorTarget(const std::string& input, ErrorMetric metric, double e) {
   for (const auto& f : fs::directory_iterator(dir.path())) files += f.path().extension() == ".tmp";
   EXPECT_EQ(files, 0u);
   if (bits == kMinGridBits) return;
+  // One bit fewer misses: as the search measures it (the pipeline's measurement, against E less the margin)...
   EncodeSettings fewer = s;
   fewer.target = EncodeTarget{};
   fewer.bits = bits - 1;
+  fewer.measure.enabled = true;
   fewer.output = dir.file("fewer.spz");
   auto f = encodeFile(fewer, nullptr, testing::device());
   if (!f.isOk()) {
     EXPECT_EQ(f.status().code(), ErrorCode::kLimitExceeded) << f.status().toString();
     return;
   }
-  EXPECT_GT(independentError(input, fewer.output, metric), e) << "one bit fewer (" << bits - 1 << ") meets it too";
+  const ErrorStats sym = symmetricOf(statsOf(f->forward), statsOf(f->backward));
+  const double fewer_error = (metric == ErrorMetric::kMax ? sym.max : sym.rms) / f->diagonal;
+  EXPECT_GT(fewer_error, (1 - measureMargin(metric)) * e) << "one bit fewer (" << bits - 1 << ") meets it too";
+  // ... and for RMS independently too, within the sampling noise the margin covers. Not for the max: the per-tile
+  // measurement looks for the closest point within the tile only, so near tile borders of a coarse grid (where
+  // quantization folds triangles and the closest decoded point can lie in the neighbouring tile) its max is
+  // larger than the whole mesh's (sphere, max, 1e-3: 0.94e-3 per tile against 0.78e-3 whole at 9 bits). The
+  // search is conservative there: it can keep one bit more than a whole-mesh measurement would need.
+  if (metric == ErrorMetric::kRms) {
+    EXPECT_GT(independentError(input, fewer.output, metric), (1 - 2 * measureMargin(metric)) * e);
+  }
 }
 
 TEST(Targets, ErrorTargetOnASphereChoosesTheFewestBits) {
