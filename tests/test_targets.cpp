@@ -390,5 +390,71 @@ TEST(Targets, PerTileKnobSearchMeetsTheTargetInEveryTile) {
   }
 }
 
+// A stand-in for a simplifying codec's knob under a size target: the z of every unlocked vertex snaps to a multiple
+// of 2^floor(log2(cells)) grid cells, so the bytes shrink and the error grows with the knob.
+Result<StagedTile> snapStage(const TileContext&, const TileView& tile, double cells) {
+  StagedTile out{tile.mesh, std::vector<uint8_t>(tile.locked.begin(), tile.locked.end())};
+  const int k = cells < 1 ? 0 : std::min(20, static_cast<int>(std::floor(std::log2(cells))));
+  for (size_t v = 0; v < out.mesh.positions.size(); ++v)
+    if (out.locked.empty() || !out.locked[v]) out.mesh.positions[v][2] = out.mesh.positions[v][2] >> k << k;
+  return out;
+}
+
+TEST(Targets, SizeTargetWithAKnobBisectsOneGlobalThreshold) {
+  testing::TempDir dir;
+  const std::string sphere = sphereFile(dir);
+  PipelineHooks hooks;
+  hooks.knob_stage = snapStage;
+  EncodeSettings s;
+  s.input = sphere;
+  s.codec = "kdtree";
+  s.bits = 14;
+  s.tile_triangles = 4096;
+  s.knob_cells = 0;
+  s.output = dir.file("k0.spz");
+  auto fine = encodeFile(s, nullptr, nullptr, &hooks);
+  ASSERT_TRUE(fine.isOk()) << fine.status().toString();
+  s.knob_cells = 64;
+  s.output = dir.file("k64.spz");
+  auto coarse = encodeFile(s, nullptr, nullptr, &hooks);
+  ASSERT_TRUE(coarse.isOk());
+  ASSERT_LT(coarse->bytes, fine->bytes);
+  s.knob_cells = -1;
+  s.output = dir.file("t.spz");
+  s.target.kind = TargetKind::kMaxBytes;
+  s.target.fixed_bits = true;
+  s.target.max_bytes = (fine->bytes + coarse->bytes) / 2;
+  auto r = encodeFile(s, nullptr, nullptr, &hooks);
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  ASSERT_TRUE(r->target);
+  EXPECT_TRUE(r->target->met);
+  EXPECT_EQ(r->target->bits, 14);
+  EXPECT_LE(fs::file_size(s.output), s.target.max_bytes);
+  const double t = r->target->knob_cells;
+  EXPECT_GT(t, 1);
+  EXPECT_LE(t, 64);
+  for (const TileReport& tile : r->tiles) EXPECT_EQ(tile.knob_cells, t);
+  // The next finer setting tried (within 5% of the chosen knob, or the knob a power of two lower, where the snap
+  // changes) does not fit.
+  bool finer_missed = false;
+  for (const TargetAttempt& a : r->target->attempts) {
+    if (a.knob_cells < t) {
+      EXPECT_GT(a.bytes, s.target.max_bytes) << "knob " << a.knob_cells << " fits and is finer";
+    }
+    finer_missed |= a.knob_cells < t && !a.met &&
+                    (a.knob_cells * 1.05 >= t || std::floor(std::log2(a.knob_cells)) == std::floor(std::log2(t)) - 1);
+  }
+  EXPECT_TRUE(finer_missed);
+  // Impossible: below what the coarsest knob gives.
+  s.target.max_bytes = 200;
+  s.output = dir.file("impossible.spz");
+  r = encodeFile(s, nullptr, nullptr, &hooks);
+  ASSERT_TRUE(r.isOk());
+  EXPECT_FALSE(r->target->met);
+  EXPECT_NE(r->target->status.message().find("and the coarsest knob"), std::string::npos)
+      << r->target->status.message();
+  EXPECT_FALSE(fs::exists(s.output));
+}
+
 }  // namespace
 }  // namespace scanpress
