@@ -122,6 +122,10 @@ class TargetSearch {
     }
     int bits = s_.target.fixed_bits ? s_.bits : predictBits(e, s_.target.metric, 1.0, share);
     SP_ASSIGN_OR_RETURN(Pass * p, pass(bits, tile_error, -1, true));
+    if (p->status.isOk() && !p->result.measured)  // a point cloud: no surface to measure (jobs/measure.h)
+      return makeError(ErrorCode::kUnsupported, s_.input +
+                                                    ": an error target (--max-error, /codec/target/max_error) needs "
+                                                    "triangles to measure; this scan is a point cloud");
     if (s_.target.fixed_bits) {
       chosen_ = p;
       return Status::ok();
@@ -259,16 +263,20 @@ class TargetSearch {
     std::string msg = s_.input + ": target not met: ";
     switch (t.kind) {
       case TargetKind::kMaxError:
-        msg += std::string("--max-error ") + number(t.max_error) + " (" + errorMetricName(t.metric) +
-               ", relative to the diagonal): achieved " + number(errorOf(r, t.metric)) + where;
+        msg += std::string("--max-error ") + number(t.max_error) + " (/codec/target/max_error; " +
+               errorMetricName(t.metric) + ", relative to the diagonal): achieved " + number(errorOf(r, t.metric)) +
+               where;
         if (!t.fixed_bits && r.grid.bits >= kMaxGridBits) msg += ", the finest grid";
+        msg += " (accepted: at most " + number((1 - measureMargin(t.metric)) * t.max_error) +
+               ", a margin for the sampled measurement)";
         break;
       case TargetKind::kMaxBytes:
-        msg += "--max-bytes " + std::to_string(t.max_bytes) + ": the coarsest setting needs " +
-               std::to_string(r.bytes) + " bytes" + where;
+        msg += "--max-bytes " + std::to_string(t.max_bytes) +
+               " (/codec/target/max_bytes): the coarsest setting needs " + std::to_string(r.bytes) + " bytes" + where;
         break;
       case TargetKind::kBitsPerVertex:
-        msg += "--bpv " + number(t.bpv) + ": the coarsest setting needs " + number(r.bitsPerVertex()) + " bpv" + where;
+        msg += "--bpv " + number(t.bpv) + " (/codec/target/bpv): the coarsest setting needs " +
+               number(r.bitsPerVertex()) + " bpv" + where;
         break;
       case TargetKind::kNone: break;
     }

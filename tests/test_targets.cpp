@@ -231,7 +231,9 @@ TEST(Targets, ImpossibleTargetsFailClearly) {
                                   &out),
             2)
       << out;
-  EXPECT_NE(out.find("target not met: --max-error 1e-09 (rms, relative to the diagonal): achieved"), std::string::npos)
+  EXPECT_NE(
+      out.find("target not met: --max-error 1e-09 (/codec/target/max_error; rms, relative to the diagonal): achieved"),
+      std::string::npos)
       << out;
   EXPECT_NE(out.find("at 24 bits"), std::string::npos) << out;
   EXPECT_FALSE(fs::exists(dir.file("c.spz")));
@@ -247,6 +249,18 @@ TEST(Targets, ImpossibleTargetsFailClearly) {
             2)
       << out;
   EXPECT_NE(out.find("at 8 bits (fixed by --bits"), std::string::npos) << out;
+  // A point cloud has no surface to measure: an error target is refused, naming the option and the key.
+  Mesh points = icosphere(2);
+  points.triangles.clear();
+  ASSERT_TRUE(writePly(dir.file("points.ply"), points).isOk());
+  EXPECT_EQ(testing::runScanpress("encode '" + dir.file("points.ply") + "' '" + dir.file("p.spz") +
+                                      "' --codec kdtree --max-error 1e-3",
+                                  &out),
+            2)
+      << out;
+  EXPECT_NE(out.find("an error target (--max-error, /codec/target/max_error) needs triangles"), std::string::npos)
+      << out;
+  EXPECT_FALSE(fs::exists(dir.file("p.spz")));
 }
 
 TEST(TargetOptions, CommandLineConflictsAndBadValuesNameTheOption) {
