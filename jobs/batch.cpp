@@ -246,6 +246,7 @@ static void encodeOne(const JobSettings& job, const EncodeSettings& s, const std
     if (f.result.target && !f.result.target->status.isOk()) {  // a missed target: no container, a failure
       f.state = FileOutcome::State::kFailed;
       f.error = f.result.target->status;
+      f.counts.reset();  // the summary's totals count containers that exist
     }
     if (f.result.failed_tiles)
       for (const auto& t : f.result.tiles)

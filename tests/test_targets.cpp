@@ -263,6 +263,38 @@ TEST(Targets, ImpossibleTargetsFailClearly) {
   EXPECT_FALSE(fs::exists(dir.file("p.spz")));
 }
 
+// A job file's target: met (summary ok, report with the target), then a budget no setting meets (exit 2, the
+// input failed naming the target, its report not complete so a resume redoes it).
+TEST(Targets, JobFileTargets) {
+  testing::TempDir dir;
+  const std::string sphere = sphereFile(dir);
+  auto job = [&](const std::string& target) {
+    std::ofstream(dir.file("j.json")) << R"({"inputs": [")" << sphere
+                                      << R"("], "output": {"directory": "out"}, "codec": {"name": "kdtree", "target": )"
+                                      << target << "}}";
+  };
+  auto read = [&](const std::string& name) {
+    std::ifstream f(dir.file("out/" + name));
+    return nlohmann::json::parse(f);
+  };
+  std::string out;
+  job(R"({"max_error": 2e-4, "error": "max"})");
+  ASSERT_EQ(testing::runScanpress("run '" + dir.file("j.json") + "' --quiet", &out), 0) << out;
+  auto report = read("sphere.report.json");
+  EXPECT_EQ(report["complete"], true);
+  EXPECT_EQ(report["target"]["met"], true);
+  EXPECT_EQ(report["target"]["error"], "max");
+  EXPECT_LE(independentError(sphere, dir.file("out/sphere.spz"), ErrorMetric::kMax), 2e-4);
+  job(R"({"max_bytes": 500})");
+  EXPECT_EQ(testing::runScanpress("run '" + dir.file("j.json") + "' --quiet", &out), 2) << out;
+  const auto summary = read("summary.json");
+  EXPECT_EQ(summary["files"][0]["status"], "failed");
+  EXPECT_NE(summary["files"][0]["error"].get<std::string>().find("target not met: --max-bytes 500"), std::string::npos);
+  report = read("sphere.report.json");
+  EXPECT_EQ(report["complete"], false);
+  EXPECT_EQ(report["target"]["met"], false);
+}
+
 TEST(TargetOptions, CommandLineConflictsAndBadValuesNameTheOption) {
   testing::TempDir dir;
   const std::string sphere = sphereFile(dir);
