@@ -10,6 +10,7 @@
 #include <string>
 
 #include "engine/quantize.h"
+#include "jobs/file_io.h"
 #include "spatial/surface_index.h"
 
 namespace scanpress {
@@ -318,6 +319,9 @@ int predictBits(double max_error, ErrorMetric metric, double extent_over_diagona
 
 Result<EncodeResult> encodeToTarget(const EncodeSettings& settings, ProgressListener* progress,
                                     std::shared_ptr<EmbreeDevice> device, const PipelineHooks* hooks) {
+  // The passes write temporaries next to the output, which the pipeline's own check cannot relate to the input:
+  // `encode X X --max-error E` must not replace X when the chosen pass is renamed into place.
+  SP_RETURN_IF_ERROR(checkOutputPath(settings.output, {settings.input}));
   return TargetSearch(settings, progress, std::move(device), hooks).run();
 }
 

@@ -261,6 +261,11 @@ TEST(Targets, ImpossibleTargetsFailClearly) {
   EXPECT_NE(out.find("an error target (--max-error, /codec/target/max_error) needs triangles"), std::string::npos)
       << out;
   EXPECT_FALSE(fs::exists(dir.file("p.spz")));
+  // The output must not be the input, with a target as without.
+  const auto before = fs::file_size(sphere);
+  EXPECT_EQ(testing::runScanpress("encode '" + sphere + "' '" + sphere + "' --codec kdtree --max-error 1e-3", &out), 1)
+      << out;
+  EXPECT_EQ(fs::file_size(sphere), before);
 }
 
 // A job file's target: met (summary ok, report with the target), then a budget no setting meets (exit 2, the
