@@ -126,6 +126,7 @@ struct TargetAttempt {
   uint64_t vertices = 0;
   double error = -1;  // relative to the diagonal, in the target's metric; -1: not measured
   bool met = false;
+  std::string refused;  // the pipeline refused this setting (e.g. too many degenerate triangles at these bits)
 };
 struct TargetReport {
   EncodeTarget target;

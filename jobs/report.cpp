@@ -96,6 +96,7 @@ json targetJson(const TargetReport& t) {
     json e = {{"bits", a.bits}, {"bytes", a.bytes}, {"vertices", a.vertices}, {"met", a.met}};
     if (a.knob_cells >= 0) e["knob_cells"] = a.knob_cells;
     if (a.error >= 0) e["error"] = a.error;
+    if (!a.refused.empty()) e["refused"] = a.refused;
     attempts.push_back(std::move(e));
   }
   j["attempts"] = std::move(attempts);

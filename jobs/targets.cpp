@@ -90,6 +90,7 @@ class TargetSearch {
       out.met = meets(out.result);
     }
     a.met = out.met;
+    if (!out.status.isOk()) a.refused = out.status.message();
     report_.attempts.push_back(a);
     return &out;
   }
