@@ -2,6 +2,8 @@
 #include "jobs/targets.h"
 
 #include <algorithm>
+#include <unistd.h>
+
 #include <cmath>
 #include <cstdio>
 #include <deque>
@@ -10,6 +12,7 @@
 #include <string>
 
 #include "engine/quantize.h"
+#include "jobs/cleanup.h"
 #include "jobs/file_io.h"
 #include "spatial/surface_index.h"
 
@@ -58,6 +61,7 @@ class TargetSearch {
     Status status;  // a setting the pipeline refuses (kLimitExceeded: degenerate triangles) counts as a miss
     EncodeResult result;
     std::string path;
+    uint64_t tracked = 0;  // cleanup registration of the pass's container
     bool met = false;
   };
 
@@ -70,10 +74,22 @@ class TargetSearch {
     p.tile_metric = s_.target.metric;
     p.knob_cells = knob_cells;
     p.measure.enabled = measure;
-    p.output = s_.output + ".target-" + std::to_string(passes_.size()) + ".tmp";
+    // Named as AtomicFile names its temporaries (`.NAME.tmp-PID-N`), so that the next job run in the directory
+    // removes them after a SIGKILL (removeStaleTemporaries), and tracked, so that SIGINT's cleanup removes them.
+    const fs::path target(s_.output);
+    std::string name = ".";  // appended piecewise: GCC 12 warns (-Wrestrict) on "." + std::string
+    name += target.filename().string();
+    name += ".target";
+    name += std::to_string(passes_.size());
+    name += ".tmp-";
+    name += std::to_string(::getpid());
+    name += "-";
+    name += std::to_string(passes_.size());
+    p.output = (target.has_parent_path() ? target.parent_path() / name : fs::path(name)).string();
     auto r = encodeFileOnce(p, progress_, device_, hooks_);
     Pass& out = passes_.emplace_back();
     out.path = p.output;
+    if (r.isOk()) out.tracked = createTracked(TrackedKind::kFile, [&] { return out.path; });
     if (!r.isOk()) {
       if (r.status().code() != ErrorCode::kLimitExceeded) return r.status();
       out.status = r.status();
@@ -221,9 +237,13 @@ class TargetSearch {
     return Status::ok();
   }
 
-  void removeAll() {
+  void remove(const Pass& p) {
     std::error_code ec;
-    for (const Pass& p : passes_) fs::remove(p.path, ec);
+    fs::remove(p.path, ec);
+    untrack(p.tracked);
+  }
+  void removeAll() {
+    for (const Pass& p : passes_) remove(p);
   }
 
   // Moves the chosen pass's container into place and fills the report; a miss removes every container.
@@ -236,9 +256,10 @@ class TargetSearch {
     const bool met = chosen_->met;
     std::error_code ec;
     for (const Pass& p : passes_)
-      if (&p != chosen_ || !met) fs::remove(p.path, ec);
+      if (&p != chosen_ || !(met || result.failed_tiles > 0)) remove(p);
     if (met || result.failed_tiles > 0) {  // failed tiles: the container is kept, as without a target
       fs::rename(chosen_->path, s_.output, ec);
+      untrack(chosen_->tracked);
       if (ec)
         return makeError(ErrorCode::kIo, s_.output + ": cannot rename the chosen pass into place: " + ec.message());
     }

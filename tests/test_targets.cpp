@@ -14,6 +14,7 @@
 
 #include "engine/quantize.h"
 #include "engine/shapes.h"
+#include "jobs/cleanup.h"
 #include "jobs/commands.h"
 #include "jobs/config.h"
 #include "jobs/measure.h"
@@ -82,10 +83,12 @@ void checkErrorTarget(const std::string& input, ErrorMetric metric, double e) {
   const double achieved = independentError(input, s.output, metric);
   EXPECT_LE(achieved, e) << "at " << bits << " bits";
   EXPECT_LE(r->target->error, e);
-  // No temporary containers of the search are left.
+  // No temporary containers of the search are left, nor registered for cleanup.
   size_t files = 0;
-  for (const auto& f : fs::directory_iterator(dir.path())) files += f.path().extension() == ".tmp";
+  for (const auto& f : fs::directory_iterator(dir.path()))
+    files += f.path().filename().string().find(".tmp-") != std::string::npos;
   EXPECT_EQ(files, 0u);
+  EXPECT_EQ(trackedCount(), 0u);
   if (bits == kMinGridBits) return;
   // One bit fewer misses: as the search measures it (the pipeline's measurement, against E less the margin)...
   EncodeSettings fewer = s;
