@@ -170,6 +170,10 @@ class TargetSearch {
     } else {
       while (!p->met && bits < kMaxGridBits) {
         if (p->status.isOk() && p->result.failed_tiles > 0) break;  // a tile failed: not a question of bits
+        if (best_ && best_->result.grid.bits == bits + 1) {         // the first pass, before the jump down
+          p = best_;
+          break;
+        }
         SP_ASSIGN_OR_RETURN(p, pass(++bits, tile_error, -1, true));
       }
       if (p->met) best_ = p;
