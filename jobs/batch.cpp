@@ -251,7 +251,14 @@ std::string settingsFingerprint(const EncodeSettings& s) {
   // Allowing degenerate triangles turns a failure into an output; written only when set, so the fingerprints of
   // earlier runs stay valid.
   if (s.allow_degenerate) key += "|allow_degenerate=1";
-  if (s.strict) key += "|strict";         // a complete output made without it may have dropped what strict refuses
+  if (s.strict) key += "|strict";
+  if (s.target.active()) {  // a target decides the bits (and a lossy codec's knob); written only when set
+    char buf[128];
+    std::snprintf(buf, sizeof buf, "|target=%s,%.17g,%s,%llu,%.17g,%d", targetKindName(s.target.kind),
+                  s.target.max_error, errorMetricName(s.target.metric),
+                  static_cast<unsigned long long>(s.target.max_bytes), s.target.bpv, int(s.target.fixed_bits));
+    key += buf;
+  }                                       // a complete output made without it may have dropped what strict refuses
   for (const StageSpec& st : s.stages) {  // every option of every stage changes the bytes
     key += "|stage=" + std::string(findStage(st.kind)->name);
     if (st.kind == StageKind::kSmooth) {
@@ -338,6 +345,11 @@ static void encodeOne(const JobSettings& job, const EncodeSettings& s, const std
       f.counts->max_relative = sym.max / f.result.diagonal;
     }
     f.state = f.result.failed_tiles == 0 ? FileOutcome::State::kOk : FileOutcome::State::kFailed;
+    if (f.result.target && !f.result.target->status.isOk()) {  // a missed target: no container, a failure
+      f.state = FileOutcome::State::kFailed;
+      f.error = f.result.target->status;
+      f.counts.reset();  // the summary's totals count containers that exist
+    }
     if (f.result.failed_tiles)
       for (const auto& t : f.result.tiles)
         if (!t.status.isOk()) {

@@ -188,6 +188,42 @@ void readStages(const json& j, const std::string& file, Status& error, std::vect
     readStage(j[i], "/stages/" + std::to_string(i), file, error, out[i]);
 }
 
+// /codec/target: at most one of max_error (with error), max_bytes and bpv; null is as absent (reference.json lists
+// every key so).
+void readTarget(const json& given, const std::string& file, Status& error, EncodeTarget& out) {
+  json j = given;
+  if (j.is_object())
+    for (auto it = j.begin(); it != j.end();) it = it->is_null() ? j.erase(it) : std::next(it);
+  ObjectReader r(j, "/codec/target", file, error);
+  double max_error = -1, bpv = -1;
+  uint64_t max_bytes = 0;
+  std::string metric;
+  r.number("max_error", 1e-12, 1, max_error);
+  r.string("error", metric);
+  r.unsignedInteger("max_bytes", UINT64_MAX, max_bytes);
+  r.number("bpv", 1e-6, 1e6, bpv);
+  r.finish();
+  if (!error.isOk()) return;
+  const bool has_error = j.contains("max_error"), has_bytes = j.contains("max_bytes"), has_bpv = j.contains("bpv");
+  if (int(has_error) + int(has_bytes) + int(has_bpv) > 1)
+    return r.fail(has_bpv ? "/codec/target/bpv" : "/codec/target/max_bytes",
+                  "conflicts with " + std::string(has_error ? "/codec/target/max_error" : "/codec/target/max_bytes") +
+                      ": give one target (an error bound or a size budget)");
+  if (j.contains("error") && metric != "rms" && metric != "max")
+    return r.fail("/codec/target/error", "must be \"rms\" or \"max\", got \"" + metric + "\"");
+  if (j.contains("error") && (has_bytes || has_bpv))
+    return r.fail("/codec/target/error", "applies to /codec/target/max_error only, not to a size budget");
+  if (has_bytes && max_bytes == 0) return r.fail("/codec/target/max_bytes", "must be at least 1");
+  out.kind = has_error   ? TargetKind::kMaxError
+             : has_bytes ? TargetKind::kMaxBytes
+             : has_bpv   ? TargetKind::kBitsPerVertex
+                         : TargetKind::kNone;
+  out.max_error = has_error ? max_error : 0;
+  out.metric = metric == "max" ? ErrorMetric::kMax : ErrorMetric::kRms;
+  out.max_bytes = max_bytes;
+  out.bpv = has_bpv ? bpv : 0;
+}
+
 bool validPattern(const std::string& p) {
   for (size_t i = 0; i < p.size(); ++i)
     if (p[i] == '{') {
@@ -215,6 +251,10 @@ std::vector<std::string> knownConfigKeys() {
           "/codec/normals",
           "/codec/colors",
           "/codec/allow_degenerate",
+          "/codec/target/max_error",
+          "/codec/target/error",
+          "/codec/target/max_bytes",
+          "/codec/target/bpv",
           "/stages",
           "/tiling/target_triangles",
           "/strict",
@@ -287,6 +327,9 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     c.boolean("normals", s.encode.keep_normals);
     c.boolean("colors", s.encode.keep_colors);
     c.boolean("allow_degenerate", s.encode.allow_degenerate);
+    if (const json* target = c.object("target")) readTarget(*target, config_path, error, s.encode.target);
+    // A target chooses the bits unless they are given.
+    s.encode.target.fixed_bits = codec->is_object() && codec->contains("bits");
     c.finish();
     if (error.isOk() && !findCodec(s.encode.codec)) {
       c.fail("/codec/name", "unknown codec '" + s.encode.codec + "' (available: " + codecNames() + ")");

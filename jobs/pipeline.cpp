@@ -24,6 +24,7 @@
 #include "jobs/file_io.h"
 #include "jobs/process.h"
 #include "jobs/scan_store.h"
+#include "jobs/targets.h"
 #include "spatial/surface_index.h"
 #include "spatial/tile_builder.h"
 #include "spatial/tiling.h"
@@ -260,6 +261,9 @@ struct TileResult {
   uint32_t border = 0;
   uint32_t input_vertices = 0, input_faces = 0;  // of the tile as built (a failed tile reports what it lost)
   ErrorAccumulator forward, backward;
+  double knob_cells = -1;
+  bool target_met = true;
+  uint32_t knob_trials = 0;
 };
 
 // Measures one tile: its original triangles against the decoded tile, both ways. Near tile borders the other
@@ -526,9 +530,95 @@ class ScanEncoder {
       SP_RETURN_IF_ERROR(checkBorderContract(ctx, view(), next.view(), true).withContext("test stage"));
       staged = std::move(next);
     }
-    SP_ASSIGN_OR_RETURN(r.encoded, codec_.encode(ctx, view(), s_.codec_options));
+    const bool knob = (hooks_ && hooks_->knob_stage) || errorKnobOf(codec_.id);
+    if (knob && s_.tile_error > 0 && result_.measured) return searchKnob(ctx, view(), tm, originals, r);
+    SP_RETURN_IF_ERROR(encodeAt(ctx, view(), knob ? s_.knob_cells : -1, r));
     if (result_.measured)  // decode in memory, measure against the original triangles, discard
       SP_RETURN_IF_ERROR(measureTile(s_, codec_, ctx, result_.grid, density_, device_, tm, originals, r));
+    return Status::ok();
+  }
+
+  // The codec's encode with its error knob at `cells` grid cells (< 0: the knob as configured).
+  Status encodeAt(const TileContext& ctx, const TileView& tile, double cells, TileResult& r) const {
+    CodecOptions options = s_.codec_options;
+    r.knob_cells = cells;
+    if (cells < 0) {
+      SP_ASSIGN_OR_RETURN(r.encoded, codec_.encode(ctx, tile, options));
+      return Status::ok();
+    }
+    if (hooks_ && hooks_->knob_stage) {
+      SP_ASSIGN_OR_RETURN(StagedTile lossy, hooks_->knob_stage(ctx, tile, cells));
+      SP_RETURN_IF_ERROR(checkBorderContract(ctx, tile, lossy.view(), true).withContext("test knob stage"));
+      SP_ASSIGN_OR_RETURN(r.encoded, codec_.encode(ctx, lossy.view(), options));
+      return Status::ok();
+    }
+    errorKnobOf(codec_.id)(options, cells);
+    SP_ASSIGN_OR_RETURN(r.encoded, codec_.encode(ctx, tile, options));
+    return Status::ok();
+  }
+
+  // The measured error of the tile as encoded in `r`, in the per-tile target's metric (absolute units).
+  double tileError(const TileResult& r) const {
+    const ErrorStats sym = symmetricOf(statsOf(r.forward), statsOf(r.backward));
+    return s_.tile_metric == ErrorMetric::kMax ? sym.max : sym.rms;
+  }
+
+  // The per-tile knob search: the largest knob t (grid cells) whose decoded tile, measured against the tile's
+  // original triangles, stays within s_.tile_error. Each trial is a full encode, decode and measurement, so the
+  // error is the codec's real error, not its own estimate.
+  //
+  // t = 0 (no simplification) is the floor: its error is the quantization's, which the bits were chosen to keep
+  // well inside the target. The first trial is a prediction: the target in grid cells (for RMS twice that, as a
+  // simplification's RMS is well below its bound on the worst point). Then a bracket: while the trial meets the
+  // target, t doubles (the error grows with t, roughly in proportion, so doubling finds the failing side in a
+  // trial or two); once a trial misses, bisection between the largest t that met and the smallest that missed (in
+  // the log of t, since t spans orders of magnitude). kKnobTrials encodes in all; the tile keeps the encoding of
+  // the largest t that met. The error need not be monotone in t: only trials that were measured to meet are
+  // kept, so a non-monotone codec can cost bytes, never the target.
+  //
+  // Per-tile bounds imply the overall one: the overall RMS is the area-weighted mean of the tiles' squared
+  // errors (each side samples by area, and the tiles partition the original's triangles and the decoded ones),
+  // so RMS <= E in every tile gives RMS <= E overall. The overall max is the max over the tiles' samples; a tile's
+  // measurement ignores its neighbours' surfaces, which can only make a distance near a border larger, and the
+  // border vertices are locked (never moved), so max <= E in every tile gives max <= E overall.
+  Status searchKnob(const TileContext& ctx, const TileView& tile, const TileMesh& tm,
+                    const std::vector<Vec3d>& originals, TileResult& r) {
+    constexpr uint32_t kKnobTrials = 7;
+    const double target = s_.tile_error * result_.diagonal;
+    const double target_cells = target / result_.grid.cell;
+    auto trial = [&](double t, TileResult& out) -> Status {
+      out.forward = ErrorAccumulator();
+      out.backward = ErrorAccumulator();
+      SP_RETURN_IF_ERROR(encodeAt(ctx, tile, t, out));
+      ++r.knob_trials;
+      return measureTile(s_, codec_, ctx, result_.grid, density_, device_, tm, originals, out);
+    };
+    // The floor first: when even t = 0 misses, the bits are too coarse and the tile reports it (the target search
+    // adds a bit).
+    SP_RETURN_IF_ERROR(trial(0, r));
+    if (tileError(r) > target) {
+      r.target_met = false;
+      return Status::ok();
+    }
+    double met = 0, missed = -1;  // largest t that met; smallest t that missed (< 0: none yet)
+    double t = s_.tile_metric == ErrorMetric::kRms ? 2 * target_cells : target_cells;
+    for (uint32_t i = 1; i < kKnobTrials && t > 0; ++i) {
+      TileResult attempt;
+      attempt.tile = r.tile;
+      SP_RETURN_IF_ERROR(trial(t, attempt));
+      if (tileError(attempt) <= target) {
+        met = t;
+        r.encoded = std::move(attempt.encoded);
+        r.forward = attempt.forward;
+        r.backward = attempt.backward;
+        r.knob_cells = t;
+      } else {
+        missed = t;
+      }
+      t = missed < 0 ? 2 * met : met > 0 ? std::sqrt(met * missed) : missed / 4;
+      // Within 5% of each other the bracket has converged: another trial would not change the bytes much.
+      if (missed > 0 && met > 0 && missed < 1.05 * met) break;
+    }
     return Status::ok();
   }
 
@@ -564,6 +654,9 @@ class ScanEncoder {
     rep.status = r.status;
     rep.forward = statsOf(r.forward);
     rep.backward = statsOf(r.backward);
+    rep.knob_cells = r.knob_cells;
+    rep.target_met = r.target_met;
+    rep.knob_trials = r.knob_trials;
     result_.forward.merge(r.forward);
     result_.backward.merge(r.backward);
     if (!r.status.isOk()) {
@@ -608,8 +701,32 @@ class ScanEncoder {
 
 }  // namespace
 
+const char* targetKindName(TargetKind kind) {
+  switch (kind) {
+    case TargetKind::kNone: return "none";
+    case TargetKind::kMaxError: return "max_error";
+    case TargetKind::kMaxBytes: return "max_bytes";
+    case TargetKind::kBitsPerVertex: return "bpv";
+  }
+  return "unknown";
+}
+
+const char* errorMetricName(ErrorMetric m) { return m == ErrorMetric::kMax ? "max" : "rms"; }
+
+ErrorKnob errorKnobOf(CodecId id) {
+  // pm's last level keeps collapses whose error estimate is at most max_error grid cells (engine/codecs/codec.h).
+  if (id == CodecId::kPm) return [](CodecOptions& o, double cells) { o.pm.max_error = cells; };
+  return nullptr;
+}
+
 Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progress,
                                 std::shared_ptr<EmbreeDevice> device, const PipelineHooks* hooks) {
+  if (s.target.active()) return encodeToTarget(s, progress, std::move(device), hooks);
+  return encodeFileOnce(s, progress, std::move(device), hooks);
+}
+
+Result<EncodeResult> encodeFileOnce(const EncodeSettings& s, ProgressListener* progress,
+                                    std::shared_ptr<EmbreeDevice> device, const PipelineHooks* hooks) {
   const CodecInfo* codec = findCodec(s.codec);
   if (!codec)
     return makeError(ErrorCode::kInvalidArgument, "unknown codec '" + s.codec + "' (available: " + codecNames() + ")");

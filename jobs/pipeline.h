@@ -21,6 +21,7 @@
 
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -31,6 +32,31 @@
 #include "jobs/mesh_io/mesh_reader.h"
 
 namespace scanpress {
+
+// What an encode aims at instead of fixed settings (jobs/targets.cpp): an error bound or a size budget. A target
+// without fixed bits chooses the quantization bits; for a codec with an error knob (errorKnobOf), the target also
+// chooses how far each tile departs from the quantized tile.
+enum class TargetKind : uint8_t {
+  kNone = 0,
+  kMaxError = 1,       // measured symmetric error of the decoded scan <= max_error * diagonal
+  kMaxBytes = 2,       // container bytes <= max_bytes, at the least error
+  kBitsPerVertex = 3,  // 8 * bytes / vertices <= bpv, at the least error
+};
+enum class ErrorMetric : uint8_t {
+  kRms = 0,  // symmetric RMS (the larger of the two one-sided RMS), as `scanpress measure` reports it
+  kMax = 1,  // symmetric max (Hausdorff, vertices included)
+};
+struct EncodeTarget {
+  TargetKind kind = TargetKind::kNone;
+  double max_error = 0;  // kMaxError: relative to the diagonal of the scan's bounding box
+  ErrorMetric metric = ErrorMetric::kRms;
+  uint64_t max_bytes = 0;   // kMaxBytes
+  double bpv = 0;           // kBitsPerVertex
+  bool fixed_bits = false;  // the bits were given (--bits, /codec/bits): the search keeps them
+  bool active() const { return kind != TargetKind::kNone; }
+};
+const char* targetKindName(TargetKind kind);  // "max_error", "max_bytes", "bpv"
+const char* errorMetricName(ErrorMetric m);   // "rms", "max"
 
 // Everything that decides what an encode produces and how it runs. The CLI's `encode` options and the job files'
 // keys both map onto this struct (jobs/config.cpp).
@@ -51,7 +77,19 @@ struct EncodeSettings {
   std::vector<StageSpec> stages;     // geometry stages every tile runs before the codec, in order
   CodecOptions codec_options;        // the codec's typed options
   bool strict = false;               // fail (kUnsupported) when the input holds anything the container drops
+  EncodeTarget target;               // none: the settings above are used as they are
+  // Set by the target search for one pass (jobs/targets.cpp), not by users. For a codec with an error knob:
+  // `tile_error` > 0 makes every tile search the knob so that its measured error (`tile_metric`, relative to the
+  // scan's diagonal) stays within it; else `knob_cells` >= 0 sets the knob of every tile to that many grid cells.
+  double tile_error = 0;
+  ErrorMetric tile_metric = ErrorMetric::kRms;
+  double knob_cells = -1;
 };
+
+// A lossy codec's error knob: sets how far the codec may depart from the tile, in grid cells (pm:
+// PmOptions::max_error). nullptr for a codec without one (every lossless codec).
+using ErrorKnob = void (*)(CodecOptions& options, double cells);
+ErrorKnob errorKnobOf(CodecId id);
 
 // The share of a mesh's triangles that quantization may make degenerate (two corners in one cell) and drop before
 // the encode fails with kLimitExceeded, unless EncodeSettings::allow_degenerate. Triangles that are degenerate in
@@ -75,6 +113,30 @@ struct TileReport {
   uint64_t bytes = 0;
   Status status;
   ErrorStats forward, backward;  // when measured
+  double knob_cells = -1;        // the error knob this tile was encoded at (a codec with one, under a target)
+  bool target_met = true;        // under a per-tile error target: the tile's measured error is within it
+  uint32_t knob_trials = 0;      // encodes the per-tile search ran
+};
+
+// What the target search did (jobs/targets.cpp), for the report.
+struct TargetAttempt {
+  int bits = 0;
+  double knob_cells = -1;  // global knob (size targets with a knob codec), or -1
+  uint64_t bytes = 0;
+  uint64_t vertices = 0;
+  double error = -1;  // relative to the diagonal, in the target's metric; -1: not measured
+  bool met = false;
+  std::string refused;  // the pipeline refused this setting (e.g. too many degenerate triangles at these bits)
+};
+struct TargetReport {
+  EncodeTarget target;
+  int bits = 0;            // chosen
+  double knob_cells = -1;  // chosen global knob (size targets with a knob codec)
+  double tile_error = 0;   // per-tile error bound given to the knob search (absolute units), 0: none
+  bool met = false;
+  double error = -1;  // achieved, relative to the diagonal, in the target's metric (-1: not measured)
+  std::vector<TargetAttempt> attempts;
+  Status status;  // not met: kLimitExceeded naming achieved and target
 };
 
 struct EncodeResult {
@@ -98,7 +160,8 @@ struct EncodeResult {
   ErrorAccumulator forward, backward;  // over all tiles: original -> decoded, decoded -> original
   StageSeconds seconds;
   std::string codec;
-  std::vector<std::string> stages;  // names, in the order they ran
+  std::vector<std::string> stages;     // names, in the order they ran
+  std::optional<TargetReport> target;  // when the settings had a target
   double bitsPerVertex() const { return vertices ? 8.0 * bytes / vertices : 0.0; }
 };
 
@@ -118,13 +181,23 @@ struct PipelineHooks {
   std::function<Status(uint32_t tile_id)> fail_tile;
   // Fault injection outside the tile tasks: called before a scan is read; may throw.
   std::function<void(const std::string& input)> before_survey;
+  // A lossy transformation standing in for a codec's error knob: when set, the codec counts as having a knob, and
+  // each tile runs this (after the stages, checked against the border contract) at the knob's value in grid
+  // cells before the codec encodes it. Lets the target search be tested before a lossy codec exists.
+  std::function<Result<StagedTile>(const TileContext& ctx, const TileView& tile, double cells)> knob_stage;
 };
 
 // Encodes one scan: survey, ingest, tile, encode tiles, finish (jobs/pipeline.cpp). The container is written
 // even when some tiles fail (they are listed in the result); it is not written at all on a read or write error.
-// Measuring uses `device` (one per job); one is created when none is given.
+// Measuring uses `device` (one per job); one is created when none is given. With a target (settings.target), the
+// target search of jobs/targets.h runs the encode as often as it needs; result.target tells what it chose and
+// whether the target was met (a missed target removes the container and sets result.target->status).
 Result<EncodeResult> encodeFile(const EncodeSettings& settings, ProgressListener* progress = nullptr,
                                 std::shared_ptr<EmbreeDevice> device = nullptr, const PipelineHooks* hooks = nullptr);
+
+// One encode at exactly these settings, ignoring `target` (the target search runs it once per attempt).
+Result<EncodeResult> encodeFileOnce(const EncodeSettings& settings, ProgressListener* progress,
+                                    std::shared_ptr<EmbreeDevice> device, const PipelineHooks* hooks);
 
 // Peak memory of a tile task per triangle (measured, generously rounded up): sizes tiles and tiles in flight.
 constexpr uint64_t kTileBytesPerTriangle = 160;

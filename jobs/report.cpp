@@ -78,11 +78,41 @@ json layoutJson(const AttributeLayout& l) {
   return {{"normals", l.hasNormals()}, {"normal_bits", l.normal_bits}, {"color_channels", l.color_channels}};
 }
 
+// The target, what the search chose and tried, and whether the target was met.
+json targetJson(const TargetReport& t) {
+  json j = {{"kind", targetKindName(t.target.kind)}, {"fixed_bits", t.target.fixed_bits}};
+  switch (t.target.kind) {
+    case TargetKind::kMaxError:
+      j["max_error"] = t.target.max_error;  // relative to the diagonal
+      j["error"] = errorMetricName(t.target.metric);
+      if (t.error >= 0) j["achieved_error"] = t.error;
+      if (t.tile_error > 0) j["tile_error"] = t.tile_error;  // absolute, each tile's bound
+      break;
+    case TargetKind::kMaxBytes: j["max_bytes"] = t.target.max_bytes; break;
+    case TargetKind::kBitsPerVertex: j["bpv"] = t.target.bpv; break;
+    case TargetKind::kNone: break;
+  }
+  j["bits"] = t.bits;
+  if (t.knob_cells >= 0) j["knob_cells"] = t.knob_cells;
+  j["met"] = t.met;
+  if (!t.status.isOk()) j["failure"] = t.status.toString();
+  json attempts = json::array();
+  for (const TargetAttempt& a : t.attempts) {
+    json e = {{"bits", a.bits}, {"bytes", a.bytes}, {"vertices", a.vertices}, {"met", a.met}};
+    if (a.knob_cells >= 0) e["knob_cells"] = a.knob_cells;
+    if (a.error >= 0) e["error"] = a.error;
+    if (!a.refused.empty()) e["refused"] = a.refused;
+    attempts.push_back(std::move(e));
+  }
+  j["attempts"] = std::move(attempts);
+  return j;
+}
+
 }  // namespace
 
 nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& r, const std::string& fingerprint) {
   json j;
-  j["complete"] = r.failed_tiles == 0;
+  j["complete"] = r.failed_tiles == 0 && (!r.target || r.target->met);
   if (!fingerprint.empty()) j["fingerprint"] = fingerprint;
   j["input"] = settings.input;
   j["output"] = settings.output;
@@ -134,6 +164,7 @@ nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& 
                               {"stratified", settings.measure.stratified},
                               {"vertices", settings.measure.vertices}};
   }
+  if (r.target) j["target"] = targetJson(*r.target);
   json tiles = json::array();
   for (const auto& t : r.tiles) {
     json e = {{"id", t.id},       {"vertices", t.vertices},
@@ -141,6 +172,9 @@ nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& 
               {"bytes", t.bytes}, {"status", t.status.isOk() ? "ok" : "failed"}};
     if (!t.status.isOk()) e["failure"] = t.status.toString();
     else if (r.measured) e["error"] = errorJson(t.forward, t.backward, r.diagonal);
+    if (t.status.isOk() && r.target && r.target->target.kind == TargetKind::kMaxError)
+      e["within_target"] = t.target_met;
+    if (t.knob_cells >= 0) e["knob_cells"] = t.knob_cells, e["knob_trials"] = t.knob_trials;
     tiles.push_back(std::move(e));
   }
   j["tiles"] = std::move(tiles);

@@ -66,6 +66,15 @@ options:
                       (available: %s); e.g. smooth:iterations=5 (configs/REFERENCE.md, "Stages")
   --bits N            quantization bits, 8..24 (default 16): the largest bounding-box extent is divided into 2^N
                       cubic cells, as Draco's -qp does
+  --max-error E       error target, relative to the bounding-box diagonal: the measured error of the decoded scan
+                      is at most E (verified by decoding and measuring; the report gives it per tile and overall).
+                      Without --bits the fewest bits that meet it are chosen; a codec that simplifies also
+                      chooses per tile how far. Exit 2 when it cannot be met
+  --error rms|max     the metric of --max-error: symmetric RMS (default) or symmetric max (Hausdorff), as
+                      `scanpress measure` reports them
+  --max-bytes N       size target: the container at most N bytes, at the least error (exit 2 when even the
+                      coarsest setting is larger)
+  --bpv R             size target: at most R bits per encoded vertex, at the least error
   --normal-bits N     octahedral bits per normal component, 4..16 (default 12)
   --no-normals        drop normals
   --no-colors         drop colors
@@ -273,12 +282,40 @@ bool numberOption(const Args& args, const char* name, double lo, double hi, doub
   return option(args, name, out, error, [&](const std::string& v) { return parseNumber(v, lo, hi, name); });
 }
 
+// --max-error, --error, --max-bytes, --bpv into s.target; an error message, or "" when they are fine.
+std::string targetOptions(const Args& args, EncodeSettings& s) {
+  std::vector<std::string> given;
+  for (const char* name : {"--max-error", "--max-bytes", "--bpv"})
+    if (args.has(name)) given.push_back(name);
+  if (given.size() > 1)
+    return given[0] + " and " + given[1] + " conflict: give one target (an error bound or a size budget)";
+  std::string error;
+  EncodeTarget& t = s.target;
+  if (!numberOption(args, "--max-error", 1e-12, 1, t.max_error, error) ||
+      !unsignedOption(args, "--max-bytes", UINT64_MAX, t.max_bytes, error) ||
+      !numberOption(args, "--bpv", 1e-6, 1e6, t.bpv, error))
+    return error;
+  if (const std::string* m = args.get("--error")) {
+    if (*m != "rms" && *m != "max") return "--error: must be rms or max, got '" + *m + "'";
+    if (!args.has("--max-error")) return "--error applies to --max-error only";
+    t.metric = *m == "max" ? ErrorMetric::kMax : ErrorMetric::kRms;
+  }
+  if (args.has("--max-bytes") && t.max_bytes == 0) return "--max-bytes: must be at least 1";
+  t.kind = args.has("--max-error")   ? TargetKind::kMaxError
+           : args.has("--max-bytes") ? TargetKind::kMaxBytes
+           : args.has("--bpv")       ? TargetKind::kBitsPerVertex
+                                     : TargetKind::kNone;
+  t.fixed_bits = args.has("--bits");
+  return "";
+}
+
 int runEncode(int argc, char** argv) {
   Args args;
   std::string error;
   if (!parseArgs(argc, argv, 2,
                  {"--codec", "--stages", "--bits", "--normal-bits", "--report", "--tile-triangles", "--threads",
-                  "--memory-budget", "--scratch-dir", "--samples-per-triangle", "--format"},
+                  "--memory-budget", "--scratch-dir", "--samples-per-triangle", "--format", "--max-error", "--error",
+                  "--max-bytes", "--bpv"},
                  {"--no-normals", "--no-colors", "--allow-degenerate", "--strict", "--measure", "--quiet", "--help"},
                  args, error))
     return usage(error, "encode");
@@ -300,6 +337,7 @@ int runEncode(int argc, char** argv) {
   if (!integerOption(args, "--bits", kMinGridBits, kMaxGridBits, s.bits, error) ||
       !integerOption(args, "--normal-bits", 4, 16, s.normal_bits, error))
     return usage(error, "encode");
+  if (std::string target_error = targetOptions(args, s); !target_error.empty()) return usage(target_error, "encode");
   s.keep_normals = !args.has("--no-normals");
   s.keep_colors = !args.has("--no-colors");
   s.allow_degenerate = args.has("--allow-degenerate");
@@ -355,8 +393,6 @@ int runEncode(int argc, char** argv) {
   progress.clear();
   const std::string spooled_in = in_stdin ? s.input : "", spooled_out = out_stdout ? s.output : "";
   if (!result.isOk()) return failStdio(result.status(), spooled_in, spooled_out);
-  if (out_stdout)
-    if (Status w = spool->writeStdout("stdout.spz"); !w.isOk()) return failStdio(w, spooled_in, spooled_out);
   if (!args.has("--quiet") && !result->read.dropped.empty())
     std::fprintf(stderr, "scanpress: warning: dropped %s (not kept by scanpress; --strict fails instead)\n",
                  describeDropped(result->read.dropped).c_str());
@@ -370,6 +406,20 @@ int runEncode(int argc, char** argv) {
       if (!w.isOk()) return fail(w);
     }
   }
+  if (result->target && !args.has("--quiet")) {
+    const TargetReport& t = *result->target;
+    std::fprintf(say, "target %s: %s; %d bits%s, %zu attempt(s)", targetKindName(t.target.kind),
+                 t.met ? "met" : "NOT met", t.bits, t.target.fixed_bits ? " (fixed)" : " (chosen)", t.attempts.size());
+    if (t.target.kind == TargetKind::kMaxError)
+      std::fprintf(say, ", %s error %.3e d (target %.3e d)", errorMetricName(t.target.metric), t.error,
+                   t.target.max_error);
+    if (t.knob_cells >= 0) std::fprintf(say, ", knob %.3g cells", t.knob_cells);
+    std::fprintf(say, "\n");
+  }
+  if (result->target && !result->target->status.isOk())
+    return failStdio(result->target->status, spooled_in, spooled_out);
+  if (out_stdout)
+    if (Status w = spool->writeStdout("stdout.spz"); !w.isOk()) return failStdio(w, spooled_in, spooled_out);
   if (!args.has("--quiet") && result->measured) {
     const ErrorStats sym = symmetricOf(statsOf(result->forward), statsOf(result->backward));
     const double d = result->diagonal > 0 ? result->diagonal : 1;
@@ -380,7 +430,7 @@ int runEncode(int argc, char** argv) {
     std::fprintf(say, "%s -> %s: %llu vertices, %llu faces, %llu bytes, %.3f bpv (%s, %d bits, %zu tiles)\n",
                  in_name.c_str(), out_name.c_str(), static_cast<unsigned long long>(result->vertices),
                  static_cast<unsigned long long>(result->faces), static_cast<unsigned long long>(result->bytes),
-                 result->bitsPerVertex(), result->codec.c_str(), s.bits, result->tiles.size());
+                 result->bitsPerVertex(), result->codec.c_str(), result->grid.bits, result->tiles.size());
   if (result->failed_tiles > 0) {
     for (const auto& t : result->tiles)
       if (!t.status.isOk()) std::fprintf(stderr, "scanpress: error: tile %u: %s\n", t.id, t.status.toString().c_str());
