@@ -9,8 +9,13 @@
 
 #include "engine/codecs/codec.h"
 #include "engine/quantize.h"
+#include "engine/simplify/simplify.h"
 #include "jobs/mesh_io/mesh_reader.h"
 #include "spatial/tiling.h"
+
+#ifdef SCANPRESS_HAVE_MESHOPTIMIZER
+#include <meshoptimizer.h>
+#endif
 
 namespace scanpress {
 namespace {
@@ -109,6 +114,51 @@ void BM_Tiling(benchmark::State& state, std::string scan) {
   state.counters["tiles"] = double(tiles);
 }
 
+// Simplification to `percent` of the faces (issue 19: >= 2 Mtri/s of input per core on igea to 10%): Mtri/s of
+// input, and the result's face count.
+void BM_Simplify(benchmark::State& state, std::string scan, SimplifyWeights weights) {
+  const Prepared& p = prepared(scan, 16);
+  SimplifyOptions o;
+  o.weights = weights;
+  o.target_faces = p.mesh.triangles.size() * uint64_t(state.range(0)) / 100;
+  size_t faces = 0, passes = 0;
+  for (auto _ : state) {
+    auto s = simplify(p.mesh, {}, o);
+    if (!s.isOk()) return state.SkipWithError(s.status().message().c_str());
+    faces = s->mesh.triangles.size();
+    passes = s->pass_ends.size();
+    benchmark::DoNotOptimize(s);
+  }
+  state.counters["Mtri/s"] =
+      benchmark::Counter(double(p.mesh.triangles.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["faces_%"] = 100.0 * double(faces) / double(p.mesh.triangles.size());
+  state.counters["passes"] = double(passes);
+}
+
+#ifdef SCANPRESS_HAVE_MESHOPTIMIZER
+// meshoptimizer's simplifier on the same quantized input (float positions of the grid coordinates).
+void BM_MeshoptSimplify(benchmark::State& state, std::string scan) {
+  const Prepared& p = prepared(scan, 16);
+  std::vector<float> xyz;
+  for (const auto& q : p.mesh.positions)
+    for (uint32_t c : q) xyz.push_back(float(c));
+  std::vector<uint32_t> indices;
+  for (const auto& t : p.mesh.triangles) indices.insert(indices.end(), t.begin(), t.end());
+  std::vector<uint32_t> out(indices.size());
+  const size_t target = indices.size() * size_t(state.range(0)) / 100;
+  size_t n = 0;
+  for (auto _ : state) {
+    float error = 0;
+    n = meshopt_simplify(out.data(), indices.data(), indices.size(), xyz.data(), p.mesh.positions.size(),
+                         3 * sizeof(float), target, 1.0f, 0, &error);
+    benchmark::DoNotOptimize(out.data());
+  }
+  state.counters["Mtri/s"] =
+      benchmark::Counter(double(p.mesh.triangles.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["faces_%"] = 100.0 * double(n / 3) / double(p.mesh.triangles.size());
+}
+#endif
+
 // Where a progressive codec's bits go on every scan: connectivity and geometry per vertex (kdtree's paper, Table 2)
 // and connectivity per triangle (EMC's paper, Table 1).
 using StatsEncoder =
@@ -169,6 +219,22 @@ int registerAll() {
           ->Iterations(1)
           ->Unit(benchmark::kMillisecond);
     }
+  }
+  for (const char* scan : {"igea.ply.zst", "bun_zipper.ply.zst"}) {
+    benchmark::RegisterBenchmark((std::string("Simplify/") + scan).c_str(), BM_Simplify, std::string(scan),
+                                 SimplifyWeights::kShapePreserving)
+        ->Arg(10)
+        ->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark((std::string("SimplifyPlain/") + scan).c_str(), BM_Simplify, std::string(scan),
+                                 SimplifyWeights::kPlain)
+        ->Arg(10)
+        ->Unit(benchmark::kMillisecond);
+#ifdef SCANPRESS_HAVE_MESHOPTIMIZER
+    benchmark::RegisterBenchmark((std::string("MeshoptSimplify/") + scan).c_str(), BM_MeshoptSimplify,
+                                 std::string(scan))
+        ->Arg(10)
+        ->Unit(benchmark::kMillisecond);
+#endif
   }
   for (const char* scan : kScans) {
     benchmark::RegisterBenchmark((std::string("Read/") + scan).c_str(), BM_Read, std::string(scan))
