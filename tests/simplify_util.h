@@ -7,7 +7,6 @@
 
 #include <algorithm>
 #include <map>
-#include <set>
 #include <string>
 #include <vector>
 
@@ -22,56 +21,54 @@ inline QuantizedMesh replayCollapses(const QuantizedMesh& input, const Simplific
   std::vector<uint8_t> alive(m.triangles.size(), 1);
   size_t begin = 0;
   EXPECT_TRUE(s.pass_ends.empty() ? s.collapses.empty() : s.pass_ends.back() == s.collapses.size());
+  std::vector<int64_t> owner(m.positions.size(), -1);
   for (size_t pass = 0; pass < s.pass_ends.size(); ++pass) {
-    const size_t end = s.pass_ends[pass];
+    const size_t end = std::min<size_t>(s.pass_ends[pass], s.collapses.size());
     EXPECT_LT(begin, end) << "empty pass " << pass;
-    // Neighbours at the pass's start (brute force over the faces).
-    std::vector<std::set<uint32_t>> nb(m.positions.size());
+    // Triangles per vertex at the pass's start.
+    std::vector<std::vector<uint32_t>> faces(m.positions.size());
     for (size_t f = 0; f < m.triangles.size(); ++f)
       if (alive[f])
-        for (uint32_t a : m.triangles[f])
-          for (uint32_t b : m.triangles[f])
-            if (a != b) nb[a].insert(b);
-    std::vector<int> owner(m.positions.size(), -1);
-    for (size_t i = begin; i < end && i < s.collapses.size(); ++i) {
+        for (uint32_t v : m.triangles[f])
+          if (faces[v].empty() || faces[v].back() != f) faces[v].push_back(uint32_t(f));
+    // Closed one-rings: every vertex of a triangle of kept or removed belongs to one collapse only.
+    for (size_t i = begin; i < end; ++i) {
       const EdgeCollapse& c = s.collapses[i];
-      EXPECT_TRUE(nb[c.kept].count(c.removed)) << "collapse " << i << " is not an edge";
-      std::set<uint32_t> ring = nb[c.kept];
-      ring.insert(nb[c.removed].begin(), nb[c.removed].end());
-      ring.insert(c.kept);
-      ring.insert(c.removed);
-      for (uint32_t v : ring) {
-        EXPECT_EQ(owner[v], -1) << "pass " << pass << ": collapses " << owner[v] << " and " << i << " share vertex "
-                                << v;
-        owner[v] = int(i);
-      }
+      bool is_edge = false;
+      for (uint32_t f : faces[c.kept])
+        for (uint32_t w : m.triangles[f]) is_edge |= w == c.removed;
+      EXPECT_TRUE(is_edge) << "collapse " << i << " is not an edge";
+      for (uint32_t v : {c.kept, c.removed})
+        for (uint32_t f : faces[v])
+          for (uint32_t w : m.triangles[f]) {
+            if (owner[w] >= int64_t(begin) && owner[w] != int64_t(i))
+              ADD_FAILURE() << "pass " << pass << ": collapses " << owner[w] << " and " << i << " share vertex " << w;
+            owner[w] = int64_t(i);
+          }
     }
-    for (size_t i = begin; i < end && i < s.collapses.size(); ++i) {
+    // Apply, as the header defines a collapse (the rings are disjoint, so the start's adjacency is current).
+    for (size_t i = begin; i < end; ++i) {
       const EdgeCollapse& c = s.collapses[i];
-      for (size_t f = 0; f < m.triangles.size(); ++f) {
-        if (!alive[f]) continue;
+      for (uint32_t f : faces[c.removed]) {
         auto& t = m.triangles[f];
         const bool hk = t[0] == c.kept || t[1] == c.kept || t[2] == c.kept;
-        const bool hr = t[0] == c.removed || t[1] == c.removed || t[2] == c.removed;
-        if (hk && hr) {
+        if (hk) {
           alive[f] = 0;
-        } else if (hr) {
+        } else {
           for (auto& v : t)
             if (v == c.removed) v = c.kept;
         }
       }
       // The placement index names the position (the paper's 0/1/2).
+      EXPECT_LE(c.placement, 2) << "collapse " << i;
       if (c.placement == 0) {
         EXPECT_EQ(c.position, m.positions[c.kept]) << "collapse " << i;
-      }
-      if (c.placement == 1) {
+      } else if (c.placement == 1) {
         EXPECT_EQ(c.position, m.positions[c.removed]) << "collapse " << i;
-      }
-      if (c.placement == 2) {
+      } else {
         EXPECT_NE(c.position, m.positions[c.kept]) << "collapse " << i;
         EXPECT_NE(c.position, m.positions[c.removed]) << "collapse " << i;
       }
-      EXPECT_LE(c.placement, 2);
       m.positions[c.kept] = c.position;
     }
     begin = end;

@@ -78,13 +78,26 @@ struct Quadric {
 
 using Vec3 = std::array<double, 3>;
 
+// std::array's == is a memcmp call here; this one inlines.
+inline bool same(const Vec3u& a, const Vec3u& b) { return a[0] == b[0] && a[1] == b[1] && a[2] == b[2]; }
+
 Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
 Vec3 cross(const Vec3& a, const Vec3& b) {
   return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
 }
 double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
+// A candidate collapse as stored for sorting (24 bytes: candidates are the largest per-pass array). Which end is
+// kept follows from the position (the end it lands on, else v0), the error is recomputed when it is taken, and
+// v0 < v1 exactly when the edge was interior (see evaluateCandidates).
 struct Candidate {
+  uint32_t v0;
+  uint32_t v1;
+  Vec3u position;
+  float cost;
+};
+
+struct Collapse {
   uint32_t kept;
   uint32_t removed;
   Vec3u position;
@@ -127,7 +140,18 @@ class Simplifier {
       for (uint32_t v : t) quadrics_[v].add(q);
     }
     faces_ = tris_.size();
-    mark_.assign(n, 0);
+    live_.resize(tris_.size());
+    for (size_t f = 0; f < tris_.size(); ++f) live_[f] = uint32_t(f);
+    count_.assign(n, 0);
+    local_.assign(n, 0);
+    for (const Triangle& t : tris_)
+      for (uint32_t v : t) count_[v] = 1;
+    for (size_t v = 0; v < n; ++v)
+      if (count_[v]) verts_.push_back(uint32_t(v));
+    kept_pass_.assign(n, 0);
+    cand_begin_.assign(n, 0);
+    cand_end_.assign(n, 0);
+    blocked_.assign(n, 0);
     open_.assign(n, 0);
     complex_.assign(n, 0);
     degree_.assign(n, 0);
@@ -168,50 +192,62 @@ class Simplifier {
     return {double(p[0]) - center_[0], double(p[1]) - center_[1], double(p[2]) - center_[2]};
   }
 
+  // The live triangles and the vertices they use (ascending), and a CSR vertex -> triangles over those vertices.
+  // Only what is live is visited, so a pass costs what is left of the mesh.
   void buildAdjacency() {
-    const size_t n = pos_.size();
-    offsets_.assign(n + 1, 0);
-    for (size_t f = 0; f < tris_.size(); ++f)
-      if (face_alive_[f])
-        for (uint32_t v : tris_[f]) offsets_[v + 1]++;
-    for (size_t v = 0; v < n; ++v) offsets_[v + 1] += offsets_[v];
-    adj_.resize(offsets_[n]);
-    cursor_.assign(offsets_.begin(), offsets_.end() - 1);
-    for (size_t f = 0; f < tris_.size(); ++f)
-      if (face_alive_[f])
-        for (uint32_t v : tris_[f]) adj_[cursor_[v]++] = uint32_t(f);
+    size_t m = 0;
+    for (uint32_t f : live_)
+      if (face_alive_[f]) live_[m++] = f;
+    live_.resize(m);
+    for (uint32_t v : verts_) count_[v] = 0;
+    for (uint32_t f : live_)
+      for (uint32_t v : tris_[f]) count_[v]++;
+    size_t k = 0;
+    offsets_.resize(verts_.size() + 1);
+    offsets_[0] = 0;
+    for (uint32_t v : verts_) {
+      if (count_[v] == 0) continue;
+      local_[v] = uint32_t(k);
+      offsets_[k + 1] = offsets_[k] + count_[v];
+      verts_[k++] = v;
+    }
+    verts_.resize(k);
+    offsets_.resize(k + 1);
+    adj_.resize(offsets_[k]);
+    for (uint32_t v : verts_) count_[v] = offsets_[local_[v]];
+    for (uint32_t f : live_)
+      for (uint32_t v : tris_[f]) adj_[count_[v]++] = f;
   }
 
   std::span<const uint32_t> facesOf(uint32_t v) const {
-    return {adj_.data() + offsets_[v], adj_.data() + offsets_[v + 1]};
+    const uint32_t i = local_[v];
+    return {adj_.data() + offsets_[i], adj_.data() + offsets_[i + 1]};
   }
 
   // Edges (a < b) with their triangle counts, and per vertex: on an open edge, on a complex edge, its number of
   // edges, its open-edge neighbours. The first pass also adds the open edges' constraint planes.
   void gatherEdges(bool add_boundary_planes) {
-    const size_t n = pos_.size();
     edges_.clear();
-    std::vector<std::pair<uint32_t, uint32_t>>& nb = scratch_pairs_;
-    for (uint32_t v = 0; v < n; ++v) {
+    std::vector<uint64_t>& nb = scratch_;
+    for (uint32_t v : verts_) {
       open_[v] = complex_[v] = 0;
       degree_[v] = 0;
-      const auto faces = facesOf(v);
-      if (faces.empty()) continue;
       nb.clear();
-      for (uint32_t f : faces)
+      for (uint32_t f : facesOf(v))
         for (uint32_t w : tris_[f])
-          if (w != v) nb.emplace_back(w, f);
+          if (w != v) nb.push_back(uint64_t(w) << 32 | f);
       std::sort(nb.begin(), nb.end());
       uint32_t open_count = 0;
       for (size_t i = 0; i < nb.size();) {
+        const uint32_t w = uint32_t(nb[i] >> 32);
         size_t j = i + 1;
-        while (j < nb.size() && nb[j].first == nb[i].first) ++j;
-        const uint32_t w = nb[i].first, count = uint32_t(j - i);
+        while (j < nb.size() && uint32_t(nb[j] >> 32) == w) ++j;
+        const uint32_t count = uint32_t(j - i);
         degree_[v]++;
         if (count == 1) {
           if (open_count < 2) open_nb_[v][open_count] = w;
           open_count++;
-          if (add_boundary_planes) addBoundaryPlane(v, w, nb[i].second);
+          if (add_boundary_planes) addBoundaryPlane(v, w, uint32_t(nb[i]));
         } else if (count > 2) {
           complex_[v] = 1;
         }
@@ -251,19 +287,44 @@ class Simplifier {
   Vec3u roundToGrid(const Vec3& p) const {
     Vec3u r;
     for (int a = 0; a < 3; ++a) {
-      double x = std::nearbyint(p[a] + center_[a]);
-      x = std::clamp(x, double(lo_[a]), double(hi_[a]));
-      r[a] = uint32_t(x);
+      const double x = std::clamp(p[a] + center_[a], double(lo_[a]), double(hi_[a]));
+      r[a] = uint32_t(x + 0.5);  // x >= 0: rounds half up
     }
     return r;
   }
 
+  // Every edge's collapse: its placement, cost and error. An interior edge (two triangles, neither end on a
+  // boundary, a complex edge or frozen) costs what it cost in the previous pass unless an end was a kept vertex
+  // there (only kept vertices change position or quadric), so its candidate is copied from that pass.
   void evaluateCandidates() {
+    std::swap(previous_, candidates_);
     candidates_.clear();
     const bool paper = options_.weights == SimplifyWeights::kShapePreserving;
+    const uint32_t last_pass = pass_;
+    uint32_t current = UINT32_MAX, old_begin = 0, old_end = 0;
     for (const auto& e : edges_) {
       const uint32_t a = e[0], b = e[1], count = e[2];
+      if (a != current) {
+        if (current != UINT32_MAX) cand_end_[current] = uint32_t(candidates_.size());
+        current = a;
+        old_begin = cand_begin_[a], old_end = std::min<uint32_t>(cand_end_[a], uint32_t(previous_.size()));
+        cand_begin_[a] = cand_end_[a] = uint32_t(candidates_.size());
+      }
       if (frozen_[a] && frozen_[b]) continue;
+      const bool interior = count == 2 && !open_[a] && !open_[b] && !complex_[a] && !complex_[b] && !frozen_[a] &&
+                            !frozen_[b];
+      if (interior && last_pass > 0 && kept_pass_[a] != last_pass && kept_pass_[b] != last_pass) {
+        bool found = false;
+        for (uint32_t i = old_begin; i < old_end; ++i) {
+          const Candidate& p = previous_[i];
+          if (p.v0 == a && p.v1 == b) {  // and so interior
+            candidates_.push_back(p);
+            found = true;
+            break;
+          }
+        }
+        if (found) continue;
+      }
       int forced = -1;  // 0: kept a at its position, 1: kept b at its position
       if (frozen_[a]) forced = 0;
       if (frozen_[b]) forced = 1;
@@ -290,7 +351,7 @@ class Simplifier {
       }
       Quadric q = quadrics_[a];
       q.add(quadrics_[b]);
-      Candidate c;
+      Collapse c;
       if (forced >= 0) {
         c.kept = forced == 0 ? a : b;
         c.removed = forced == 0 ? b : a;
@@ -313,13 +374,13 @@ class Simplifier {
         consider(pos_[b], 1);
         const Vec3 mid{(pa[0] + pb[0]) / 2, (pa[1] + pb[1]) / 2, (pa[2] + pb[2]) / 2};
         const Vec3u mid_u = roundToGrid(mid);
-        if (mid_u != pos_[a] && mid_u != pos_[b]) consider(mid_u, 2);
+        if (!same(mid_u, pos_[a]) && !same(mid_u, pos_[b])) consider(mid_u, 2);
         Vec3 opt;
         if (solve(q, opt)) {
           const Vec3 d = sub(opt, mid), ab = sub(pb, pa);
           if (dot(d, d) <= 4 * dot(ab, ab)) {
             const Vec3u u = roundToGrid(opt);
-            if (u != pos_[a] && u != pos_[b]) consider(u, 2);
+            if (!same(u, pos_[a]) && !same(u, pos_[b])) consider(u, 2);
           }
         }
         c.kept = which == 1 ? b : a;
@@ -331,8 +392,9 @@ class Simplifier {
       }
       // Over the error bound: not a candidate in this pass (a later pass evaluates the edge again).
       if (!(double(c.error) <= options_.max_error)) continue;
-      candidates_.push_back(c);
+      candidates_.push_back(interior ? Candidate{a, b, c.position, c.cost} : Candidate{b, a, c.position, c.cost});
     }
+    if (current != UINT32_MAX) cand_end_[current] = uint32_t(candidates_.size());
   }
 
   static bool solve(const Quadric& q, Vec3& out) {
@@ -352,18 +414,20 @@ class Simplifier {
     return std::isfinite(out[0]) && std::isfinite(out[1]) && std::isfinite(out[2]);
   }
 
-  // Marks (or tests) the closed one-ring of the edge: both ends and all their neighbours.
-  bool ringFree(uint32_t a, uint32_t b) const {
+  // Two collapses have disjoint closed one-rings exactly when neither end of the second lies in the closed
+  // neighbourhood of the first's closed one-ring; so taking a collapse blocks that neighbourhood, and testing a
+  // candidate looks at its two ends only.
+  bool free(uint32_t a, uint32_t b) const { return blocked_[a] != pass_ && blocked_[b] != pass_; }
+  void block(uint32_t a, uint32_t b) {
+    ring_vertices_.clear();
     for (uint32_t v : {a, b})
       for (uint32_t f : facesOf(v))
-        for (uint32_t w : tris_[f])
-          if (mark_[w] == pass_) return false;
-    return true;
-  }
-  void markRing(uint32_t a, uint32_t b) {
-    for (uint32_t v : {a, b})
+        for (uint32_t w : tris_[f]) ring_vertices_.push_back(w);
+    std::sort(ring_vertices_.begin(), ring_vertices_.end());
+    ring_vertices_.erase(std::unique(ring_vertices_.begin(), ring_vertices_.end()), ring_vertices_.end());
+    for (uint32_t v : ring_vertices_)
       for (uint32_t f : facesOf(v))
-        for (uint32_t w : tris_[f]) mark_[w] = pass_;
+        for (uint32_t w : tris_[f]) blocked_[w] = pass_;
   }
 
   struct RingEdge {
@@ -371,10 +435,10 @@ class Simplifier {
     uint32_t ck, cr, d;
   };
 
-  bool legal(const Candidate& c) {
+  bool legal(const Collapse& c) {
     const uint32_t k = c.kept, r = c.removed;
     if (frozen_[r]) return false;
-    if (frozen_[k] && c.position != pos_[k]) return false;
+    if (frozen_[k] && !same(c.position, pos_[k])) return false;
     ring_.clear();
     auto entry = [&](uint32_t w) -> RingEdge& {
       for (RingEdge& e : ring_)
@@ -412,7 +476,7 @@ class Simplifier {
           q[i] = (w == k || w == r) ? c.position : pos_[w];
           after[i] = (w == k || w == r) ? pk : before[i];
         }
-        if (q[0] == q[1] || q[1] == q[2] || q[0] == q[2]) return false;
+        if (same(q[0], q[1]) || same(q[1], q[2]) || same(q[0], q[2])) return false;
         const Vec3 nb = cross(sub(before[1], before[0]), sub(before[2], before[0]));
         const Vec3 na = cross(sub(after[1], after[0]), sub(after[2], after[0]));
         if (dot(nb, nb) > 0 && !(dot(nb, na) > 0)) return false;
@@ -443,7 +507,7 @@ class Simplifier {
     return true;
   }
 
-  void apply(const Candidate& c) {
+  void apply(const Collapse& c) {
     const uint32_t k = c.kept, r = c.removed;
     for (uint32_t f : facesOf(r)) {
       if (!face_alive_[f]) continue;
@@ -458,6 +522,23 @@ class Simplifier {
     }
     pos_[k] = c.position;
     quadrics_[k].add(quadrics_[r]);
+  }
+
+  Collapse expand(const Candidate& s) const {
+    Collapse c;
+    const bool on_v1 = same(s.position, pos_[s.v1]);
+    c.kept = on_v1 ? s.v1 : s.v0;
+    c.removed = on_v1 ? s.v0 : s.v1;
+    c.position = s.position;
+    c.placement = (on_v1 || same(s.position, pos_[s.v0])) ? 0 : 2;
+    c.cost = s.cost;
+    // As evaluateCandidates computed it (same operands, same order).
+    Quadric q = quadrics_[std::min(s.v0, s.v1)];
+    q.add(quadrics_[std::max(s.v0, s.v1)]);
+    const Vec3 p = relOf(s.position);
+    const double qe = q.eval(p[0], p[1], p[2]);
+    c.error = float(std::sqrt(q.weight > 0 ? qe / q.weight : 0));
+    return c;
   }
 
   void runPass(uint64_t goal, Simplification& out) {
@@ -480,11 +561,13 @@ class Simplifier {
     const uint64_t start_faces = faces_;
     for (auto it = keys_.begin(); it != end; ++it) {
       if (start_faces - faces_ >= goal) break;
-      const Candidate& c = candidates_[uint32_t(*it)];
-      if (!ringFree(c.kept, c.removed)) continue;
+      const Candidate& candidate = candidates_[uint32_t(*it)];
+      if (!free(candidate.v0, candidate.v1)) continue;
+      const Collapse c = expand(candidate);
       if (!legal(c)) continue;
-      markRing(c.kept, c.removed);
+      block(c.kept, c.removed);
       apply(c);
+      kept_pass_[c.kept] = pass_;
       out.collapses.push_back({c.kept, c.removed, c.position, c.placement, c.error});
       max_error_ = std::max(max_error_, c.error);
     }
@@ -501,16 +584,21 @@ class Simplifier {
   uint64_t faces_ = 0;
   float max_error_ = 0;
   uint32_t pass_ = 0;
-  std::vector<uint32_t> mark_;
+  std::vector<uint32_t> blocked_;  // per vertex: the last pass whose collapses block it
+  std::vector<uint32_t> ring_vertices_;
   // Per pass.
-  std::vector<uint32_t> offsets_, adj_, cursor_;
+  std::vector<uint32_t> live_;   // triangles alive at the pass's start
+  std::vector<uint32_t> verts_;  // vertices they use, ascending
+  std::vector<uint32_t> count_, local_, offsets_, adj_;
+  std::vector<uint32_t> kept_pass_;  // per vertex: the last pass it was a collapse's kept vertex in (0: none)
   std::vector<uint8_t> open_, complex_;
   std::vector<uint32_t> degree_;
   std::vector<std::array<uint32_t, 2>> open_nb_;
   std::vector<std::array<uint32_t, 3>> edges_;
-  std::vector<Candidate> candidates_;
+  std::vector<Candidate> candidates_, previous_;
+  std::vector<uint32_t> cand_begin_, cand_end_;  // per vertex a: candidates of its edges (a, b > a)
   std::vector<uint64_t> keys_;
-  std::vector<std::pair<uint32_t, uint32_t>> scratch_pairs_;
+  std::vector<uint64_t> scratch_;
   std::vector<RingEdge> ring_;
 };
 
