@@ -6,7 +6,7 @@
 // cost is weight * Q(v') at its placement v', and the paper's weights are:
 //   complex edge (more than two triangles): the number of its triangles;
 //   exactly one end on the boundary: the interior vertex collapses onto the boundary one (v' = the boundary
-//     vertex's position), weight 1 + (#edges of the boundary vertex - 2);
+//     vertex's position), weight 1 + (#edges of the boundary vertex - 2), at least 1;
 //   both ends on the boundary, along a boundary edge: 1 + max(cos theta1, cos theta2);
 //   interior: 1.
 //
@@ -16,7 +16,7 @@
 //   expensive. The weight is floored at kMinBoundaryEdgeWeight = 1: with the paper's range [0, 2] a straight run
 //   would cost less than the interior around it (nothing at all at 0, whatever the surface does there); measured
 //   at 10% (bench/RESULTS.md), the floor at 1 gives a smaller Hausdorff distance than 0.5 on parasaurolophus and
-//   bun_zipper, about the same on rs1 and lato000.
+//   bun_zipper, the same on lato000, a slightly larger one on rs1.
 // - "Boundary vertex" means a vertex on an open edge (one triangle) or on a complex edge: both are discontinuities
 //   the paper wants kept, and a complex vertex pulled inward tears the non-manifold junction the same way.
 //   A boundary vertex is only ever removed along an edge of its own kind (open along open, complex along complex);
@@ -32,7 +32,11 @@
 //   in the pass. Disjoint closed one-rings also make every legality test made on the pass's starting mesh still
 //   exact when the collapse is applied. Like meshoptimizer's simplifier, a pass only considers candidates up to
 //   1.5x the cost of the candidate whose rank is the number of collapses the pass needs, so that a pass does not
-//   reach far up the cost order just because cheap collapses conflict.
+//   reach far up the cost order just because cheap collapses conflict (unless nothing within that bound is legal).
+// - Legality beyond the paper: no triangle changes orientation (normals before and after have a positive dot
+//   product) or gets two corners in one grid cell, no duplicate triangle, no manifold edge becomes complex, an
+//   interior edge between two open-boundary vertices is never collapsed, and no edge other than the collapsed one
+//   disappears (which keeps boundary and border chains, and never shrinks a component to a dangling vertex).
 // - error: sqrt(Q(v') / sum of the quadric's weights), the area-weighted RMS distance (grid cells) from v' to the
 //   planes gathered so far, without the paper's weight. It is an estimate, not a bound on the Hausdorff distance.
 // - Vertices of degenerate input triangles (a repeated index, or two corners in one grid cell) are frozen like
