@@ -139,7 +139,7 @@ inline void expectValidSimplification(const QuantizedMesh& input, std::span<cons
     std::sort(sorted.begin(), sorted.end());
     return sorted.size() - size_t(std::unique(sorted.begin(), sorted.end()) - sorted.begin());
   };
-  EXPECT_EQ(duplicates(s.mesh), duplicates(input)) << "no new duplicate triangle";
+  EXPECT_LE(duplicates(s.mesh), duplicates(input)) << "no new duplicate triangle";
   // Edges with more than two triangles: none when the input has none.
   bool input_manifold = true;
   for (const auto& [e, n] : edgeCounts(input)) input_manifold &= n <= 2;

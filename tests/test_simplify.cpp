@@ -356,5 +356,45 @@ TEST(Simplify, UglyInputsKeepTheContracts) {
   }
 }
 
+// Random damage on a sphere: triangles removed (holes, slivers of surface, isolated pieces), random triangles
+// added between random vertices (complex edges, non-manifold vertices, flipped and sliver triangles, duplicates)
+// and random locks; every seed and both weight sets keep the contracts down to one face.
+TEST(Simplify, RandomlyDamagedMeshesKeepTheContracts) {
+  const QuantizedMesh sphere = quantizedSphere(3);  // 1280 triangles, 642 vertices
+  for (uint32_t seed = 1; seed <= 12; ++seed) {
+    QuantizedMesh m;
+    m.positions = sphere.positions;
+    for (size_t f = 0; f < sphere.triangles.size(); ++f)
+      if (noise(seed, uint32_t(f)) > 0.15 * (seed % 4)) m.triangles.push_back(sphere.triangles[f]);
+    const uint32_t n = uint32_t(m.positions.size());
+    for (uint32_t k = 0; k < 4 * seed; ++k) {
+      const uint32_t a = uint32_t(noise(seed + 100, k) * n), b = uint32_t(noise(seed + 200, k) * n),
+                     c = uint32_t(noise(seed + 300, k) * n);
+      if (k % 3 == 0) {
+        m.triangles.push_back(m.triangles[k % m.triangles.size()]);  // a duplicate triangle
+      } else {
+        m.triangles.push_back({a, b, c});
+      }
+    }
+    std::vector<uint8_t> locked(n, 0);
+    if (seed % 2 == 0)
+      for (uint32_t v = 0; v < n; ++v) locked[v] = noise(seed + 400, v) < 0.1 ? 1 : 0;
+    for (SimplifyWeights w : {SimplifyWeights::kShapePreserving, SimplifyWeights::kPlain}) {
+      SimplifyOptions o;
+      o.weights = w;
+      o.target_faces = 1;
+      o.pass_fraction = 0.1 + 0.1 * (seed % 5);
+      const Simplification s = run(m, locked, o);
+      SCOPED_TRACE("seed " + std::to_string(seed));
+      expectValidSimplification(m, locked, s);
+      EXPECT_LT(s.mesh.triangles.size(), m.triangles.size() / 2);
+      TileContext ctx;
+      ctx.bits = 16;
+      const Status st = checkBorderContract(ctx, TileView{m, locked}, TileView{s.mesh, locked}, true);
+      EXPECT_TRUE(st.isOk()) << st.toString();
+    }
+  }
+}
+
 }  // namespace
 }  // namespace scanpress
