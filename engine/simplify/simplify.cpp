@@ -176,8 +176,12 @@ class Simplifier {
       gatherEdges(first);
       first = false;
       evaluateCandidates();
+      // Memory: what a pass no longer needs goes before the next array is built (the peak is the evaluation of
+      // the second pass: edges and two passes' candidates).
+      std::vector<std::array<uint32_t, 3>>().swap(edges_);
       const size_t before = out.collapses.size();
       runPass(goal, out);
+      std::vector<uint64_t>().swap(keys_);
       if (out.collapses.size() == before) break;
       out.pass_ends.push_back(uint32_t(out.collapses.size()));
       out.pass_errors.push_back(max_error_);
@@ -304,7 +308,8 @@ class Simplifier {
   // there (only kept vertices change position or quadric), so its candidate is copied from that pass.
   void evaluateCandidates() {
     std::swap(previous_, candidates_);
-    candidates_.clear();
+    std::vector<Candidate>().swap(candidates_);
+    candidates_.reserve(edges_.size());  // at most one per edge, and no growth beyond it
     const bool paper = options_.weights == SimplifyWeights::kShapePreserving;
     const uint32_t last_pass = pass_;
     uint32_t current = UINT32_MAX, old_begin = 0, old_end = 0;
