@@ -1,6 +1,7 @@
 // Codec and I/O throughput on real scans: mesh reading (MB/s, Mtri/s) and each codec's encode and decode
 // (Mtri/s, bits per vertex). Scans come from ../shared/data (the bundled bunny when it is missing).
 #include <benchmark/benchmark.h>
+#include <sys/resource.h>
 
 #include <filesystem>
 #include <functional>
@@ -9,8 +10,15 @@
 
 #include "engine/codecs/codec.h"
 #include "engine/quantize.h"
+#include "engine/simplify/simplify.h"
+#include "jobs/measure.h"
 #include "jobs/mesh_io/mesh_reader.h"
+#include "spatial/surface_index.h"
 #include "spatial/tiling.h"
+
+#ifdef SCANPRESS_HAVE_MESHOPTIMIZER
+#include <meshoptimizer.h>
+#endif
 
 namespace scanpress {
 namespace {
@@ -109,6 +117,86 @@ void BM_Tiling(benchmark::State& state, std::string scan) {
   state.counters["tiles"] = double(tiles);
 }
 
+// Simplification to `percent` of the faces (issue 19: >= 2 Mtri/s of input per core on igea to 10%): Mtri/s of
+// input, and the result's face count.
+void BM_Simplify(benchmark::State& state, std::string scan, SimplifyWeights weights) {
+  const Prepared& p = prepared(scan, 16);
+  SimplifyOptions o;
+  o.weights = weights;
+  o.target_faces = p.mesh.triangles.size() * uint64_t(state.range(0)) / 100;
+  size_t faces = 0, passes = 0;
+  rusage before{};
+  getrusage(RUSAGE_SELF, &before);
+  for (auto _ : state) {
+    auto s = simplify(p.mesh, {}, o);
+    if (!s.isOk()) return state.SkipWithError(s.status().message().c_str());
+    faces = s->mesh.triangles.size();
+    passes = s->pass_ends.size();
+    benchmark::DoNotOptimize(s);
+  }
+  state.counters["Mtri/s"] =
+      benchmark::Counter(double(p.mesh.triangles.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["faces_%"] = 100.0 * double(faces) / double(p.mesh.triangles.size());
+  state.counters["passes"] = double(passes);
+  // Growth of the peak RSS over what the process had reached (reading the scan), per input triangle: a lower
+  // bound of the simplifier's peak (its result included), exact when it exceeds the reader's peak.
+  rusage after{};
+  getrusage(RUSAGE_SELF, &after);
+  state.counters["peak_B/tri"] = 1024.0 * double(after.ru_maxrss - before.ru_maxrss) / double(p.mesh.triangles.size());
+}
+
+// The paper's Table 1 analogue: symmetric Hausdorff distance (relative to the diagonal) at `percent` of the faces,
+// with the paper's weights and with plain QEM, on the same 16-bit grid.
+void BM_SimplifyHausdorff(benchmark::State& state, std::string scan) {
+  const Prepared& p = prepared(scan, 16);
+  auto device = EmbreeDevice::create();
+  if (!device.isOk()) return state.SkipWithError(device.status().message().c_str());
+  auto source = readMeshFile(scanPath(scan));
+  if (!source.isOk()) return state.SkipWithError(source.status().message().c_str());
+  auto grid = makeGrid(boundingBox(*source), 16);
+  const Mesh original = dequantizeMesh(p.mesh, *grid, AttributeLayout{});
+  MeasureSettings ms;
+  ms.samples_per_triangle = 4;
+  for (auto _ : state) {
+    for (SimplifyWeights w : {SimplifyWeights::kShapePreserving, SimplifyWeights::kPlain}) {
+      SimplifyOptions o;
+      o.weights = w;
+      o.target_faces = p.mesh.triangles.size() * uint64_t(state.range(0)) / 100;
+      auto s = simplify(p.mesh, {}, o);
+      if (!s.isOk()) return state.SkipWithError(s.status().message().c_str());
+      auto r = measureMeshes(original, dequantizeMesh(s->mesh, *grid, AttributeLayout{}), ms, *device);
+      if (!r.isOk()) return state.SkipWithError(r.status().message().c_str());
+      const char* name = w == SimplifyWeights::kPlain ? "plain" : "paper";
+      state.counters[std::string("H_") + name] = r->symmetric.max / r->diagonal;
+      state.counters[std::string("rms_") + name] = r->symmetric.rms / r->diagonal;
+    }
+  }
+}
+
+#ifdef SCANPRESS_HAVE_MESHOPTIMIZER
+// meshoptimizer's simplifier on the same quantized input (float positions of the grid coordinates).
+void BM_MeshoptSimplify(benchmark::State& state, std::string scan) {
+  const Prepared& p = prepared(scan, 16);
+  std::vector<float> xyz;
+  for (const auto& q : p.mesh.positions)
+    for (uint32_t c : q) xyz.push_back(float(c));
+  std::vector<uint32_t> indices;
+  for (const auto& t : p.mesh.triangles) indices.insert(indices.end(), t.begin(), t.end());
+  std::vector<uint32_t> out(indices.size());
+  const size_t target = indices.size() * size_t(state.range(0)) / 100;
+  size_t n = 0;
+  for (auto _ : state) {
+    float error = 0;
+    n = meshopt_simplify(out.data(), indices.data(), indices.size(), xyz.data(), p.mesh.positions.size(),
+                         3 * sizeof(float), target, 1.0f, 0, &error);
+    benchmark::DoNotOptimize(out.data());
+  }
+  state.counters["Mtri/s"] =
+      benchmark::Counter(double(p.mesh.triangles.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["faces_%"] = 100.0 * double(n / 3) / double(p.mesh.triangles.size());
+}
+#endif
+
 // Where a codec's bits go on every scan: connectivity and geometry per vertex (kdtree's paper, Table 2)
 // and connectivity per triangle (EMC's paper, Table 1).
 using StatsEncoder =
@@ -177,6 +265,29 @@ int registerAll() {
           ->Unit(benchmark::kMillisecond);
     }
   }
+  for (const char* scan : {"igea.ply.zst", "bun_zipper.ply.zst"}) {
+    benchmark::RegisterBenchmark((std::string("Simplify/") + scan).c_str(), BM_Simplify, std::string(scan),
+                                 SimplifyWeights::kShapePreserving)
+        ->Arg(10)
+        ->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark((std::string("SimplifyPlain/") + scan).c_str(), BM_Simplify, std::string(scan),
+                                 SimplifyWeights::kPlain)
+        ->Arg(10)
+        ->Unit(benchmark::kMillisecond);
+#ifdef SCANPRESS_HAVE_MESHOPTIMIZER
+    benchmark::RegisterBenchmark((std::string("MeshoptSimplify/") + scan).c_str(), BM_MeshoptSimplify,
+                                 std::string(scan))
+        ->Arg(10)
+        ->Unit(benchmark::kMillisecond);
+#endif
+  }
+  for (const char* scan : {"rs1_normals.ply.zst", "lato000.ply.zst", "parasaurolophus_low_normals2.ply.zst",
+                           "bun_zipper.ply.zst", "igea.ply.zst"})
+    benchmark::RegisterBenchmark((std::string("SimplifyHausdorff/") + scan).c_str(), BM_SimplifyHausdorff,
+                                 std::string(scan))
+        ->Arg(10)
+        ->Iterations(1)
+        ->Unit(benchmark::kMillisecond);
   for (const char* scan : kScans) {
     benchmark::RegisterBenchmark((std::string("Read/") + scan).c_str(), BM_Read, std::string(scan))
         ->Unit(benchmark::kMillisecond);

@@ -33,8 +33,11 @@ struct SimplifyOptions {
   double max_error = std::numeric_limits<double>::infinity();  // grid cells: no collapse whose error exceeds it
   // Collapses are made in passes; within a pass no two collapses touch the same vertex or its neighbours (their
   // closed one-rings are disjoint), so the vertex splits that undo a pass are independent and can be coded as one
-  // batch. A pass ends when it has removed this share of the faces the mesh had at its start, or when the cheapest
-  // remaining collapse touches a vertex already used in the pass.
+  // batch. A pass ends when it has removed this share of the faces the mesh had at its start, or when no candidate
+  // is left that is legal, independent of the pass's collapses so far, and within the pass's cost bound (1.5x the
+  // cost at the rank of the collapses the pass needs; the whole cost order when nothing within the bound is legal).
+  // In practice the independence limits a pass to about 5% of the faces on a closed scan (igea: 41 passes to 10%).
+  // Must be in (0, 1].
   double pass_fraction = 0.25;
 };
 
@@ -64,7 +67,11 @@ struct Simplification {
 // has one flag per vertex: a locked vertex never moves or disappears, and an edge between two locked vertices that
 // is a border edge (one incident triangle, or more than two) is never collapsed. Never flips a triangle's normal,
 // never makes a manifold edge non-manifold or creates a duplicate or degenerate triangle (two corners in one grid
-// cell). Input triangles that are degenerate or repeat a vertex are kept as they are.
+// cell). Input triangles that are degenerate or repeat a vertex are kept as they are (their corners are never moved
+// or removed). Triangle soups must be welded by the caller (a soup has no shared edge, so nothing collapses); the
+// readers weld STL. Isolated vertices, vertices sharing a position and meshes without triangles are accepted.
+// kInvalidArgument for indices out of range, lock flags of the wrong size, a pass_fraction outside (0, 1] or a
+// negative max_error.
 Result<Simplification> simplify(const QuantizedMesh& mesh, std::span<const uint8_t> locked,
                                 const SimplifyOptions& options);
 
