@@ -244,7 +244,8 @@ TEST(Writers, PlyAndObjRoundTripThroughReaders) {
   EXPECT_EQ(r.normals, m.normals);
   EXPECT_EQ(r.colors, m.colors);
   EXPECT_EQ(r.triangles, m.triangles);
-  EXPECT_EQ(writeMeshFile(dir.file("o.stl"), m).code(), ErrorCode::kInvalidArgument);
+  EXPECT_EQ(writeMeshFile(dir.file("o.xyz"), m).code(), ErrorCode::kInvalidArgument);
+  EXPECT_EQ(writeMeshFile(dir.file("o.stl.gz"), m).code(), ErrorCode::kInvalidArgument);
 }
 
 }  // namespace
