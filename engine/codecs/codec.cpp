@@ -17,10 +17,16 @@ namespace {
 constexpr PayloadFloor kStoreFloor{1.0, 3.0, 64};
 constexpr PayloadFloor kHierarchyFloor{8.0 / 1024, 8.0 / (1024 * 64), 1024};
 
-constexpr std::array<CodecInfo, 3> kCodecs = {{
+// pm: its base mesh is coded by store, kdtree or octree, and every vertex split costs at least its split flag, a
+// placement symbol and three residual buckets, each a few thousandths of a bit at the models' most skewed
+// probabilities: half the hierarchy codecs' floor per vertex and face.
+constexpr PayloadFloor kPmFloor{4.0 / 1024, 4.0 / (1024 * 64), 1024};
+
+constexpr std::array<CodecInfo, 4> kCodecs = {{
     {CodecId::kStore, "store", 1, kStoreFloor, &storeEncode, &storeDecode},
     {CodecId::kKdtree, "kdtree", 1, kHierarchyFloor, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel},
     {CodecId::kOctree, "octree", 1, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel},
+    {CodecId::kPm, "pm", 1, kPmFloor, &pmEncode, &pmDecode, &pmLevels, &pmDecodeLevel},
 }};
 
 }  // namespace

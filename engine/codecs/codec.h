@@ -22,7 +22,7 @@ enum class CodecId : uint16_t {
   kStore = 1,
   kKdtree = 2,
   kOctree = 3,
-  kPm = 4,          // engine/codecs/pm.cpp (issue 19)
+  kPm = 4,           // engine/codecs/pm.cpp (issue 19)
   kEdgebreaker = 5,  // engine/codecs/edgebreaker.cpp (issue 20)
 };
 
@@ -193,6 +193,16 @@ Result<std::vector<CodecLevel>> octreeLevels(const TileContext& ctx, uint16_t ve
                                              std::span<const uint8_t> payload, const DecodeLimits& limits);
 Result<QuantizedMesh> octreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         uint32_t level, const DecodeLimits& limits);
+
+// `pm`: a simplified base mesh and the vertex splits back to the tile, after Ahn, Chang and Ho (pm.cpp). Welds
+// vertices by position; keeps no normals or colors (derived from the triangles at every level).
+Result<EncodedTile> pmEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options);
+Result<QuantizedMesh> pmDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                               const DecodeLimits& limits);
+Result<std::vector<CodecLevel>> pmLevels(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                         const DecodeLimits& limits);
+Result<QuantizedMesh> pmDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                    uint32_t level, const DecodeLimits& limits);
 
 // What a progressive encoding (kdtree, octree) spent, in bits (ideal arithmetic-coding costs; the bytes add flushes and headers).
 struct CodecStats {
