@@ -3,12 +3,15 @@
 // Paper: S. Ahn, M. Chang, Y.-S. Ho, "Shape-preserving progressive coding of 3-D models"
 // (../shared/papers/shape-preserving-progressive-qem.md): section 2 is the simplifier (engine/simplify), section 3
 // the geometry coding followed here: each split codes the collapse's placement index (0: the kept vertex did not
-// move, 1: it moved onto the removed vertex, 2: elsewhere), then for index 0/1 one residual, the endpoint that is
-// not at v'_s minus v'_s; for index 2 Delta_s = v_s - v'_s and Delta_l = v_l - (the average of v_l's neighbours
-// after the split, v_s included).
+// move, 1: it moved onto the removed vertex, 2: elsewhere), then the residuals of the positions v'_s does not give.
 //
 // Where this departs from the paper, and why:
 //  - The index is computed from the positions, not taken from the simplifier, so any valid Simplification codes.
+//  - Predictions: the paper codes Delta_r = v_r - v'_s for index 0/1, which costs about an edge length per
+//    component; here the endpoint that is not at v'_s is predicted by the average of its neighbours after the split
+//    (the paper's index-2 predictor, applied to every index): 43 -> see bench/RESULTS.md. For index 2, v_l is
+//    predicted by the average of its neighbours other than v_s, then v_s by v_l mirrored through v'_s (exact for a
+//    midpoint placement) instead of by v'_s.
 //  - Residuals are integers on the scan's grid (no m-bit requantization), coded with the range coder: per
 //    component a bit-length bucket with an adaptive model (context: the previous component's bucket, or for x
 //    the last bucket of that residual kind), a sign bit and raw mantissa bits (the paper: QM coder).
@@ -277,7 +280,7 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
     c.bit(m.orient[known ? 0 : 1], b);
     ordered.push_back({w, uint8_t(b ^ pred)});
   }
-  // Geometry (section 3).
+  // Geometry (section 3, with the neighbour-average prediction for every vertex that is not at v'_s).
   const Vec3u vp = st.pos[k];
   uint32_t placement = 2;
   if constexpr (C::kEncode) placement = s.vs == vp ? 0 : (s.vr == vp ? 1 : 2);
@@ -293,45 +296,64 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
   auto diff = [](const Vec3u& x, const Vec3u& y) {
     return std::array<int64_t, 3>{int64_t(x[0]) - y[0], int64_t(x[1]) - y[1], int64_t(x[2]) - y[2]};
   };
-  // The new vertex's index and its faces, needed by the Delta_l prediction.
-  const uint32_t r = n;
-  if (placement < 2) {
-    std::array<int64_t, 3> d = placement == 0 ? diff(s.vr, vp) : diff(s.vs, vp);
-    codeResidual(c, m, 0, d);
-    if (placement == 0) {
-      s.vs = vp;
-      SP_RETURN_IF_ERROR(add(vp, d, s.vr));
-    } else {
-      s.vr = vp;
-      SP_RETURN_IF_ERROR(add(vp, d, s.vs));
-    }
-  } else {
-    std::array<int64_t, 3> ds = diff(s.vs, vp);
-    codeResidual(c, m, 1, ds);
-    SP_RETURN_IF_ERROR(add(vp, ds, s.vs));
-    // v_l's neighbours after the split: the corners of its faces (k at v_s).
-    std::vector<uint32_t> rn;
-    for (size_t i = 0; i < fan.size(); ++i)
-      if (s.moved[i]) {
-        const auto [a, b] = st.others(fan[i], k);
-        rn.push_back(a), rn.push_back(b);
-      }
-    for (const auto& [w, o] : ordered) rn.push_back(w);
-    if (!ordered.empty()) rn.push_back(k);
-    std::sort(rn.begin(), rn.end());
-    rn.erase(std::unique(rn.begin(), rn.end()), rn.end());
-    Vec3u pred = s.vs;
-    if (!rn.empty()) {
-      int64_t sum[3] = {0, 0, 0};
-      for (uint32_t w : rn)
-        for (int a = 0; a < 3; ++a) sum[a] += w == k ? int64_t(s.vs[a]) : int64_t(st.pos[w][a]);
-      const int64_t cnt = int64_t(rn.size());
-      for (int a = 0; a < 3; ++a) pred[a] = uint32_t((sum[a] + cnt / 2) / cnt);
-    }
-    std::array<int64_t, 3> dl = diff(s.vr, pred);
-    codeResidual(c, m, 2, dl);
-    SP_RETURN_IF_ERROR(add(pred, dl, s.vr));
+  // The neighbours of the new vertex r and of k after the split, other than k and r themselves.
+  std::vector<uint32_t> rn, kn;
+  for (size_t i = 0; i < fan.size(); ++i) {
+    const auto [a, b] = st.others(fan[i], k);
+    auto& list = s.moved[i] ? rn : kn;
+    list.push_back(a), list.push_back(b);
   }
+  for (const auto& [w, o] : ordered) rn.push_back(w), kn.push_back(w);
+  for (auto* l : {&rn, &kn}) {
+    std::sort(l->begin(), l->end());
+    l->erase(std::unique(l->begin(), l->end()), l->end());
+  }
+  // The rounded average of `list`'s positions plus `extra` (when `with_extra`); `fallback` when there is none.
+  auto average = [&](const std::vector<uint32_t>& list, bool with_extra, const Vec3u& extra, const Vec3u& fallback) {
+    int64_t sum[3] = {0, 0, 0};
+    int64_t cnt = 0;
+    for (uint32_t w : list) {
+      if (w == k) continue;
+      for (int a = 0; a < 3; ++a) sum[a] += st.pos[w][a];
+      ++cnt;
+    }
+    if (with_extra) {
+      for (int a = 0; a < 3; ++a) sum[a] += extra[a];
+      ++cnt;
+    }
+    if (cnt == 0) return fallback;
+    Vec3u out;
+    for (int a = 0; a < 3; ++a) out[a] = uint32_t((sum[a] + cnt / 2) / cnt);
+    return out;
+  };
+  const bool joined = !ordered.empty();  // k and r share a face after the split
+  if (placement == 0) {
+    s.vs = vp;
+    const Vec3u pred = average(rn, joined, vp, vp);
+    std::array<int64_t, 3> d = diff(s.vr, pred);
+    codeResidual(c, m, 0, d);
+    SP_RETURN_IF_ERROR(add(pred, d, s.vr));
+  } else if (placement == 1) {
+    s.vr = vp;
+    const Vec3u pred = average(kn, joined, vp, vp);
+    std::array<int64_t, 3> d = diff(s.vs, pred);
+    codeResidual(c, m, 0, d);
+    SP_RETURN_IF_ERROR(add(pred, d, s.vs));
+  } else {
+    // Delta_l: v_l from its neighbours other than k; then Delta_s from v_l mirrored through v'_s (exact for a
+    // midpoint placement, close for the quadric optimum).
+    const Vec3u pred_r = average(rn, false, vp, vp);
+    std::array<int64_t, 3> dl = diff(s.vr, pred_r);
+    codeResidual(c, m, 1, dl);
+    SP_RETURN_IF_ERROR(add(pred_r, dl, s.vr));
+    Vec3u pred_s;
+    for (int a = 0; a < 3; ++a)
+      pred_s[a] = uint32_t(std::clamp<int64_t>(2 * int64_t(vp[a]) - s.vr[a], 0, int64_t(max_coord)));
+    std::array<int64_t, 3> ds = diff(s.vs, pred_s);
+    codeResidual(c, m, 2, ds);
+    SP_RETURN_IF_ERROR(add(pred_s, ds, s.vs));
+  }
+  const uint32_t r = n;
   // Apply.
   st.pos[k] = s.vs;
   st.pos.push_back(s.vr);
