@@ -9,16 +9,17 @@
 //  - The index is computed from the positions, not taken from the simplifier, so any valid Simplification codes.
 //  - Predictions: the paper codes Delta_r = v_r - v'_s for index 0/1, which costs about an edge length per
 //    component; here the endpoint that is not at v'_s is predicted by the average of its neighbours after the split
-//    (the paper's index-2 predictor, applied to every index): 43 -> see bench/RESULTS.md. For index 2, v_l is
-//    predicted by the average of its neighbours other than v_s, then v_s by v_l mirrored through v'_s (exact for a
+//    (the paper's index-2 predictor, applied to every index; bunny, 16 bits, lossless, with the temporary
+//    shortest-edge simplifier: 43.2 -> 40.9 bpv). For index 2, v_l is predicted by the average of its neighbours other than v_s, then v_s by v_l mirrored through v'_s (exact for a
 //    midpoint placement) instead of by v'_s.
 //  - Residuals are integers on the scan's grid (no m-bit requantization), coded with the range coder: per
 //    component a bit-length bucket with an adaptive model (context: the previous component's bucket, or for x
 //    the last bucket of that residual kind), a sign bit and raw mantissa bits (the paper: QM coder).
 //  - Connectivity (the paper refers to Hoppe's PM): per batch of independent splits, one context-coded flag per
-//    current vertex in canonical order says whether it splits. A split vertex k codes, per incident face in
-//    canonical fan order (sorted by the other two vertex indices in k's rotation), whether the face goes to the
-//    new vertex (context: the previous bit). The new faces (those the collapse deleted) are coded against the
+//    current vertex in canonical order says whether it splits; vertices within two edges of a split already made
+//    in the batch get no flag (the simplifier's passes have disjoint closed one-rings, so they cannot split). A
+//    split vertex k codes, per incident face in canonical fan order (walks around k across shared edges), whether
+//    the face goes to the new vertex (context: walk start / previous bit). The new faces (those the collapse deleted) are coded against the
 //    "cut" vertices (neighbours shared by a moving and a staying face): per cut vertex a count of new faces with
 //    it (0/1/2/more); any other new face's third vertex as an index into k's sorted neighbours or, escaped, any
 //    vertex. Each new face's orientation is a bit predicted by the neighbouring face across its edge with k. On
@@ -130,20 +131,70 @@ struct PmState {
     if (t[1] != t[0]) vf[t[1]].push_back(id);
     if (t[2] != t[0] && t[2] != t[1]) vf[t[2]].push_back(id);
   }
+  // Marks the vertices within two edges of a and b (after a split of a into a and b): in one batch no other
+  // vertex among them splits (the pass's closed one-rings are disjoint), so their flags are not coded.
+  void block(uint32_t a, uint32_t b, std::vector<uint32_t>& stamp, uint32_t mark) const {
+    if (stamp.size() < pos.size()) stamp.resize(pos.size(), 0);
+    ring1_.clear();
+    for (uint32_t c : {a, b}) {
+      stamp[c] = mark;
+      for (uint32_t f : vf[c])
+        for (uint32_t w : faces[f]) ring1_.push_back(w);
+    }
+    for (uint32_t w : ring1_) {
+      stamp[w] = mark;
+      for (uint32_t f : vf[w])
+        for (uint32_t x : faces[f]) stamp[x] = mark;
+    }
+  }
+  mutable std::vector<uint32_t> ring1_;
   // The other two corners of face f after v, in f's rotation.
   std::pair<uint32_t, uint32_t> others(uint32_t f, uint32_t v) const {
     const Triangle& t = faces[f];
     const int i = t[0] == v ? 0 : (t[1] == v ? 1 : 2);
     return {t[(i + 1) % 3], t[(i + 2) % 3]};
   }
-  // v's faces in canonical order: by (other corners in rotation), ties by face id (equal faces are interchangeable).
-  void fan(uint32_t v, std::vector<uint32_t>& ids) const {
-    ids = vf[v];
-    std::sort(ids.begin(), ids.end(), [&](uint32_t x, uint32_t y) {
-      const auto ox = others(x, v), oy = others(y, v);
-      return ox != oy ? ox < oy : x < y;
-    });
+  // v's faces in canonical order: walks around v across shared edges ((v, a, b) is followed by the first unvisited
+  // (v, b, c)), starting each walk at the first unvisited face in key order (the other corners (a, b) in rotation,
+  // ties by face id). On a manifold fan this is the cyclic order, so the faces that move to a split's new vertex
+  // form runs. `starts[i]` is set when face i begins a walk.
+  void fan(uint32_t v, std::vector<uint32_t>& ids, std::vector<uint8_t>& starts) const {
+    keyed_.clear();
+    for (uint32_t f : vf[v]) {
+      const auto [a, b] = others(f, v);
+      keyed_.push_back({a, b, f});
+    }
+    std::sort(keyed_.begin(), keyed_.end());
+    const size_t n = keyed_.size();
+    visited_.assign(n, 0);
+    group_next_.resize(n);
+    for (size_t i = 0; i < n; ++i) group_next_[i] = uint32_t(i);  // at a group's first entry: its next candidate
+    ids.clear();
+    starts.clear();
+    for (size_t start = 0; start < n; ++start) {
+      if (visited_[start]) continue;
+      size_t cur = start;
+      bool first = true;
+      while (true) {
+        visited_[cur] = 1;
+        ids.push_back(keyed_[cur][2]);
+        starts.push_back(first);
+        first = false;
+        const uint32_t want = keyed_[cur][1];
+        const size_t g = size_t(std::lower_bound(keyed_.begin(), keyed_.end(), std::array<uint32_t, 3>{want, 0, 0}) -
+                                keyed_.begin());
+        if (g == n || keyed_[g][0] != want) break;
+        size_t j = group_next_[g];
+        while (j < n && keyed_[j][0] == want && visited_[j]) ++j;
+        group_next_[g] = uint32_t(j);
+        if (j == n || keyed_[j][0] != want) break;
+        cur = j;
+      }
+    }
   }
+  mutable std::vector<std::array<uint32_t, 3>> keyed_;
+  mutable std::vector<uint8_t> visited_;
+  mutable std::vector<uint32_t> group_next_;
 };
 
 // One vertex split in the state's indices: k splits into k (at vs) and a new vertex (at vr).
@@ -198,12 +249,13 @@ void codeResidual(C& c, Models& m, int kind, std::array<int64_t, 3>& d) {
 template <class C>
 Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t max_coord, uint64_t face_budget) {
   std::vector<uint32_t> fan;
-  st.fan(k, fan);
+  std::vector<uint8_t> starts;
+  st.fan(k, fan, starts);
   if (!C::kEncode) s.moved.assign(fan.size(), 0);
   int prev = 0;
   for (size_t i = 0; i < fan.size(); ++i) {
     int b = s.moved[i];
-    c.bit(m.moved[i == 0 ? 0 : 1 + prev], b);
+    c.bit(m.moved[starts[i] ? 0 : 1 + prev], b);
     s.moved[i] = uint8_t(b);
     prev = b;
   }
@@ -508,6 +560,8 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   st.faces.reserve(final_f);
   const uint32_t max_coord = uint32_t((uint64_t(1) << ctx.bits) - 1);
   Models m;
+  std::vector<uint32_t> blocked;  // == mark: within two edges of a split of the current batch
+  uint32_t mark = 0;
   size_t offset = h.base_offset + h.base_bytes;
   for (uint32_t li = 0; li < target; ++li) {
     const LevelEntry& le = h.levels[li];
@@ -518,8 +572,10 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
     Split s;
     for (uint64_t b = 0; b < le.batches; ++b) {
       const uint32_t n_start = uint32_t(st.pos.size());
+      ++mark;
       int prev = 0;
       for (uint32_t v = 0; v < n_start; ++v) {
+        if (v < blocked.size() && blocked[v] == mark) continue;
         int flag = 0;
         c.bit(m.flag[prev], flag);
         prev = flag;
@@ -527,6 +583,7 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
         if (st.pos.size() >= le.vertices)
           return makeError(ErrorCode::kMalformed, "pm: level " + std::to_string(li + 1) + " splits too many vertices");
         SP_RETURN_IF_ERROR(codeSplit(c, m, st, v, s, max_coord, le.faces - st.faces.size()));
+        st.block(v, uint32_t(st.pos.size() - 1), blocked, mark);
         if (rd.overrun()) return makeError(ErrorCode::kTruncated, "pm: level stream ends early");
       }
       // Checked per batch too: a stream that runs dry must not make the decoder walk every vertex per batch.
@@ -746,6 +803,8 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   h.base_error = last_error + (s2.pass_errors.empty() ? 0.f : s2.pass_errors.back());
   const uint32_t max_coord = uint32_t((uint64_t(1) << ctx.bits) - 1);
   Models m;
+  std::vector<uint32_t> blocked;
+  uint32_t mark = 0;
   std::vector<uint8_t> level_bytes;
   std::unique_ptr<RangeEncoder> re;
   LevelEntry cur;
@@ -767,10 +826,16 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
     size_t next = 0;
     int prev = 0;
     std::vector<uint32_t> fan;
+    std::vector<uint8_t> starts;
+    ++mark;
     for (uint32_t v = 0; v < n_start; ++v) {
       int flag = next < splits.size() && splits[next].first == v;
       if (next + 1 < splits.size() && flag && splits[next + 1].first == v)
         return makeError(ErrorCode::kInternal, "pm: a vertex collapses twice in one pass");
+      if (v < blocked.size() && blocked[v] == mark) {
+        if (flag) return makeError(ErrorCode::kInternal, "pm: a pass's collapses are not independent");
+        continue;
+      }
       c.bit(m.flag[prev], flag);
       prev = flag;
       if (!flag) continue;
@@ -778,7 +843,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
       if (st.pos[v] != rec.vp) return makeError(ErrorCode::kInternal, "pm: a pass's collapses are not independent");
       Split s;
       s.vs = rec.vs, s.vr = rec.vr;
-      st.fan(v, fan);
+      st.fan(v, fan, starts);
       std::vector<std::pair<uint32_t, uint32_t>> to_move = rec.moved;  // sorted
       for (uint32_t f : fan) {
         const auto [a, b] = st.others(f, v);
@@ -795,6 +860,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
         s.new_faces.push_back({ws, o});
       }
       SP_RETURN_IF_ERROR(codeSplit(c, m, st, v, s, max_coord, UINT64_MAX));
+      st.block(v, uint32_t(st.pos.size() - 1), blocked, mark);
       state_of[rec.removed] = uint32_t(st.pos.size() - 1);
       last_of.push_back(rec.removed);
     }
