@@ -84,6 +84,12 @@ struct Models {
   SymbolModel placement{3};
   std::vector<SymbolModel> bucket;
   uint32_t last_bucket[3] = {0, 0, 0};
+  // Buffers reused by every split (allocation dominated the decoder's profile).
+  struct Scratch {
+    std::vector<uint32_t> fan, in_moved, in_stayed, nbrs, cut, extra_w, rn, kn;
+    std::vector<uint8_t> starts, extra_o, orients;
+    std::vector<std::pair<uint32_t, uint8_t>> ordered;
+  } scratch;
   Models() : bucket(3 * 2 * kBucketContexts, SymbolModel(kBuckets)) {}
 };
 
@@ -141,6 +147,8 @@ struct PmState {
       for (uint32_t f : vf[c])
         for (uint32_t w : faces[f]) ring1_.push_back(w);
     }
+    std::sort(ring1_.begin(), ring1_.end());
+    ring1_.erase(std::unique(ring1_.begin(), ring1_.end()), ring1_.end());
     for (uint32_t w : ring1_) {
       stamp[w] = mark;
       for (uint32_t f : vf[w])
@@ -248,8 +256,8 @@ void codeResidual(C& c, Models& m, int kind, std::array<int64_t, 3>& d) {
 // on the decoder's side, on input no encoder writes.
 template <class C>
 Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t max_coord, uint64_t face_budget) {
-  std::vector<uint32_t> fan;
-  std::vector<uint8_t> starts;
+  auto& fan = m.scratch.fan;
+  auto& starts = m.scratch.starts;
   st.fan(k, fan, starts);
   if (!C::kEncode) s.moved.assign(fan.size(), 0);
   int prev = 0;
@@ -260,7 +268,8 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
     prev = b;
   }
   // Cut vertices and k's neighbours.
-  std::vector<uint32_t> in_moved, in_stayed, nbrs;
+  auto &in_moved = m.scratch.in_moved, &in_stayed = m.scratch.in_stayed, &nbrs = m.scratch.nbrs;
+  in_moved.clear(), in_stayed.clear(), nbrs.clear();
   for (size_t i = 0; i < fan.size(); ++i) {
     const auto [a, b] = st.others(fan[i], k);
     auto& list = s.moved[i] ? in_moved : in_stayed;
@@ -271,20 +280,25 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
     std::sort(l->begin(), l->end());
     l->erase(std::unique(l->begin(), l->end()), l->end());
   }
-  std::vector<uint32_t> cut;
+  auto& cut = m.scratch.cut;
+  cut.clear();
   std::set_intersection(in_moved.begin(), in_moved.end(), in_stayed.begin(), in_stayed.end(), std::back_inserter(cut));
   cut.erase(std::remove(cut.begin(), cut.end(), k), cut.end());
   // New faces: per cut vertex a count, then the others.
-  std::vector<std::pair<uint32_t, uint8_t>> ordered;
-  std::vector<uint32_t> extra_w;
-  std::vector<uint8_t> extra_o;
+  auto& ordered = m.scratch.ordered;
+  ordered.clear();
+  auto& extra_w = m.scratch.extra_w;
+  extra_w.clear();
+  auto& extra_o = m.scratch.extra_o;
+  extra_o.clear();
   if constexpr (C::kEncode) {
     for (const auto& [w, o] : s.new_faces)
       if (!std::binary_search(cut.begin(), cut.end(), w)) extra_w.push_back(w), extra_o.push_back(o);
   }
   for (uint32_t w : cut) {
     uint64_t count = 0;
-    std::vector<uint8_t> orients;
+    auto& orients = m.scratch.orients;
+    orients.clear();
     if constexpr (C::kEncode) {
       for (const auto& [x, o] : s.new_faces)
         if (x == w) ++count, orients.push_back(o);
@@ -349,7 +363,8 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
     return std::array<int64_t, 3>{int64_t(x[0]) - y[0], int64_t(x[1]) - y[1], int64_t(x[2]) - y[2]};
   };
   // The neighbours of the new vertex r and of k after the split, other than k and r themselves.
-  std::vector<uint32_t> rn, kn;
+  auto &rn = m.scratch.rn, &kn = m.scratch.kn;
+  rn.clear(), kn.clear();
   for (size_t i = 0; i < fan.size(); ++i) {
     const auto [a, b] = st.others(fan[i], k);
     auto& list = s.moved[i] ? rn : kn;
@@ -411,6 +426,7 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
   st.pos.push_back(s.vr);
   st.vf.emplace_back();
   std::vector<uint32_t> stay;
+  stay.reserve(fan.size());
   for (size_t i = 0; i < fan.size(); ++i) {
     if (!s.moved[i]) {
       stay.push_back(fan[i]);
