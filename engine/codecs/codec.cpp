@@ -26,7 +26,7 @@ constexpr std::array<CodecInfo, 4> kCodecs = {{
     {CodecId::kStore, "store", 1, kStoreFloor, &storeEncode, &storeDecode},
     {CodecId::kKdtree, "kdtree", 1, kHierarchyFloor, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel},
     {CodecId::kOctree, "octree", 1, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel},
-    {CodecId::kPm, "pm", 1, kPmFloor, &pmEncode, &pmDecode, &pmLevels, &pmDecodeLevel},
+    {CodecId::kPm, "pm", 1, kPmFloor, &pmEncode, &pmDecode, &pmLevels, &pmDecodeLevel, false},
 }};
 
 }  // namespace

@@ -143,6 +143,9 @@ struct CodecInfo {
                                             const DecodeLimits& limits) = nullptr;
   Result<QuantizedMesh> (*decode_level)(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         uint32_t level, const DecodeLimits& limits) = nullptr;
+  // False when the codec derives normals and colors from the triangles instead of keeping them (pm v1): its tiles
+  // weld by position even when complete, as coarse levels do, and get attributes derived from the welded mesh.
+  bool keeps_attributes = true;
   bool progressive() const { return levels != nullptr; }
 };
 
