@@ -13,8 +13,8 @@
 //    shortest-edge simplifier: 43.2 -> 40.9 bpv). For index 2, v_l is predicted by the average of its neighbours other than v_s, then v_s by v_l mirrored through v'_s (exact for a
 //    midpoint placement) instead of by v'_s.
 //  - Residuals are integers on the scan's grid (no m-bit requantization), coded with the range coder: per
-//    component a bit-length bucket with an adaptive model (context: the previous component's bucket, or for x
-//    the last bucket of that residual kind), a sign bit and raw mantissa bits (the paper: QM coder).
+//    component a bit-length bucket with an adaptive model (context: the local scale, the distance from v'_s to
+//    the prediction, and the previous component's bucket), a sign bit and raw mantissa bits (the paper: QM coder).
 //  - Connectivity (the paper refers to Hoppe's PM): per batch of independent splits, one context-coded flag per
 //    current vertex in canonical order says whether it splits; vertices within two edges of a split already made
 //    in the batch get no flag (the simplifier's passes have disjoint closed one-rings, so they cannot split). A
@@ -63,8 +63,9 @@ constexpr double kLevelGrowth = 1.3;
 constexpr double kBaseFaceShare = 1.0 / 32;
 constexpr uint64_t kBaseMinFaces = 16;
 
-constexpr uint32_t kBuckets = 33;  // bit length of a residual component's magnitude (< 2^32)
-constexpr uint32_t kBucketContexts = 11;
+constexpr uint32_t kBuckets = 33;      // bit length of a residual component's magnitude (< 2^32)
+constexpr uint32_t kScales = 16;       // context: bit length of the local scale (see codeResidual)
+constexpr uint32_t kRelContexts = 5;   // context of y and z: their predecessor's bucket relative to the scale
 constexpr uint32_t kCountEscape = 15;  // counts >= this code the rest in 32 raw bits
 
 uint32_t bitLength(uint64_t v) {
@@ -83,14 +84,13 @@ struct Models {
   SymbolModel big_count{kCountEscape + 1};
   SymbolModel placement{3};
   std::vector<SymbolModel> bucket;
-  uint32_t last_bucket[3] = {0, 0, 0};
   // Buffers reused by every split (allocation dominated the decoder's profile).
   struct Scratch {
     std::vector<uint32_t> fan, in_moved, in_stayed, nbrs, cut, extra_w, rn, kn;
     std::vector<uint8_t> starts, extra_o, orients;
     std::vector<std::pair<uint32_t, uint8_t>> ordered;
   } scratch;
-  Models() : bucket(3 * 2 * kBucketContexts, SymbolModel(kBuckets)) {}
+  Models() : bucket(3 * kScales * (1 + kRelContexts), SymbolModel(kBuckets)) {}
 };
 
 // Encoder and decoder share one coding routine: each call codes `v` (encoder) or sets it (decoder).
@@ -227,29 +227,35 @@ int predictOrientation(const PmState& st, uint32_t k, const std::vector<uint32_t
   return 0;
 }
 
+// `scale`: the bit length of a distance the residual is expected to be proportional to (the distance from v'_s to
+// the prediction, about an edge length): residuals shrink from coarse to fine levels, and the scale follows them.
 template <class C>
-void codeResidual(C& c, Models& m, int kind, std::array<int64_t, 3>& d) {
+void codeResidual(C& c, Models& m, int kind, uint32_t scale, std::array<int64_t, 3>& d) {
+  scale = std::min(scale, kScales - 1);
   uint32_t prev = 0;
   for (int a = 0; a < 3; ++a) {
     const uint64_t mag = C::kEncode ? uint64_t(d[a] < 0 ? -d[a] : d[a]) : 0;
     uint32_t b = bitLength(mag);
-    const uint32_t ctx = a == 0 ? std::min(m.last_bucket[kind], kBucketContexts - 1)
-                                : kBucketContexts + std::min(prev, kBucketContexts - 1);
-    c.sym(m.bucket[kind * 2 * kBucketContexts + ctx], b);
-    uint64_t value = 0;
+    const uint32_t rel = a == 0 ? 0 : 1 + uint32_t(std::clamp<int64_t>(int64_t(prev) - scale + 2, 0, kRelContexts - 1));
+    c.sym(m.bucket[(kind * kScales + scale) * (1 + kRelContexts) + rel], b);
     if (b > 0) {
       int neg = C::kEncode ? int(d[a] < 0) : 0;
       c.bit(m.sign[kind], neg);
       uint32_t low = C::kEncode ? uint32_t(mag & ((uint64_t(1) << (b - 1)) - 1)) : 0;
       if (b > 1) c.bits(low, int(b - 1));
-      value = (uint64_t(1) << (b - 1)) | low;
+      const uint64_t value = (uint64_t(1) << (b - 1)) | low;
       if (!C::kEncode) d[a] = neg ? -int64_t(value) : int64_t(value);
     } else if (!C::kEncode) {
       d[a] = 0;
     }
-    if (a == 0) m.last_bucket[kind] = b;
     prev = b;
   }
+}
+
+uint32_t scaleOf(const Vec3u& x, const Vec3u& y) {
+  uint64_t m = 0;
+  for (int a = 0; a < 3; ++a) m = std::max<uint64_t>(m, x[a] > y[a] ? x[a] - y[a] : y[a] - x[a]);
+  return bitLength(m);
 }
 
 // Codes the split of k (the encoder's `s` is filled in; the decoder's is filled here), then applies it. Fails only
@@ -398,26 +404,26 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
     s.vs = vp;
     const Vec3u pred = average(rn, joined, vp, vp);
     std::array<int64_t, 3> d = diff(s.vr, pred);
-    codeResidual(c, m, 0, d);
+    codeResidual(c, m, 0, scaleOf(pred, vp), d);
     SP_RETURN_IF_ERROR(add(pred, d, s.vr));
   } else if (placement == 1) {
     s.vr = vp;
     const Vec3u pred = average(kn, joined, vp, vp);
     std::array<int64_t, 3> d = diff(s.vs, pred);
-    codeResidual(c, m, 0, d);
+    codeResidual(c, m, 0, scaleOf(pred, vp), d);
     SP_RETURN_IF_ERROR(add(pred, d, s.vs));
   } else {
     // Delta_l: v_l from its neighbours other than k; then Delta_s from v_l mirrored through v'_s (exact for a
     // midpoint placement, close for the quadric optimum).
     const Vec3u pred_r = average(rn, false, vp, vp);
     std::array<int64_t, 3> dl = diff(s.vr, pred_r);
-    codeResidual(c, m, 1, dl);
+    codeResidual(c, m, 1, scaleOf(pred_r, vp), dl);
     SP_RETURN_IF_ERROR(add(pred_r, dl, s.vr));
     Vec3u pred_s;
     for (int a = 0; a < 3; ++a)
       pred_s[a] = uint32_t(std::clamp<int64_t>(2 * int64_t(vp[a]) - s.vr[a], 0, int64_t(max_coord)));
     std::array<int64_t, 3> ds = diff(s.vs, pred_s);
-    codeResidual(c, m, 2, ds);
+    codeResidual(c, m, 2, scaleOf(pred_s, vp), ds);
     SP_RETURN_IF_ERROR(add(pred_s, ds, s.vs));
   }
   const uint32_t r = n;
