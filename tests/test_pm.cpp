@@ -128,10 +128,10 @@ void expectLevelsReplay(const TileContext& ctx, const QuantizedMesh& tile, std::
     EXPECT_TRUE(triangleMultiset(*d) == expect_last) << "the last level is not the simplified tile";
     return;  // the coarser levels are checked on lossless encodes (the same code path from the last level on)
   }
-  // Pass boundaries of the simplification towards the base, as the encoder does it (pm.cpp: 1/32 of the faces).
+  // Pass boundaries of the simplification towards the base, as the encoder does it (pm.cpp: 1/8 of the faces).
   SimplifyOptions so2;
   so2.weights = opt.weights;
-  so2.target_faces = std::max<uint64_t>(16, uint64_t(double(last.triangles.size()) / 32));
+  so2.target_faces = std::max<uint64_t>(16, uint64_t(double(last.triangles.size()) / 8));
   std::set<std::vector<PosTriangle>> states;
   states.insert(triangleMultiset(last));
   if (last.triangles.size() > so2.target_faces) {
@@ -181,7 +181,7 @@ TEST(Pm, SphereEveryLevelReplaysTheCollapses) {
   expectLevelsReplay(ctx, sphere, {}, PmOptions{});
   const Encoded enc = encodeTile(ctx, sphere, {});
   EXPECT_GE(enc.levels.size(), 4u);
-  EXPECT_LT(enc.levels.front().vertices, sphere.positions.size() / 8);
+  EXPECT_LT(enc.levels.front().vertices, sphere.positions.size() / 4);
 }
 
 TEST(Pm, LossyLastLevelIsTheSimplifiedTile) {
