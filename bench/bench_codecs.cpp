@@ -80,6 +80,29 @@ void BM_Decode(benchmark::State& state, const CodecInfo* codec, std::string scan
   state.counters["bpv"] = 8.0 * out.size() / p.mesh.positions.size();
 }
 
+// pm lossless (ratio 1) and simplified to `ratio` of the faces: bits per original vertex, decode Mtri/s of output
+// triangles (the whole payload, base mesh and every level of splits), and the base level's share of the payload.
+void BM_PmDecode(benchmark::State& state, std::string scan, int bits, double ratio) {
+  const Prepared& p = prepared(scan, bits);
+  const CodecInfo& codec = *findCodec(CodecId::kPm);
+  CodecOptions options;
+  if (ratio < 1) options.pm.max_error = 1e30, options.pm.ratio = ratio;  // the face ratio decides
+  auto encoded = encodeMesh(codec, p.ctx, p.mesh, options);
+  if (!encoded.isOk()) return state.SkipWithError(encoded.status().toString().c_str());
+  const std::vector<uint8_t>& out = encoded->payload;
+  for (auto _ : state) {
+    auto m = codec.decode(p.ctx, codec.version, out, limitsOf(encoded->decoded));
+    if (!m.isOk()) state.SkipWithError("decode failed");
+    benchmark::DoNotOptimize(m);
+  }
+  const double tris = double(encoded->decoded.faces);
+  state.counters["Mtri/s"] = benchmark::Counter(tris * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["bpv"] = 8.0 * out.size() / p.mesh.positions.size();
+  state.counters["out_faces"] = tris;
+  state.counters["levels"] = double(encoded->levels.size());
+  state.counters["base_share"] = double(encoded->levels.front().end_bytes) / double(out.size());
+}
+
 void BM_Read(benchmark::State& state, std::string scan) {
   const std::string path = scanPath(scan);
   ReadStats stats;
@@ -288,6 +311,11 @@ int registerAll() {
         ->Arg(10)
         ->Iterations(1)
         ->Unit(benchmark::kMillisecond);
+  for (const char* scan : {"igea.ply.zst", "bun_zipper.ply.zst"})
+    for (double ratio : {1.0, 0.25, 0.1})
+      benchmark::RegisterBenchmark(("PmDecode/" + std::string(scan) + "/16/ratio" + std::to_string(ratio)).c_str(),
+                                   BM_PmDecode, std::string(scan), 16, ratio)
+          ->Unit(benchmark::kMillisecond);
   for (const char* scan : kScans) {
     benchmark::RegisterBenchmark((std::string("Read/") + scan).c_str(), BM_Read, std::string(scan))
         ->Unit(benchmark::kMillisecond);

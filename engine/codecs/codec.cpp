@@ -20,11 +20,16 @@ constexpr PayloadFloor kHierarchyFloor{8.0 / 1024, 8.0 / (1024 * 64), 1024};
 // edgebreaker: every point codes three residual classes and every face a symbol, each at least the cost of a
 // model's likeliest symbol (a width of 2^15 less one per other symbol); the slack covers the header and flush.
 constexpr PayloadFloor kEdgebreakerFloor{8.0 / 2048, 8.0 / 65536, 1024};
+// pm: its base mesh is coded by store, kdtree or octree, and every vertex split costs at least its split flag, a
+// placement symbol and three residual buckets, each a few thousandths of a bit at the models' most skewed
+// probabilities: half the hierarchy codecs' floor per vertex and face.
+constexpr PayloadFloor kPmFloor{4.0 / 1024, 4.0 / (1024 * 64), 1024};
 
-constexpr std::array<CodecInfo, 4> kCodecs = {{
+constexpr std::array<CodecInfo, 5> kCodecs = {{
     {CodecId::kStore, "store", 1, kStoreFloor, &storeEncode, &storeDecode},
     {CodecId::kKdtree, "kdtree", 1, kHierarchyFloor, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel},
     {CodecId::kOctree, "octree", 1, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel},
+    {CodecId::kPm, "pm", 1, kPmFloor, &pmEncode, &pmDecode, &pmLevels, &pmDecodeLevel, false},
     {CodecId::kEdgebreaker, "edgebreaker", 1, kEdgebreakerFloor, &edgebreakerEncode, &edgebreakerDecode},
 }};
 

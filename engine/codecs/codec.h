@@ -143,6 +143,9 @@ struct CodecInfo {
                                             const DecodeLimits& limits) = nullptr;
   Result<QuantizedMesh> (*decode_level)(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         uint32_t level, const DecodeLimits& limits) = nullptr;
+  // False when the codec derives normals and colors from the triangles instead of keeping them (pm v1): its tiles
+  // weld by position even when complete, as coarse levels do, and get attributes derived from the welded mesh.
+  bool keeps_attributes = true;
   bool progressive() const { return levels != nullptr; }
 };
 
@@ -193,6 +196,16 @@ Result<std::vector<CodecLevel>> octreeLevels(const TileContext& ctx, uint16_t ve
                                              std::span<const uint8_t> payload, const DecodeLimits& limits);
 Result<QuantizedMesh> octreeDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         uint32_t level, const DecodeLimits& limits);
+
+// `pm`: a simplified base mesh and the vertex splits back to the tile, after Ahn, Chang and Ho (pm.cpp). Welds
+// vertices by position; keeps no normals or colors (derived from the triangles at every level).
+Result<EncodedTile> pmEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options);
+Result<QuantizedMesh> pmDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                               const DecodeLimits& limits);
+Result<std::vector<CodecLevel>> pmLevels(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                         const DecodeLimits& limits);
+Result<QuantizedMesh> pmDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                    uint32_t level, const DecodeLimits& limits);
 
 // `edgebreaker`: single-rate lossless coding, Edgebreaker connectivity and parallelogram prediction
 // (edgebreaker.cpp). Like kdtree it merges vertices that share position and attributes.

@@ -365,7 +365,8 @@ Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const Til
     auto mesh = partial ? codec->decode_level(ctx, e.codec_version, payload, *level, limits)
                         : codec->decode(ctx, e.codec_version, payload, limits);
     if (!mesh.isOk()) return mesh.status().withContext(where);
-    if (complete) *complete = !partial;
+    // A codec that derives attributes never yields the tile's own: its tiles weld as coarse ones do.
+    if (complete) *complete = !partial && codec->keeps_attributes;
     if (partial) return mesh;
     if (mesh->positions.size() != e.vertices || mesh->triangles.size() != e.faces)
       return makeError(ErrorCode::kMalformed, where + ": decoded " + std::to_string(mesh->positions.size()) +

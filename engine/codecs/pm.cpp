@@ -1,0 +1,973 @@
+// Codec `pm` (id 4): a simplified base mesh plus the vertex splits that undo the collapses back to the tile.
+//
+// Paper: S. Ahn, M. Chang, Y.-S. Ho, "Shape-preserving progressive coding of 3-D models"
+// (../shared/papers/shape-preserving-progressive-qem.md): section 2 is the simplifier (engine/simplify), section 3
+// the geometry coding followed here: each split codes the collapse's placement index (0: the kept vertex did not
+// move, 1: it moved onto the removed vertex, 2: elsewhere), then the residuals of the positions v'_s does not give.
+//
+// Where this departs from the paper, and why:
+//  - The index is computed from the positions, not taken from the simplifier, so any valid Simplification codes.
+//  - Predictions: the paper codes Delta_r = v_r - v'_s for index 0/1, which costs about an edge length per
+//    component; here the endpoint that is not at v'_s is predicted by the average of its neighbours after the split
+//    (the paper's index-2 predictor, applied to every index; bunny, 16 bits, lossless, with the temporary
+//    shortest-edge simplifier: 43.2 -> 40.9 bpv). For index 2, v_l is predicted by the average of its neighbours other than v_s, then v_s by v_l mirrored through v'_s (exact for a
+//    midpoint placement) instead of by v'_s.
+//  - Residuals are integers on the scan's grid (no m-bit requantization), coded with the range coder: per
+//    component a bit-length bucket with an adaptive model (context: the local scale, the distance from v'_s to
+//    the prediction, and the previous component's bucket), a sign bit and raw mantissa bits (the paper: QM coder).
+//  - Connectivity (the paper refers to Hoppe's PM): per batch of independent splits, one context-coded flag per
+//    current vertex in canonical order says whether it splits; vertices within two edges of a split already made
+//    in the batch get no flag (the simplifier's passes have disjoint closed one-rings, so they cannot split). A
+//    split vertex k codes, per incident face in canonical fan order (walks around k across shared edges), whether
+//    the face goes to the new vertex (context: walk start / previous bit). The new faces (those the collapse deleted) are coded against the
+//    "cut" vertices (neighbours shared by a moving and a staying face): per cut vertex a count of new faces with
+//    it (0/1/2/more); any other new face's third vertex as an index into k's sorted neighbours or, escaped, any
+//    vertex. Each new face's orientation is a bit predicted by the neighbouring face across its edge with k. On
+//    manifold meshes a split costs the flag, about one bit per incident face, and near nothing for the new faces;
+//    boundary and non-manifold neighbourhoods code exactly with the same scheme.
+//  - The base mesh is coded by whichever of store, kdtree and octree codes it smallest (decoded again by the
+//    encoder so that both sides start from the same vertex order); the vertices are then put in canonical order
+//    (sorted by position, ties in decoded order) and every split appends its new vertex.
+//  - Batches (the simplifier's passes) are grouped into levels so that a level grows the vertex count by a useful
+//    step; each level is one range-coder stream (models carry over), so a payload cut after a level's end decodes it.
+//  - The encoder welds vertices sharing a grid position and drops triangles that repeat a vertex after the weld:
+//    the last level is the tile as triangles over positions (with multiplicity and orientation), not its vertex
+//    list. Normals and colors are not kept (v1): every level derives them from its triangles (deriveAttributes).
+//
+// Payload v1 (FORMAT.md, "Codec pm"):
+//   u8 base codec id (1 store, 2 kdtree, 3 octree), varint base codec version, varint base payload bytes B,
+//   varint base vertices V0, varint base faces F0, f32 base error (grid cells, little-endian bits),
+//   varint L (levels after the base), L x { varint batches, varint vertices, varint faces, f32 error,
+//   varint stream bytes }, then the base payload (B bytes), then the L level streams.
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <numeric>
+#include <string>
+
+#include "engine/codecs/codec.h"
+#include "engine/entropy/range_coder.h"
+#include "engine/io/bytes.h"
+
+namespace scanpress {
+namespace {
+
+constexpr uint16_t kVersion = 1;
+// A level closes once it has at least this many splits and grew the vertex count by this factor (or at the last
+// batch): fewer, larger levels pay less per-level overhead (a 4-byte flush and the table entry).
+constexpr uint64_t kMinLevelSplits = 64;
+constexpr double kLevelGrowth = 1.3;
+// The base mesh: simplification continues to this share of the last level's faces (or as far as it goes). Measured
+// on bunny at 16 bits (with the temporary simplifier): 1/8 37.5 bpv, 1/32 38.1, 1/128 38.2 lossless; the base
+// codecs code dense geometry more cheaply than vertex splits do, so a larger base is smaller but less progressive.
+constexpr double kBaseFaceShare = 1.0 / 8;
+constexpr uint64_t kBaseMinFaces = 16;
+
+constexpr uint32_t kBuckets = 33;      // bit length of a residual component's magnitude (< 2^32)
+constexpr uint32_t kScales = 16;       // context: bit length of the local scale (see codeResidual)
+constexpr uint32_t kRelContexts = 5;   // context of y and z: their predecessor's bucket relative to the scale
+constexpr uint32_t kCountEscape = 15;  // counts >= this code the rest in 32 raw bits
+
+uint32_t bitLength(uint64_t v) {
+  uint32_t b = 0;
+  while (v) ++b, v >>= 1;
+  return b;
+}
+
+struct Models {
+  BitModel flag[2];
+  BitModel moved[3];
+  BitModel orient[2];
+  BitModel sign[3];
+  SymbolModel cut_count{4};
+  SymbolModel extra_count{kCountEscape + 1};
+  SymbolModel big_count{kCountEscape + 1};
+  SymbolModel placement{3};
+  std::vector<SymbolModel> bucket;
+  // Buffers reused by every split (allocation dominated the decoder's profile).
+  struct Scratch {
+    std::vector<uint32_t> fan, in_moved, in_stayed, nbrs, cut, extra_w, rn, kn;
+    std::vector<uint8_t> starts, extra_o, orients;
+    std::vector<std::pair<uint32_t, uint8_t>> ordered;
+  } scratch;
+  Models() : bucket(3 * kScales * (1 + kRelContexts), SymbolModel(kBuckets)) {}
+};
+
+// Encoder and decoder share one coding routine: each call codes `v` (encoder) or sets it (decoder).
+struct EncodeSide {
+  static constexpr bool kEncode = true;
+  RangeEncoder& e;
+  void bit(BitModel& m, int& b) { e.encodeBit(m, b); }
+  void sym(SymbolModel& m, uint32_t& s) { e.encodeSymbol(m, s); }
+  void bits(uint32_t& v, int n) { e.encodeBits(v, n); }
+  void uniform(uint32_t& v, uint32_t count) { e.encodeUniform(v, count); }
+};
+struct DecodeSide {
+  static constexpr bool kEncode = false;
+  RangeDecoder& d;
+  void bit(BitModel& m, int& b) { b = d.decodeBit(m); }
+  void sym(SymbolModel& m, uint32_t& s) { s = d.decodeSymbol(m); }
+  void bits(uint32_t& v, int n) { v = d.decodeBits(n); }
+  void uniform(uint32_t& v, uint32_t count) { v = d.decodeUniform(count); }
+};
+
+template <class C>
+void codeCount(C& c, SymbolModel& m, uint64_t& n) {
+  uint32_t s = n >= kCountEscape ? kCountEscape : uint32_t(n);
+  c.sym(m, s);
+  if (s < kCountEscape) {
+    n = s;
+    return;
+  }
+  uint32_t rest = C::kEncode ? uint32_t(n - kCountEscape) : 0;
+  c.bits(rest, 32);
+  n = uint64_t(kCountEscape) + rest;
+}
+
+// The mesh both sides keep while splitting: positions, faces, and per vertex its faces.
+struct PmState {
+  std::vector<Vec3u> pos;
+  std::vector<Triangle> faces;
+  std::vector<std::vector<uint32_t>> vf;
+
+  void addFace(const Triangle& t) {
+    const uint32_t id = uint32_t(faces.size());
+    faces.push_back(t);
+    vf[t[0]].push_back(id);
+    if (t[1] != t[0]) vf[t[1]].push_back(id);
+    if (t[2] != t[0] && t[2] != t[1]) vf[t[2]].push_back(id);
+  }
+  // Marks the vertices within two edges of a and b (after a split of a into a and b): in one batch no other
+  // vertex among them splits (the pass's closed one-rings are disjoint), so their flags are not coded.
+  void block(uint32_t a, uint32_t b, std::vector<uint32_t>& stamp, uint32_t mark) const {
+    if (stamp.size() < pos.size()) stamp.resize(pos.size(), 0);
+    ring1_.clear();
+    for (uint32_t c : {a, b}) {
+      stamp[c] = mark;
+      for (uint32_t f : vf[c])
+        for (uint32_t w : faces[f]) ring1_.push_back(w);
+    }
+    std::sort(ring1_.begin(), ring1_.end());
+    ring1_.erase(std::unique(ring1_.begin(), ring1_.end()), ring1_.end());
+    for (uint32_t w : ring1_) {
+      stamp[w] = mark;
+      for (uint32_t f : vf[w])
+        for (uint32_t x : faces[f]) stamp[x] = mark;
+    }
+  }
+  mutable std::vector<uint32_t> ring1_;
+  // The other two corners of face f after v, in f's rotation.
+  std::pair<uint32_t, uint32_t> others(uint32_t f, uint32_t v) const {
+    const Triangle& t = faces[f];
+    const int i = t[0] == v ? 0 : (t[1] == v ? 1 : 2);
+    return {t[(i + 1) % 3], t[(i + 2) % 3]};
+  }
+  // v's faces in canonical order: walks around v across shared edges ((v, a, b) is followed by the first unvisited
+  // (v, b, c)), starting each walk at the first unvisited face in key order (the other corners (a, b) in rotation,
+  // ties by face id). On a manifold fan this is the cyclic order, so the faces that move to a split's new vertex
+  // form runs. `starts[i]` is set when face i begins a walk.
+  void fan(uint32_t v, std::vector<uint32_t>& ids, std::vector<uint8_t>& starts) const {
+    keyed_.clear();
+    for (uint32_t f : vf[v]) {
+      const auto [a, b] = others(f, v);
+      keyed_.push_back({a, b, f});
+    }
+    std::sort(keyed_.begin(), keyed_.end());
+    const size_t n = keyed_.size();
+    visited_.assign(n, 0);
+    group_next_.resize(n);
+    for (size_t i = 0; i < n; ++i) group_next_[i] = uint32_t(i);  // at a group's first entry: its next candidate
+    ids.clear();
+    starts.clear();
+    for (size_t start = 0; start < n; ++start) {
+      if (visited_[start]) continue;
+      size_t cur = start;
+      bool first = true;
+      while (true) {
+        visited_[cur] = 1;
+        ids.push_back(keyed_[cur][2]);
+        starts.push_back(first);
+        first = false;
+        const uint32_t want = keyed_[cur][1];
+        const size_t g = size_t(std::lower_bound(keyed_.begin(), keyed_.end(), std::array<uint32_t, 3>{want, 0, 0}) -
+                                keyed_.begin());
+        if (g == n || keyed_[g][0] != want) break;
+        size_t j = group_next_[g];
+        while (j < n && keyed_[j][0] == want && visited_[j]) ++j;
+        group_next_[g] = uint32_t(j);
+        if (j == n || keyed_[j][0] != want) break;
+        cur = j;
+      }
+    }
+  }
+  mutable std::vector<std::array<uint32_t, 3>> keyed_;
+  mutable std::vector<uint8_t> visited_;
+  mutable std::vector<uint32_t> group_next_;
+};
+
+// One vertex split in the state's indices: k splits into k (at vs) and a new vertex (at vr).
+struct Split {
+  std::vector<uint8_t> moved;                           // per fan face: goes to the new vertex
+  std::vector<std::pair<uint32_t, uint8_t>> new_faces;  // (third vertex w, 0: (k, r, w) / 1: (k, w, r))
+  Vec3u vs{}, vr{};
+};
+
+int predictOrientation(const PmState& st, uint32_t k, const std::vector<uint32_t>& fan,
+                       const std::vector<uint8_t>& moved, uint32_t w, bool& known) {
+  known = true;
+  for (int pass = 0; pass < 2; ++pass)
+    for (size_t i = 0; i < fan.size(); ++i) {
+      if (moved[i] != pass) continue;
+      const auto [a, b] = st.others(fan[i], k);
+      // A staying face with k->w asks for (k, r, w); a moving face (becoming r's) with r->w asks for (k, w, r).
+      if (a == w) return pass == 0 ? 0 : 1;
+      if (b == w) return pass == 0 ? 1 : 0;
+    }
+  known = false;
+  return 0;
+}
+
+// `scale`: the bit length of a distance the residual is expected to be proportional to (the distance from v'_s to
+// the prediction, about an edge length): residuals shrink from coarse to fine levels, and the scale follows them.
+template <class C>
+void codeResidual(C& c, Models& m, int kind, uint32_t scale, std::array<int64_t, 3>& d) {
+  scale = std::min(scale, kScales - 1);
+  uint32_t prev = 0;
+  for (int a = 0; a < 3; ++a) {
+    const uint64_t mag = C::kEncode ? uint64_t(d[a] < 0 ? -d[a] : d[a]) : 0;
+    uint32_t b = bitLength(mag);
+    const uint32_t rel = a == 0 ? 0 : 1 + uint32_t(std::clamp<int64_t>(int64_t(prev) - scale + 2, 0, kRelContexts - 1));
+    c.sym(m.bucket[(kind * kScales + scale) * (1 + kRelContexts) + rel], b);
+    if (b > 0) {
+      int neg = C::kEncode ? int(d[a] < 0) : 0;
+      c.bit(m.sign[kind], neg);
+      uint32_t low = C::kEncode ? uint32_t(mag & ((uint64_t(1) << (b - 1)) - 1)) : 0;
+      if (b > 1) c.bits(low, int(b - 1));
+      const uint64_t value = (uint64_t(1) << (b - 1)) | low;
+      if (!C::kEncode) d[a] = neg ? -int64_t(value) : int64_t(value);
+    } else if (!C::kEncode) {
+      d[a] = 0;
+    }
+    prev = b;
+  }
+}
+
+uint32_t scaleOf(const Vec3u& x, const Vec3u& y) {
+  uint64_t m = 0;
+  for (int a = 0; a < 3; ++a) m = std::max<uint64_t>(m, x[a] > y[a] ? x[a] - y[a] : y[a] - x[a]);
+  return bitLength(m);
+}
+
+// Codes the split of k (the encoder's `s` is filled in; the decoder's is filled here), then applies it. Fails only
+// on the decoder's side, on input no encoder writes.
+template <class C>
+Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t max_coord, uint64_t face_budget) {
+  auto& fan = m.scratch.fan;
+  auto& starts = m.scratch.starts;
+  st.fan(k, fan, starts);
+  if (!C::kEncode) s.moved.assign(fan.size(), 0);
+  int prev = 0;
+  for (size_t i = 0; i < fan.size(); ++i) {
+    int b = s.moved[i];
+    c.bit(m.moved[starts[i] ? 0 : 1 + prev], b);
+    s.moved[i] = uint8_t(b);
+    prev = b;
+  }
+  // Cut vertices and k's neighbours.
+  auto &in_moved = m.scratch.in_moved, &in_stayed = m.scratch.in_stayed, &nbrs = m.scratch.nbrs;
+  in_moved.clear(), in_stayed.clear(), nbrs.clear();
+  for (size_t i = 0; i < fan.size(); ++i) {
+    const auto [a, b] = st.others(fan[i], k);
+    auto& list = s.moved[i] ? in_moved : in_stayed;
+    list.push_back(a), list.push_back(b);
+    nbrs.push_back(a), nbrs.push_back(b);
+  }
+  for (auto* l : {&in_moved, &in_stayed, &nbrs}) {
+    std::sort(l->begin(), l->end());
+    l->erase(std::unique(l->begin(), l->end()), l->end());
+  }
+  auto& cut = m.scratch.cut;
+  cut.clear();
+  std::set_intersection(in_moved.begin(), in_moved.end(), in_stayed.begin(), in_stayed.end(), std::back_inserter(cut));
+  cut.erase(std::remove(cut.begin(), cut.end(), k), cut.end());
+  // New faces: per cut vertex a count, then the others.
+  auto& ordered = m.scratch.ordered;
+  ordered.clear();
+  auto& extra_w = m.scratch.extra_w;
+  extra_w.clear();
+  auto& extra_o = m.scratch.extra_o;
+  extra_o.clear();
+  if constexpr (C::kEncode) {
+    for (const auto& [w, o] : s.new_faces)
+      if (!std::binary_search(cut.begin(), cut.end(), w)) extra_w.push_back(w), extra_o.push_back(o);
+  }
+  for (uint32_t w : cut) {
+    uint64_t count = 0;
+    auto& orients = m.scratch.orients;
+    orients.clear();
+    if constexpr (C::kEncode) {
+      for (const auto& [x, o] : s.new_faces)
+        if (x == w) ++count, orients.push_back(o);
+    }
+    uint32_t sym = count >= 3 ? 3 : uint32_t(count);
+    c.sym(m.cut_count, sym);
+    count = sym;
+    if (sym == 3) {
+      uint64_t more = C::kEncode ? orients.size() - 3 : 0;
+      codeCount(c, m.big_count, more);
+      count = 3 + more;
+    }
+    if (count > face_budget) return makeError(ErrorCode::kMalformed, "pm: a split adds more faces than the level");
+    face_budget -= count;
+    if (!C::kEncode) orients.assign(count, 0);
+    bool known = false;
+    const int pred = predictOrientation(st, k, fan, s.moved, w, known);
+    for (uint64_t i = 0; i < count; ++i) {
+      int b = orients[i] ^ pred;
+      c.bit(m.orient[known ? 0 : 1], b);
+      ordered.push_back({w, uint8_t(b ^ pred)});
+    }
+  }
+  uint64_t extras = extra_w.size();
+  codeCount(c, m.extra_count, extras);
+  if (extras > face_budget) return makeError(ErrorCode::kMalformed, "pm: a split adds more faces than the level");
+  const uint32_t n = uint32_t(st.pos.size());
+  for (uint64_t i = 0; i < extras; ++i) {
+    uint32_t w = C::kEncode ? extra_w[i] : 0;
+    uint32_t idx = uint32_t(nbrs.size());
+    if constexpr (C::kEncode) {
+      auto it = std::lower_bound(nbrs.begin(), nbrs.end(), w);
+      if (it != nbrs.end() && *it == w) idx = uint32_t(it - nbrs.begin());
+    }
+    c.uniform(idx, uint32_t(nbrs.size()) + 1);
+    if (idx < nbrs.size()) {
+      w = nbrs[idx];
+    } else {
+      c.uniform(w, n);
+    }
+    if (w == k) return makeError(ErrorCode::kMalformed, "pm: a new face repeats the split vertex");
+    bool known = false;
+    const int pred = predictOrientation(st, k, fan, s.moved, w, known);
+    int b = (C::kEncode ? extra_o[i] : 0) ^ pred;
+    c.bit(m.orient[known ? 0 : 1], b);
+    ordered.push_back({w, uint8_t(b ^ pred)});
+  }
+  // Geometry (section 3, with the neighbour-average prediction for every vertex that is not at v'_s).
+  const Vec3u vp = st.pos[k];
+  uint32_t placement = 2;
+  if constexpr (C::kEncode) placement = s.vs == vp ? 0 : (s.vr == vp ? 1 : 2);
+  c.sym(m.placement, placement);
+  auto add = [&](const Vec3u& base, const std::array<int64_t, 3>& d, Vec3u& out) -> Status {
+    for (int a = 0; a < 3; ++a) {
+      const int64_t v = int64_t(base[a]) + d[a];
+      if (v < 0 || v > int64_t(max_coord)) return makeError(ErrorCode::kMalformed, "pm: a split leaves the grid");
+      out[a] = uint32_t(v);
+    }
+    return Status::ok();
+  };
+  auto diff = [](const Vec3u& x, const Vec3u& y) {
+    return std::array<int64_t, 3>{int64_t(x[0]) - y[0], int64_t(x[1]) - y[1], int64_t(x[2]) - y[2]};
+  };
+  // The neighbours of the new vertex r and of k after the split, other than k and r themselves.
+  auto &rn = m.scratch.rn, &kn = m.scratch.kn;
+  rn.clear(), kn.clear();
+  for (size_t i = 0; i < fan.size(); ++i) {
+    const auto [a, b] = st.others(fan[i], k);
+    auto& list = s.moved[i] ? rn : kn;
+    list.push_back(a), list.push_back(b);
+  }
+  for (const auto& [w, o] : ordered) rn.push_back(w), kn.push_back(w);
+  for (auto* l : {&rn, &kn}) {
+    std::sort(l->begin(), l->end());
+    l->erase(std::unique(l->begin(), l->end()), l->end());
+  }
+  // The rounded average of `list`'s positions plus `extra` (when `with_extra`); `fallback` when there is none.
+  auto average = [&](const std::vector<uint32_t>& list, bool with_extra, const Vec3u& extra, const Vec3u& fallback) {
+    int64_t sum[3] = {0, 0, 0};
+    int64_t cnt = 0;
+    for (uint32_t w : list) {
+      if (w == k) continue;
+      for (int a = 0; a < 3; ++a) sum[a] += st.pos[w][a];
+      ++cnt;
+    }
+    if (with_extra) {
+      for (int a = 0; a < 3; ++a) sum[a] += extra[a];
+      ++cnt;
+    }
+    if (cnt == 0) return fallback;
+    Vec3u out;
+    for (int a = 0; a < 3; ++a) out[a] = uint32_t((sum[a] + cnt / 2) / cnt);
+    return out;
+  };
+  const bool joined = !ordered.empty();  // k and r share a face after the split
+  if (placement == 0) {
+    s.vs = vp;
+    const Vec3u pred = average(rn, joined, vp, vp);
+    std::array<int64_t, 3> d = diff(s.vr, pred);
+    codeResidual(c, m, 0, scaleOf(pred, vp), d);
+    SP_RETURN_IF_ERROR(add(pred, d, s.vr));
+  } else if (placement == 1) {
+    s.vr = vp;
+    const Vec3u pred = average(kn, joined, vp, vp);
+    std::array<int64_t, 3> d = diff(s.vs, pred);
+    codeResidual(c, m, 0, scaleOf(pred, vp), d);
+    SP_RETURN_IF_ERROR(add(pred, d, s.vs));
+  } else {
+    // Delta_l: v_l from its neighbours other than k; then Delta_s from v_l mirrored through v'_s (exact for a
+    // midpoint placement, close for the quadric optimum).
+    const Vec3u pred_r = average(rn, false, vp, vp);
+    std::array<int64_t, 3> dl = diff(s.vr, pred_r);
+    codeResidual(c, m, 1, scaleOf(pred_r, vp), dl);
+    SP_RETURN_IF_ERROR(add(pred_r, dl, s.vr));
+    Vec3u pred_s;
+    for (int a = 0; a < 3; ++a)
+      pred_s[a] = uint32_t(std::clamp<int64_t>(2 * int64_t(vp[a]) - s.vr[a], 0, int64_t(max_coord)));
+    std::array<int64_t, 3> ds = diff(s.vs, pred_s);
+    codeResidual(c, m, 2, scaleOf(pred_s, vp), ds);
+    SP_RETURN_IF_ERROR(add(pred_s, ds, s.vs));
+  }
+  const uint32_t r = n;
+  // Apply.
+  st.pos[k] = s.vs;
+  st.pos.push_back(s.vr);
+  st.vf.emplace_back();
+  std::vector<uint32_t> stay;
+  stay.reserve(fan.size());
+  for (size_t i = 0; i < fan.size(); ++i) {
+    if (!s.moved[i]) {
+      stay.push_back(fan[i]);
+      continue;
+    }
+    for (uint32_t& v : st.faces[fan[i]])
+      if (v == k) v = r;
+    st.vf[r].push_back(fan[i]);
+  }
+  st.vf[k] = std::move(stay);
+  for (const auto& [w, o] : ordered) st.addFace(o ? Triangle{k, w, r} : Triangle{k, r, w});
+  return Status::ok();
+}
+
+struct LevelEntry {
+  uint64_t batches = 0, vertices = 0, faces = 0, bytes = 0;
+  float error = 0;
+};
+struct Header {
+  uint8_t base_codec = 0;
+  uint64_t base_version = 0, base_bytes = 0, base_vertices = 0, base_faces = 0;
+  float base_error = 0;
+  std::vector<LevelEntry> levels;
+  size_t base_offset = 0;  // where the base payload starts
+};
+
+void putF32(ByteWriter& w, float f) {
+  uint32_t u;
+  std::memcpy(&u, &f, 4);
+  w.u32(u);
+}
+
+Status checkVersion(uint16_t version) {
+  if (version != kVersion)
+    return makeError(ErrorCode::kUnknownVersion,
+                     "pm codec version " + std::to_string(version) + " is not known to this build (knows 1)");
+  return Status::ok();
+}
+
+Result<Header> parseHeader(std::span<const uint8_t> payload, const DecodeLimits& limits) {
+  ByteReader r(payload, "pm payload");
+  Header h;
+  SP_RETURN_IF_ERROR(r.u8(h.base_codec));
+  if (h.base_codec < 1 || h.base_codec > 3) return r.error(ErrorCode::kMalformed, "unknown base codec");
+  SP_RETURN_IF_ERROR(r.varint(h.base_version));
+  if (h.base_version > UINT16_MAX) return r.error(ErrorCode::kMalformed, "base codec version out of range");
+  SP_RETURN_IF_ERROR(r.varint(h.base_bytes));
+  SP_RETURN_IF_ERROR(r.varint(h.base_vertices));
+  SP_RETURN_IF_ERROR(r.varint(h.base_faces));
+  SP_RETURN_IF_ERROR(checkLimits("pm base mesh", h.base_vertices, h.base_faces, limits));
+  uint32_t u = 0;
+  SP_RETURN_IF_ERROR(r.u32(u));
+  std::memcpy(&h.base_error, &u, 4);
+  uint64_t count = 0;
+  SP_RETURN_IF_ERROR(r.varint(count));
+  // Every level entry takes at least 8 bytes: the count is bounded by the bytes left before anything is allocated.
+  if (count > r.remaining() / 8) return r.error(ErrorCode::kMalformed, "more levels than the payload could hold");
+  h.levels.resize(count);
+  uint64_t prev_v = h.base_vertices, prev_f = h.base_faces;
+  for (auto& l : h.levels) {
+    SP_RETURN_IF_ERROR(r.varint(l.batches));
+    SP_RETURN_IF_ERROR(r.varint(l.vertices));
+    SP_RETURN_IF_ERROR(r.varint(l.faces));
+    SP_RETURN_IF_ERROR(r.u32(u));
+    std::memcpy(&l.error, &u, 4);
+    SP_RETURN_IF_ERROR(r.varint(l.bytes));
+    SP_RETURN_IF_ERROR(checkLimits("pm level", l.vertices, l.faces, limits));
+    if (l.vertices < prev_v || l.faces < prev_f || l.batches == 0 || l.batches > l.vertices - prev_v + 1 ||
+        l.bytes > (uint64_t(1) << 40))
+      return r.error(ErrorCode::kMalformed, "inconsistent level entry");
+    prev_v = l.vertices, prev_f = l.faces;
+  }
+  h.base_offset = r.position();
+  return h;
+}
+
+std::vector<CodecLevel> levelsOf(const Header& h) {
+  std::vector<CodecLevel> out;
+  uint64_t end = h.base_offset + h.base_bytes;
+  CodecLevel base;
+  base.level = 0;
+  base.end_bytes = end;
+  base.kind = LevelKind::kSimplified;
+  base.vertices = h.base_vertices;
+  base.max_error = h.base_error;
+  base.complete = h.levels.empty();
+  out.push_back(base);
+  for (size_t i = 0; i < h.levels.size(); ++i) {
+    end += h.levels[i].bytes;
+    CodecLevel l = base;
+    l.level = uint32_t(i + 1);
+    l.end_bytes = end;
+    l.vertices = h.levels[i].vertices;
+    l.max_error = h.levels[i].error;
+    l.complete = i + 1 == h.levels.size();
+    out.push_back(l);
+  }
+  return out;
+}
+
+// Stable sort of vertex indices by position: the canonical order both sides give the base mesh.
+std::vector<uint32_t> canonicalOrder(const std::vector<Vec3u>& pos) {
+  std::vector<uint32_t> order(pos.size());
+  std::iota(order.begin(), order.end(), 0u);
+  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return pos[a] < pos[b]; });
+  return order;
+}
+
+// The base mesh in canonical order as the state to split from.
+PmState initialState(const QuantizedMesh& base, std::vector<uint32_t>* order_out) {
+  const std::vector<uint32_t> order = canonicalOrder(base.positions);
+  std::vector<uint32_t> rank(order.size());
+  for (uint32_t i = 0; i < order.size(); ++i) rank[order[i]] = i;
+  PmState st;
+  st.pos.reserve(order.size());
+  for (uint32_t v : order) st.pos.push_back(base.positions[v]);
+  st.vf.resize(order.size());
+  for (const auto& t : base.triangles) st.addFace({rank[t[0]], rank[t[1]], rank[t[2]]});
+  if (order_out) *order_out = order;
+  return st;
+}
+
+Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                 uint32_t level, const DecodeLimits& limits) {
+  SP_RETURN_IF_ERROR(checkVersion(version));
+  SP_ASSIGN_OR_RETURN(Header h, parseHeader(payload, limits));
+  const uint32_t target = std::min<uint32_t>(level, uint32_t(h.levels.size()));
+  if (h.base_bytes > payload.size() - h.base_offset)
+    return makeError(ErrorCode::kTruncated, "pm payload ends inside its base mesh");
+  const CodecInfo* base_codec = findCodec(CodecId(h.base_codec));
+  if (!base_codec) return makeError(ErrorCode::kMalformed, "pm: unknown base codec");
+  const TileContext base_ctx{ctx.bits, {}};
+  SP_ASSIGN_OR_RETURN(QuantizedMesh base,
+                      base_codec->decode(base_ctx, uint16_t(h.base_version),
+                                         payload.subspan(h.base_offset, h.base_bytes),
+                                         DecodeLimits{uint32_t(h.base_vertices), uint32_t(h.base_faces)}));
+  if (base.positions.size() != h.base_vertices || base.triangles.size() != h.base_faces)
+    return makeError(ErrorCode::kMalformed, "pm: the base mesh does not have the counts the header gives");
+  for (const auto& t : base.triangles)
+    if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2])
+      return makeError(ErrorCode::kMalformed, "pm: a base triangle repeats a vertex");
+  const uint64_t final_v = target == 0 ? h.base_vertices : h.levels[target - 1].vertices;
+  const uint64_t final_f = target == 0 ? h.base_faces : h.levels[target - 1].faces;
+  PmState st = initialState(base, nullptr);
+  st.pos.reserve(final_v);
+  st.vf.reserve(final_v);
+  st.faces.reserve(final_f);
+  const uint32_t max_coord = uint32_t((uint64_t(1) << ctx.bits) - 1);
+  Models m;
+  std::vector<uint32_t> blocked;  // == mark: within two edges of a split of the current batch
+  uint32_t mark = 0;
+  size_t offset = h.base_offset + h.base_bytes;
+  for (uint32_t li = 0; li < target; ++li) {
+    const LevelEntry& le = h.levels[li];
+    if (le.bytes > payload.size() - offset)
+      return makeError(ErrorCode::kTruncated, "pm payload ends inside level " + std::to_string(li + 1));
+    RangeDecoder rd(payload.subspan(offset, le.bytes));
+    DecodeSide c{rd};
+    Split s;
+    for (uint64_t b = 0; b < le.batches; ++b) {
+      const uint32_t n_start = uint32_t(st.pos.size());
+      ++mark;
+      int prev = 0;
+      for (uint32_t v = 0; v < n_start; ++v) {
+        if (v < blocked.size() && blocked[v] == mark) continue;
+        int flag = 0;
+        c.bit(m.flag[prev], flag);
+        prev = flag;
+        if (!flag) continue;
+        if (st.pos.size() >= le.vertices)
+          return makeError(ErrorCode::kMalformed, "pm: level " + std::to_string(li + 1) + " splits too many vertices");
+        SP_RETURN_IF_ERROR(codeSplit(c, m, st, v, s, max_coord, le.faces - st.faces.size()));
+        st.block(v, uint32_t(st.pos.size() - 1), blocked, mark);
+        if (rd.overrun()) return makeError(ErrorCode::kTruncated, "pm: level stream ends early");
+      }
+      // Checked per batch too: a stream that runs dry must not make the decoder walk every vertex per batch.
+      if (rd.overrun()) return makeError(ErrorCode::kTruncated, "pm: level stream ends early");
+    }
+    if (rd.overrun()) return makeError(ErrorCode::kTruncated, "pm: level stream ends early");
+    if (st.pos.size() != le.vertices || st.faces.size() != le.faces)
+      return makeError(ErrorCode::kMalformed,
+                       "pm: level " + std::to_string(li + 1) + " does not have the counts its entry gives");
+    offset += le.bytes;
+  }
+  QuantizedMesh out;
+  out.positions = std::move(st.pos);
+  out.triangles = std::move(st.faces);
+  deriveAttributes(out, ctx.layout);
+  SP_RETURN_IF_ERROR(validateTile(ctx, out));
+  return out;
+}
+
+// What the encoder records per collapse while it replays the simplification forwards (last-level indices).
+struct CollapseRecord {
+  uint32_t kept = 0, removed = 0;
+  Vec3u vs{}, vr{}, vp{};
+  std::vector<std::pair<uint32_t, uint32_t>> moved;  // faces (kept, a, b) after the collapse, as (a, b)
+  std::vector<std::pair<uint32_t, uint8_t>> new_faces;  // deleted faces: (w, 0: (kept, removed, w) / 1: (kept, w, removed))
+};
+
+std::array<uint32_t, 3> rotateMin(const Triangle& t) {
+  int i = 0;
+  if (t[1] < t[i]) i = 1;
+  if (t[2] < t[i]) i = 2;
+  return {t[i], t[(i + 1) % 3], t[(i + 2) % 3]};
+}
+
+std::vector<std::array<uint32_t, 3>> faceKeys(const std::vector<Triangle>& faces) {
+  std::vector<std::array<uint32_t, 3>> keys;
+  keys.reserve(faces.size());
+  for (const auto& t : faces) keys.push_back(rotateMin(t));
+  std::sort(keys.begin(), keys.end());
+  return keys;
+}
+
+Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, const CodecOptions& options) {
+  const QuantizedMesh& in = tile.mesh;
+  if (in.positions.size() >= UINT32_MAX || in.triangles.size() >= UINT32_MAX)
+    return makeError(ErrorCode::kLimitExceeded, "tile has more than 2^32-2 vertices or triangles");
+  // Weld by position; lock flags are OR-ed.
+  QuantizedMesh welded;
+  std::vector<uint8_t> locked;
+  {
+    const std::vector<uint32_t> order = canonicalOrder(in.positions);
+    std::vector<uint32_t> map(in.positions.size());
+    for (uint32_t i = 0; i < order.size(); ++i) {
+      const uint32_t v = order[i];
+      if (i == 0 || in.positions[v] != welded.positions.back()) {
+        welded.positions.push_back(in.positions[v]);
+        locked.push_back(0);
+      }
+      map[v] = uint32_t(welded.positions.size() - 1);
+      if (!tile.locked.empty() && tile.locked[v]) locked.back() = 1;
+    }
+    for (const auto& t : in.triangles) {
+      for (uint32_t v : t)
+        if (v >= in.positions.size()) return makeError(ErrorCode::kInvalidArgument, "triangle index out of range");
+      const Triangle w{map[t[0]], map[t[1]], map[t[2]]};
+      if (w[0] != w[1] && w[1] != w[2] && w[0] != w[2]) welded.triangles.push_back(w);
+    }
+  }
+  const PmOptions& opt = options.pm;
+  // The last level.
+  QuantizedMesh last;
+  std::vector<uint8_t> last_locked;
+  float last_error = 0;
+  if (opt.max_error < 0 && opt.ratio >= 1) {
+    last = std::move(welded);
+    last_locked = std::move(locked);
+  } else {
+    SimplifyOptions so;
+    so.weights = opt.weights;
+    so.max_error = opt.max_error < 0 ? std::numeric_limits<double>::infinity() : opt.max_error;
+    so.target_faces = opt.ratio < 1 ? uint64_t(std::ceil(std::max(0.0, opt.ratio) * double(welded.triangles.size())))
+                                    : 0;
+    SP_ASSIGN_OR_RETURN(Simplification s1, simplify(welded, locked, so));
+    if (!s1.pass_errors.empty()) last_error = s1.pass_errors.back();
+    std::vector<uint8_t> gone(welded.positions.size(), 0);
+    for (const auto& c : s1.collapses) {
+      if (c.removed >= gone.size()) return makeError(ErrorCode::kInternal, "pm: simplifier removed an unknown vertex");
+      gone[c.removed] = 1;
+    }
+    std::vector<uint32_t> map(gone.size(), UINT32_MAX);
+    for (uint32_t v = 0; v < gone.size(); ++v)
+      if (!gone[v]) {
+        map[v] = uint32_t(last.positions.size());
+        last.positions.push_back(s1.mesh.positions[v]);
+        last_locked.push_back(locked[v]);
+      }
+    for (const auto& t : s1.mesh.triangles) {
+      const Triangle w{map[t[0]], map[t[1]], map[t[2]]};
+      if (w[0] == UINT32_MAX || w[1] == UINT32_MAX || w[2] == UINT32_MAX)
+        return makeError(ErrorCode::kInternal, "pm: simplified mesh uses a removed vertex");
+      last.triangles.push_back(w);
+    }
+  }
+  // Simplify further to the base.
+  SimplifyOptions so2;
+  so2.weights = opt.weights;
+  so2.target_faces = std::max<uint64_t>(kBaseMinFaces, uint64_t(double(last.triangles.size()) * kBaseFaceShare));
+  Simplification s2;
+  if (last.triangles.size() > so2.target_faces) {
+    SP_ASSIGN_OR_RETURN(s2, simplify(last, last_locked, so2));
+  }
+  // Replay forwards, recording each collapse.
+  const uint32_t nl = uint32_t(last.positions.size());
+  std::vector<CollapseRecord> records(s2.collapses.size());
+  PmState fw;
+  fw.pos = last.positions;
+  fw.vf.resize(nl);
+  for (const auto& t : last.triangles) fw.addFace(t);
+  std::vector<uint8_t> alive_face(fw.faces.size(), 1), alive_v(nl, 1);
+  for (size_t ci = 0; ci < s2.collapses.size(); ++ci) {
+    const EdgeCollapse& c = s2.collapses[ci];
+    if (c.kept >= nl || c.removed >= nl || c.kept == c.removed || !alive_v[c.kept] || !alive_v[c.removed])
+      return makeError(ErrorCode::kInternal, "pm: invalid collapse from the simplifier");
+    CollapseRecord& rec = records[ci];
+    rec.kept = c.kept, rec.removed = c.removed;
+    rec.vs = fw.pos[c.kept], rec.vr = fw.pos[c.removed], rec.vp = c.position;
+    for (uint32_t f : fw.vf[c.removed]) {
+      if (!alive_face[f]) continue;
+      Triangle& t = fw.faces[f];
+      const bool has_k = t[0] == c.kept || t[1] == c.kept || t[2] == c.kept;
+      if (has_k) {
+        alive_face[f] = 0;
+        const auto [a, b] = fw.others(f, c.kept);
+        rec.new_faces.push_back(a == c.removed ? std::pair<uint32_t, uint8_t>{b, 0}
+                                               : std::pair<uint32_t, uint8_t>{a, 1});
+        continue;
+      }
+      for (uint32_t& v : t)
+        if (v == c.removed) v = c.kept;
+      fw.vf[c.kept].push_back(f);
+      rec.moved.push_back(fw.others(f, c.kept));
+    }
+    std::sort(rec.moved.begin(), rec.moved.end());
+    fw.vf[c.removed].clear();
+    alive_v[c.removed] = 0;
+    fw.pos[c.kept] = c.position;
+  }
+  // The base mesh, and each base codec's encoding of it decoded back.
+  QuantizedMesh base;
+  std::vector<uint32_t> base_to_last;
+  std::vector<uint32_t> last_to_base(nl, UINT32_MAX);
+  for (uint32_t v = 0; v < nl; ++v)
+    if (alive_v[v])
+      last_to_base[v] = uint32_t(base.positions.size()), base_to_last.push_back(v), base.positions.push_back(fw.pos[v]);
+  for (uint32_t f = 0; f < fw.faces.size(); ++f)
+    if (alive_face[f]) {
+      const Triangle& t = fw.faces[f];
+      base.triangles.push_back({last_to_base[t[0]], last_to_base[t[1]], last_to_base[t[2]]});
+    }
+  const TileContext base_ctx{ctx.bits, {}};
+  std::vector<uint32_t> sorted_base = canonicalOrder(base.positions);
+  bool unique_positions = true;
+  for (size_t i = 1; i < sorted_base.size(); ++i)
+    if (base.positions[sorted_base[i]] == base.positions[sorted_base[i - 1]]) unique_positions = false;
+  const auto base_keys = faceKeys(base.triangles);
+  const CodecInfo* best = nullptr;
+  std::vector<uint8_t> best_payload;
+  QuantizedMesh best_decoded;
+  std::vector<uint32_t> best_map;  // decoded base vertex -> last-level vertex
+  for (const CodecInfo& codec : allCodecs()) {
+    if (codec.id != CodecId::kStore && codec.id != CodecId::kKdtree && codec.id != CodecId::kOctree) continue;
+    auto enc = codec.encode(base_ctx, TileView{base, {}}, options);
+    if (!enc.isOk()) continue;
+    if (best && enc->payload.size() >= best_payload.size()) continue;
+    auto dec = codec.decode(base_ctx, codec.version, enc->payload, limitsOf(enc->decoded));
+    if (!dec.isOk() || dec->positions.size() != base.positions.size()) continue;
+    // Decoded vertex -> base vertex: by position when positions are unique, else only an order-keeping decode.
+    std::vector<uint32_t> map(dec->positions.size());
+    bool ok = true;
+    for (uint32_t i = 0; i < map.size() && ok; ++i) {
+      if (unique_positions) {
+        auto it = std::lower_bound(sorted_base.begin(), sorted_base.end(), dec->positions[i],
+                                   [&](uint32_t v, const Vec3u& p) { return base.positions[v] < p; });
+        ok = it != sorted_base.end() && base.positions[*it] == dec->positions[i];
+        if (ok) map[i] = *it;
+      } else {
+        ok = dec->positions[i] == base.positions[i];
+        map[i] = i;
+      }
+    }
+    if (!ok) continue;
+    std::vector<Triangle> mapped;
+    for (const auto& t : dec->triangles) mapped.push_back({map[t[0]], map[t[1]], map[t[2]]});
+    if (faceKeys(mapped) != base_keys) continue;
+    for (uint32_t& v : map) v = base_to_last[v];
+    best = &codec;
+    best_payload = std::move(enc->payload);
+    best_decoded = std::move(dec).value();
+    best_map = std::move(map);
+  }
+  if (!best) return makeError(ErrorCode::kInternal, "pm: no codec reproduces the base mesh");
+  // Backward: split from the decoded base, as the decoder will.
+  std::vector<uint32_t> order;
+  PmState st = initialState(best_decoded, &order);
+  std::vector<uint32_t> last_of;  // state index -> last-level vertex
+  for (uint32_t v : order) last_of.push_back(best_map[v]);
+  std::vector<uint32_t> state_of(nl, UINT32_MAX);
+  for (uint32_t i = 0; i < last_of.size(); ++i) state_of[last_of[i]] = i;
+  const size_t passes = s2.pass_ends.size();
+  std::vector<uint8_t> streams;
+  Header h;
+  h.base_codec = uint8_t(best->id);
+  h.base_version = best->version;
+  h.base_bytes = best_payload.size();
+  h.base_vertices = best_decoded.positions.size();
+  h.base_faces = best_decoded.triangles.size();
+  h.base_error = last_error + (s2.pass_errors.empty() ? 0.f : s2.pass_errors.back());
+  const uint32_t max_coord = uint32_t((uint64_t(1) << ctx.bits) - 1);
+  Models m;
+  std::vector<uint32_t> blocked;
+  uint32_t mark = 0;
+  std::vector<uint8_t> level_bytes;
+  std::unique_ptr<RangeEncoder> re;
+  LevelEntry cur;
+  uint64_t level_start_v = st.pos.size();
+  for (size_t p = passes; p-- > 0;) {
+    if (!re) re = std::make_unique<RangeEncoder>(level_bytes), level_start_v = st.pos.size();
+    EncodeSide c{*re};
+    const uint32_t begin = p == 0 ? 0 : s2.pass_ends[p - 1], end = s2.pass_ends[p];
+    if (begin > end || end > records.size()) return makeError(ErrorCode::kInternal, "pm: invalid pass ends");
+    std::vector<std::pair<uint32_t, uint32_t>> splits;  // (state index of kept, record)
+    for (uint32_t ci = begin; ci < end; ++ci) {
+      const uint32_t k = state_of[records[ci].kept];
+      if (k == UINT32_MAX) return makeError(ErrorCode::kInternal, "pm: a pass's kept vertex is not present");
+      splits.push_back({k, ci});
+    }
+    std::sort(splits.begin(), splits.end());
+    if (splits.empty() && p != 0) continue;  // an empty pass codes no batch
+    const uint32_t n_start = uint32_t(st.pos.size());
+    size_t next = 0;
+    int prev = 0;
+    std::vector<uint32_t> fan;
+    std::vector<uint8_t> starts;
+    ++mark;
+    for (uint32_t v = 0; v < n_start; ++v) {
+      int flag = next < splits.size() && splits[next].first == v;
+      if (next + 1 < splits.size() && flag && splits[next + 1].first == v)
+        return makeError(ErrorCode::kInternal, "pm: a vertex collapses twice in one pass");
+      if (v < blocked.size() && blocked[v] == mark) {
+        if (flag) return makeError(ErrorCode::kInternal, "pm: a pass's collapses are not independent");
+        continue;
+      }
+      c.bit(m.flag[prev], flag);
+      prev = flag;
+      if (!flag) continue;
+      const CollapseRecord& rec = records[splits[next++].second];
+      if (st.pos[v] != rec.vp) return makeError(ErrorCode::kInternal, "pm: a pass's collapses are not independent");
+      Split s;
+      s.vs = rec.vs, s.vr = rec.vr;
+      st.fan(v, fan, starts);
+      std::vector<std::pair<uint32_t, uint32_t>> to_move = rec.moved;  // sorted
+      for (uint32_t f : fan) {
+        const auto [a, b] = st.others(f, v);
+        const std::pair<uint32_t, uint32_t> key{last_of[a], last_of[b]};
+        auto it = std::lower_bound(to_move.begin(), to_move.end(), key);
+        const bool moved = it != to_move.end() && *it == key;
+        if (moved) to_move.erase(it);
+        s.moved.push_back(moved);
+      }
+      if (!to_move.empty()) return makeError(ErrorCode::kInternal, "pm: a pass's collapses are not independent");
+      for (const auto& [w, o] : rec.new_faces) {
+        const uint32_t ws = state_of[w];
+        if (ws == UINT32_MAX) return makeError(ErrorCode::kInternal, "pm: a new face's vertex is not present");
+        s.new_faces.push_back({ws, o});
+      }
+      SP_RETURN_IF_ERROR(codeSplit(c, m, st, v, s, max_coord, UINT64_MAX));
+      st.block(v, uint32_t(st.pos.size() - 1), blocked, mark);
+      state_of[rec.removed] = uint32_t(st.pos.size() - 1);
+      last_of.push_back(rec.removed);
+    }
+    if (next != splits.size()) return makeError(ErrorCode::kInternal, "pm: a split was not coded");
+    if (!splits.empty()) ++cur.batches;
+    const uint64_t grown = st.pos.size() - level_start_v;
+    if (p == 0 || (grown >= kMinLevelSplits && double(st.pos.size()) >= kLevelGrowth * double(level_start_v))) {
+      re->finish();
+      re.reset();
+      if (cur.batches == 0) {
+        level_bytes.clear();
+        continue;
+      }
+      cur.vertices = st.pos.size();
+      cur.faces = st.faces.size();
+      cur.error = last_error + (p == 0 || p > s2.pass_errors.size() ? 0.f : s2.pass_errors[p - 1]);
+      cur.bytes = level_bytes.size();
+      streams.insert(streams.end(), level_bytes.begin(), level_bytes.end());
+      level_bytes.clear();
+      h.levels.push_back(cur);
+      cur = LevelEntry{};
+    }
+  }
+  // The last state must be the last level: same positions per vertex, same faces.
+  if (st.pos.size() != nl) return makeError(ErrorCode::kInternal, "pm: splits do not restore the last level");
+  for (uint32_t i = 0; i < nl; ++i)
+    if (st.pos[i] != last.positions[last_of[i]]) return makeError(ErrorCode::kInternal, "pm: split positions differ");
+  std::vector<Triangle> mapped;
+  for (const auto& t : st.faces) mapped.push_back({last_of[t[0]], last_of[t[1]], last_of[t[2]]});
+  if (faceKeys(mapped) != faceKeys(last.triangles))
+    return makeError(ErrorCode::kInternal, "pm: splits do not restore the last level's faces");
+  // Assemble.
+  EncodedTile result;
+  ByteWriter w(result.payload);
+  w.u8(h.base_codec);
+  w.varint(h.base_version);
+  w.varint(h.base_bytes);
+  w.varint(h.base_vertices);
+  w.varint(h.base_faces);
+  putF32(w, h.base_error);
+  w.varint(h.levels.size());
+  for (const auto& l : h.levels) {
+    w.varint(l.batches);
+    w.varint(l.vertices);
+    w.varint(l.faces);
+    putF32(w, l.error);
+    w.varint(l.bytes);
+  }
+  h.base_offset = result.payload.size();
+  w.bytes(best_payload);
+  w.bytes(streams);
+  QuantizedMesh final_mesh;
+  final_mesh.positions = std::move(st.pos);
+  final_mesh.triangles = std::move(st.faces);
+  result.decoded = summarize(final_mesh);
+  result.levels = levelsOf(h);
+  return result;
+}
+
+}  // namespace
+
+Result<EncodedTile> pmEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options) {
+  return pmEncodeImpl(ctx, tile, options);
+}
+
+Result<QuantizedMesh> pmDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                               const DecodeLimits& limits) {
+  return decodeImpl(ctx, version, payload, UINT32_MAX, limits);
+}
+
+Result<std::vector<CodecLevel>> pmLevels(const TileContext&, uint16_t version, std::span<const uint8_t> payload,
+                                         const DecodeLimits& limits) {
+  SP_RETURN_IF_ERROR(checkVersion(version));
+  SP_ASSIGN_OR_RETURN(Header h, parseHeader(payload, limits));
+  auto levels = levelsOf(h);
+  if (levels.back().end_bytes > payload.size())
+    return makeError(ErrorCode::kTruncated, "pm payload is shorter than its levels");
+  return levels;
+}
+
+Result<QuantizedMesh> pmDecodeLevel(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                    uint32_t level, const DecodeLimits& limits) {
+  return decodeImpl(ctx, version, payload, level, limits);
+}
+
+}  // namespace scanpress

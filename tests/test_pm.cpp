@@ -1,0 +1,357 @@
+// Codec `pm`: every level of a payload is the replay of the simplifier's collapses up to a pass boundary (checked
+// against an independent forward replay of simplify()'s output, as triangles over positions), the last level is
+// the tile when lossless, locked vertices survive at every level, ugly meshes (non-manifold, boundaries,
+// duplicates, soups, degenerate triangles, isolated vertices) round-trip, every truncation and corruption fails
+// cleanly or decodes a level, and hostile counts are refused before allocation.
+#include <gtest/gtest.h>
+
+#include <map>
+#include <random>
+#include <set>
+
+#include "engine/codecs/codec.h"
+#include "engine/quantize.h"
+#include "engine/shapes.h"
+#include "engine/simplify/simplify.h"
+#include "test_util.h"
+
+namespace scanpress {
+namespace {
+
+using testing::PosTriangle;
+using testing::triangleMultiset;
+
+const CodecInfo& pm() { return *findCodec(CodecId::kPm); }
+
+QuantizedMesh quantized(const Mesh& m, int bits) {
+  auto grid = makeGrid(boundingBox(m), bits);
+  EXPECT_TRUE(grid.isOk());
+  auto q = quantizeMesh(m, *grid, AttributeLayout{}, nullptr);
+  EXPECT_TRUE(q.isOk());
+  return *q;
+}
+
+// The tile as pm's last level keeps it: triangles over positions, without those repeating a position.
+std::vector<PosTriangle> weldedTriangles(const QuantizedMesh& m) {
+  std::vector<PosTriangle> out;
+  for (const auto& t : triangleMultiset(m))
+    if (t[0] != t[1] && t[1] != t[2] && t[0] != t[2]) out.push_back(t);
+  return out;
+}
+
+// Welds by position (what the encoder simplifies), with lock flags OR-ed.
+QuantizedMesh weld(const QuantizedMesh& m, std::span<const uint8_t> locked, std::vector<uint8_t>* welded_locked) {
+  std::map<Vec3u, uint32_t> index;
+  for (const auto& p : m.positions) index.emplace(p, 0);
+  QuantizedMesh w;
+  for (auto& [p, i] : index) i = uint32_t(w.positions.size()), w.positions.push_back(p);
+  if (welded_locked) {
+    welded_locked->assign(w.positions.size(), 0);
+    for (size_t v = 0; v < locked.size(); ++v)
+      if (locked[v]) (*welded_locked)[index[m.positions[v]]] = 1;
+  }
+  for (const auto& t : m.triangles) {
+    const Triangle x{index[m.positions[t[0]]], index[m.positions[t[1]]], index[m.positions[t[2]]]};
+    if (x[0] != x[1] && x[1] != x[2] && x[0] != x[2]) w.triangles.push_back(x);
+  }
+  return w;
+}
+
+// Replays collapses on a mesh (the header's definition), returning the triangles over positions after each pass.
+std::vector<std::vector<PosTriangle>> replayPasses(const QuantizedMesh& mesh, const Simplification& s) {
+  QuantizedMesh cur = mesh;
+  std::vector<std::vector<PosTriangle>> out;
+  size_t c = 0;
+  for (uint32_t end : s.pass_ends) {
+    for (; c < end; ++c) {
+      const EdgeCollapse& e = s.collapses[c];
+      std::vector<Triangle> next;
+      for (Triangle t : cur.triangles) {
+        const bool k = t[0] == e.kept || t[1] == e.kept || t[2] == e.kept;
+        const bool r = t[0] == e.removed || t[1] == e.removed || t[2] == e.removed;
+        if (k && r) continue;
+        for (uint32_t& v : t)
+          if (v == e.removed) v = e.kept;
+        next.push_back(t);
+      }
+      cur.triangles = std::move(next);
+      cur.positions[e.kept] = e.position;
+    }
+    out.push_back(triangleMultiset(cur));
+  }
+  return out;
+}
+
+struct Encoded {
+  EncodedTile tile;
+  std::vector<CodecLevel> levels;
+};
+
+Encoded encodeTile(const TileContext& ctx, const QuantizedMesh& m, std::span<const uint8_t> locked,
+                   const PmOptions& opt = {}) {
+  CodecOptions o;
+  o.pm = opt;
+  auto e = pm().encode(ctx, TileView{m, locked}, o);
+  EXPECT_TRUE(e.isOk()) << e.status().toString();
+  if (!e.isOk()) return {};
+  auto levels = pm().levels(ctx, 1, e->payload, limitsOf(e->decoded));
+  EXPECT_TRUE(levels.isOk()) << levels.status().toString();
+  EXPECT_EQ(levels->size(), e->levels.size());
+  for (size_t i = 0; i < levels->size() && i < e->levels.size(); ++i) {
+    EXPECT_EQ((*levels)[i].end_bytes, e->levels[i].end_bytes);
+    EXPECT_EQ((*levels)[i].vertices, e->levels[i].vertices);
+  }
+  return Encoded{std::move(e).value(), levels.isOk() ? *levels : std::vector<CodecLevel>{}};
+}
+
+// Checks every level against the replay of the simplifications (lossless when opt.max_error < 0).
+void expectLevelsReplay(const TileContext& ctx, const QuantizedMesh& tile, std::span<const uint8_t> locked,
+                        const PmOptions& opt) {
+  const Encoded enc = encodeTile(ctx, tile, locked, opt);
+  ASSERT_FALSE(enc.levels.empty());
+  // Independent truth: the welded tile, the last level and the base by replaying simplify()'s collapses.
+  std::vector<uint8_t> wl;
+  const QuantizedMesh welded = weld(tile, locked, &wl);
+  QuantizedMesh last = welded;
+  std::vector<uint8_t> last_locked = wl;
+  if (opt.max_error >= 0 || opt.ratio < 1) {
+    SimplifyOptions so;
+    so.weights = opt.weights;
+    so.max_error = opt.max_error < 0 ? std::numeric_limits<double>::infinity() : opt.max_error;
+    so.target_faces = opt.ratio < 1 ? uint64_t(std::ceil(opt.ratio * double(welded.triangles.size()))) : 0;
+    auto s1 = simplify(welded, wl, so);
+    ASSERT_TRUE(s1.isOk());
+    auto passes = replayPasses(welded, *s1);
+    const std::vector<PosTriangle> expect_last = passes.empty() ? triangleMultiset(welded) : passes.back();
+    auto d = pm().decode(ctx, 1, enc.tile.payload, limitsOf(enc.tile.decoded));
+    ASSERT_TRUE(d.isOk()) << d.status().toString();
+    EXPECT_TRUE(triangleMultiset(*d) == expect_last) << "the last level is not the simplified tile";
+    return;  // the coarser levels are checked on lossless encodes (the same code path from the last level on)
+  }
+  // Pass boundaries of the simplification towards the base, as the encoder does it (pm.cpp: 1/8 of the faces).
+  SimplifyOptions so2;
+  so2.weights = opt.weights;
+  so2.target_faces = std::max<uint64_t>(16, uint64_t(double(last.triangles.size()) / 8));
+  std::set<std::vector<PosTriangle>> states;
+  states.insert(triangleMultiset(last));
+  if (last.triangles.size() > so2.target_faces) {
+    auto s2 = simplify(last, last_locked, so2);
+    ASSERT_TRUE(s2.isOk());
+    for (auto& p : replayPasses(last, *s2)) states.insert(std::move(p));
+  }
+  std::set<Vec3u> locked_positions;
+  for (size_t v = 0; v < locked.size(); ++v)
+    if (locked[v]) locked_positions.insert(tile.positions[v]);
+  uint64_t prev_vertices = 0;
+  for (const CodecLevel& l : enc.levels) {
+    SCOPED_TRACE(l.level);
+    auto d =
+        pm().decode_level(ctx, 1, std::span(enc.tile.payload).first(l.end_bytes), l.level, limitsOf(enc.tile.decoded));
+    ASSERT_TRUE(d.isOk()) << d.status().toString();
+    EXPECT_TRUE(validateTile(ctx, *d).isOk());
+    EXPECT_EQ(d->positions.size(), l.vertices);
+    EXPECT_GE(l.vertices, prev_vertices);
+    prev_vertices = l.vertices;
+    EXPECT_EQ(l.kind, LevelKind::kSimplified);
+    EXPECT_TRUE(states.count(triangleMultiset(*d))) << "level " << l.level << " is no pass boundary of the replay";
+    std::set<Vec3u> have(d->positions.begin(), d->positions.end());
+    for (const auto& p : locked_positions) EXPECT_TRUE(have.count(p)) << "a locked vertex is missing";
+  }
+  EXPECT_TRUE(enc.levels.back().complete);
+  auto full = pm().decode(ctx, 1, enc.tile.payload, limitsOf(enc.tile.decoded));
+  ASSERT_TRUE(full.isOk()) << full.status().toString();
+  EXPECT_TRUE(weldedTriangles(*full) == weldedTriangles(tile)) << "the last level is not the tile";
+  const TileSummary got = summarize(*full);
+  EXPECT_EQ(got.vertices, enc.tile.decoded.vertices);
+  EXPECT_EQ(got.faces, enc.tile.decoded.faces);
+  EXPECT_EQ(got.lo, enc.tile.decoded.lo);
+  EXPECT_EQ(got.hi, enc.tile.decoded.hi);
+}
+
+QuantizedMesh rawMesh(std::vector<Vec3u> p, std::vector<Triangle> t) {
+  QuantizedMesh m;
+  m.positions = std::move(p);
+  m.triangles = std::move(t);
+  return m;
+}
+
+TEST(Pm, SphereEveryLevelReplaysTheCollapses) {
+  const TileContext ctx{14, {}};
+  const QuantizedMesh sphere = quantized(icosphere(5), 14);
+  expectLevelsReplay(ctx, sphere, {}, PmOptions{});
+  const Encoded enc = encodeTile(ctx, sphere, {});
+  EXPECT_GE(enc.levels.size(), 4u);
+  EXPECT_LT(enc.levels.front().vertices, sphere.positions.size() / 4);
+}
+
+TEST(Pm, LossyLastLevelIsTheSimplifiedTile) {
+  const TileContext ctx{14, {}};
+  const QuantizedMesh sphere = quantized(icosphere(5), 14);
+  PmOptions opt;
+  opt.max_error = 1e9;  // the face ratio decides
+  opt.ratio = 0.3;
+  expectLevelsReplay(ctx, sphere, {}, opt);
+  const Encoded lossy = encodeTile(ctx, sphere, {}, opt);
+  EXPECT_LE(lossy.tile.decoded.faces, uint64_t(0.3 * double(sphere.triangles.size())) + 2);
+  EXPECT_LT(lossy.tile.payload.size(), encodeTile(ctx, sphere, {}).tile.payload.size());
+}
+
+TEST(Pm, LockedVerticesSurviveEveryLevel) {
+  const TileContext ctx{12, {}};
+  const QuantizedMesh sphere = quantized(icosphere(4), 12);
+  std::vector<uint8_t> locked(sphere.positions.size(), 0);
+  for (size_t v = 0; v < locked.size(); ++v) locked[v] = sphere.positions[v][0] < 1200;  // a cap of the sphere
+  expectLevelsReplay(ctx, sphere, locked, PmOptions{});
+  // Lossy, locked positions kept at the last level too.
+  PmOptions opt;
+  opt.max_error = 100;
+  opt.ratio = 0.1;
+  const Encoded enc = encodeTile(ctx, sphere, locked, opt);
+  for (const CodecLevel& l : enc.levels) {
+    auto d = pm().decode_level(ctx, 1, enc.tile.payload, l.level, limitsOf(enc.tile.decoded));
+    ASSERT_TRUE(d.isOk());
+    std::set<Vec3u> have(d->positions.begin(), d->positions.end());
+    for (size_t v = 0; v < locked.size(); ++v)
+      if (locked[v]) {
+        EXPECT_TRUE(have.count(sphere.positions[v]));
+      }
+  }
+}
+
+TEST(Pm, UglyMeshesRoundTrip) {
+  const TileContext ctx{10, {}};
+  // Empty, points only, one triangle.
+  expectLevelsReplay(ctx, QuantizedMesh{}, {}, PmOptions{});
+  expectLevelsReplay(ctx, rawMesh({{1, 2, 3}, {4, 5, 6}, {1, 2, 3}}, {}), {}, PmOptions{});
+  expectLevelsReplay(ctx, rawMesh({{0, 0, 0}, {9, 0, 0}, {0, 9, 0}}, {{0, 1, 2}}), {}, PmOptions{});
+  // A grid patch with an open boundary, plus non-manifold fins, duplicates, a reversed copy, a degenerate triangle,
+  // coincident vertices (a soup corner) and an isolated vertex.
+  QuantizedMesh m;
+  const int n = 24;
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x)
+      m.positions.push_back({uint32_t(10 + 20 * x), uint32_t(10 + 20 * y), uint32_t(500 + (x * y) % 7)});
+  for (int y = 0; y + 1 < n; ++y)
+    for (int x = 0; x + 1 < n; ++x) {
+      const uint32_t a = y * n + x, b = a + 1, c = a + n, d = c + 1;
+      m.triangles.push_back({a, b, d});
+      m.triangles.push_back({a, d, c});
+    }
+  const uint32_t fin = uint32_t(m.positions.size());
+  m.positions.push_back({200, 200, 900});
+  m.positions.push_back({220, 220, 100});
+  m.triangles.push_back({5 * n + 5, 5 * n + 6, fin});  // three faces on one edge
+  m.triangles.push_back({5 * n + 6, 5 * n + 5, fin + 1});
+  m.triangles.push_back(m.triangles[40]);
+  m.triangles.push_back({m.triangles[60][0], m.triangles[60][2], m.triangles[60][1]});
+  m.triangles.push_back({3, 3, 4});
+  const uint32_t twin = uint32_t(m.positions.size());
+  m.positions.push_back(m.positions[10 * n + 10]);
+  m.triangles.push_back({twin, 10 * n + 11, 11 * n + 11});
+  m.positions.push_back({1000, 1000, 1000});
+  expectLevelsReplay(ctx, m, {}, PmOptions{});
+  // A soup: every triangle with its own corners.
+  QuantizedMesh soup;
+  for (const auto& t : quantized(icosphere(3), 10).triangles) {
+    const QuantizedMesh s = quantized(icosphere(3), 10);
+    const uint32_t base = uint32_t(soup.positions.size());
+    for (uint32_t v : t) soup.positions.push_back(s.positions[v]);
+    soup.triangles.push_back({base, base + 1, base + 2});
+  }
+  expectLevelsReplay(ctx, soup, {}, PmOptions{});
+}
+
+TEST(Pm, AttributesAreDerived) {
+  const TileContext ctx{12, AttributeLayout{10, 3}};
+  Mesh s = icosphere(3);
+  for (const auto& p : s.positions) {
+    s.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
+    s.colors.push_back({1, 2, 3, 255});
+  }
+  s.color_channels = 3;
+  auto grid = makeGrid(boundingBox(s), 12);
+  auto q = quantizeMesh(s, *grid, ctx.layout, nullptr);
+  ASSERT_TRUE(q.isOk());
+  auto e = encodeMesh(pm(), ctx, *q);
+  ASSERT_TRUE(e.isOk()) << e.status().toString();
+  auto d = pm().decode(ctx, 1, e->payload, limitsOf(e->decoded));
+  ASSERT_TRUE(d.isOk()) << d.status().toString();
+  EXPECT_EQ(d->normals.size(), d->positions.size());
+  EXPECT_EQ(d->colors.size(), d->positions.size());
+  EXPECT_TRUE(weldedTriangles(*d) == weldedTriangles(*q));
+}
+
+TEST(Pm, EveryTruncationFailsCleanlyOrDecodesALevel) {
+  const TileContext ctx{12, {}};
+  const QuantizedMesh sphere = quantized(icosphere(2), 12);
+  const Encoded enc = encodeTile(ctx, sphere, {});
+  ASSERT_GE(enc.levels.size(), 3u);
+  const auto& bytes = enc.tile.payload;
+  const DecodeLimits limits = limitsOf(enc.tile.decoded);
+  for (size_t cut = 0; cut < bytes.size(); ++cut) {
+    const auto part = std::span(bytes).first(cut);
+    EXPECT_FALSE(pm().decode(ctx, 1, part, limits).isOk()) << cut;
+    EXPECT_FALSE(pm().levels(ctx, 1, part, limits).isOk()) << cut;
+    for (const CodecLevel& l : enc.levels) {
+      auto d = pm().decode_level(ctx, 1, part, l.level, limits);
+      EXPECT_EQ(d.isOk(), cut >= l.end_bytes) << "cut " << cut << " level " << l.level;
+      if (d.isOk()) {
+        EXPECT_EQ(d->positions.size(), l.vertices);
+      }
+    }
+  }
+}
+
+TEST(Pm, CorruptPayloadsFailCleanlyOrStayWithinLimits) {
+  const TileContext ctx{12, {}};
+  const QuantizedMesh sphere = quantized(icosphere(3), 12);
+  const Encoded enc = encodeTile(ctx, sphere, {});
+  const DecodeLimits limits = limitsOf(enc.tile.decoded);
+  std::mt19937 rng(7);
+  for (int trial = 0; trial < 3000; ++trial) {
+    std::vector<uint8_t> bad = enc.tile.payload;
+    const int flips = 1 + int(rng() % 3);
+    for (int f = 0; f < flips; ++f) bad[rng() % bad.size()] ^= uint8_t(1u << (rng() % 8));
+    auto d = pm().decode(ctx, 1, bad, limits);
+    if (d.isOk()) {
+      EXPECT_LE(d->positions.size(), limits.vertices);
+      EXPECT_LE(d->triangles.size(), limits.faces);
+      EXPECT_TRUE(validateTile(ctx, *d).isOk());
+    }
+  }
+}
+
+TEST(Pm, HostileCountsAreRefusedBeforeAllocating) {
+  const TileContext ctx{12, {}};
+  const QuantizedMesh sphere = quantized(icosphere(3), 12);
+  const Encoded enc = encodeTile(ctx, sphere, {});
+  const TileSummary s = enc.tile.decoded;
+  EXPECT_EQ(pm().decode(ctx, 1, enc.tile.payload, DecodeLimits{s.vertices - 1, s.faces}).status().code(),
+            ErrorCode::kMalformed);
+  EXPECT_EQ(pm().decode(ctx, 1, enc.tile.payload, DecodeLimits{s.vertices, s.faces - 1}).status().code(),
+            ErrorCode::kMalformed);
+  // A header claiming 2^40 base vertices, and one claiming a level of 2^33 faces, within a few bytes.
+  auto varint = [](std::vector<uint8_t>& out, uint64_t v) {
+    while (v >= 0x80) out.push_back(uint8_t(v | 0x80)), v >>= 7;
+    out.push_back(uint8_t(v));
+  };
+  std::vector<uint8_t> h1 = {2};
+  varint(h1, 1), varint(h1, 0), varint(h1, uint64_t(1) << 40), varint(h1, 10);
+  auto r1 = pm().decode(ctx, 1, h1, DecodeLimits{1000, 2000});
+  EXPECT_EQ(r1.status().code(), ErrorCode::kMalformed) << r1.status().toString();
+  std::vector<uint8_t> h2 = {2};
+  varint(h2, 1), varint(h2, 0), varint(h2, 4), varint(h2, 4);
+  for (int i = 0; i < 4; ++i) h2.push_back(0);
+  varint(h2, 1), varint(h2, 1), varint(h2, 5), varint(h2, uint64_t(1) << 33);
+  for (int i = 0; i < 4; ++i) h2.push_back(0);
+  varint(h2, 3);
+  auto r2 = pm().decode(ctx, 1, h2, DecodeLimits{1000, 2000});
+  EXPECT_EQ(r2.status().code(), ErrorCode::kMalformed) << r2.status().toString();
+  // An unknown version.
+  EXPECT_EQ(pm().decode(ctx, 2, enc.tile.payload, limitsOf(s)).status().code(), ErrorCode::kUnknownVersion);
+  // The payload admits the registry's floor.
+  EXPECT_TRUE(pm().floor.admits(s.vertices, s.faces, enc.tile.payload.size()));
+}
+
+}  // namespace
+}  // namespace scanpress
