@@ -148,7 +148,7 @@ class TargetSearch {
       chosen_ = p;
       return Status::ok();
     }
-    if (!knob_ && p->status.isOk() && p->result.diagonal > 0) {
+    if (p->status.isOk() && p->result.diagonal > 0) {
       const double ratio = p->result.grid.cell * std::ldexp(1.0, bits) / p->result.diagonal;
       const int better = predictBits(e, s_.target.metric, ratio, share);
       if (p->met && better < bits) {
@@ -159,11 +159,13 @@ class TargetSearch {
     }
     if (p->met) {
       best_ = p;
-      // A lossy codec's bits stay at the prediction: fewer bits would leave less of the budget to the
-      // simplification, which gains more per unit of error (see kKnobQuantizationShare).
-      while (!knob_ && bits > kMinGridBits) {
+      // Fewer bits while they still meet the target. A lossless codec: the fewest that do. A codec with a knob:
+      // fewer bits leave less of the budget to the simplification, so the bytes have a minimum over the bits (the
+      // prediction's share is a starting point: under the max metric, or where the codec's fine levels cost more
+      // than the bits they save, fewer bits win); a bit fewer is kept while it is smaller.
+      while (bits > kMinGridBits) {
         SP_ASSIGN_OR_RETURN(Pass * q, pass(bits - 1, tile_error, -1, true));
-        if (!q->met) break;
+        if (!q->met || (knob_ && q->result.bytes >= best_->result.bytes)) break;
         best_ = q;
         --bits;
       }

@@ -37,7 +37,8 @@ int predictBits(double max_error, ErrorMetric metric, double extent_over_diagona
 //     bit fewer is tried, while it misses one bit more, so the chosen bits are the fewest that measure within the
 //     target (one fewer measured a miss, or is below kMinGridBits).
 //   error target, codec with an error knob: bits predicted for kKnobQuantizationShare of the budget; every tile
-//     searches its knob (the pipeline's searchKnob) to meet the target; a bit is added while a tile misses.
+//     searches its knob (the pipeline's searchKnob) to meet the target; a bit is added while a tile misses, and
+//     a bit fewer is kept while it still meets the target with fewer bytes.
 //   size target, lossless codec: bisection of the bits for the most that fit the budget (the next finer missed).
 //   size target, codec with an error knob: one global knob for all tiles, at the bits as set, bisected for the
 //     least that fits the budget.
