@@ -63,7 +63,7 @@ const char* errorMetricName(ErrorMetric m);   // "rms", "max"
 struct EncodeSettings {
   std::string input;
   std::string output;
-  std::string codec = "store";
+  std::string codec = "edgebreaker";  // the smallest lossless codec (bench/RESULTS.md)
   int bits = kDefaultGridBits;
   int normal_bits = kDefaultNormalBits;
   bool keep_normals = true;

@@ -103,7 +103,7 @@ TEST(Cli, EncodeInfoDecodeWithReport) {
   EXPECT_EQ(info["bytes"], fs::file_size(dir.file("b.spz")));
   ASSERT_EQ(info["tiles"].size(), 1u);
   for (const char* key : {"id", "codec", "bytes", "vertices", "faces"}) EXPECT_TRUE(info["tiles"][0].contains(key));
-  EXPECT_EQ(info["tiles"][0]["codec"], "store");
+  EXPECT_EQ(info["tiles"][0]["codec"], "edgebreaker");  // the default
 
   ASSERT_EQ(run("decode '" + dir.file("b.spz") + "' '" + dir.file("b.obj") + "' --tiles 0", &out), 0) << out;
   EXPECT_TRUE(fs::exists(dir.file("b.obj")));

@@ -61,7 +61,7 @@ mesh from stdin (with --format), OUT `-` writes the container to stdout (message
 folder is created; an OUT named like a mesh, glTF, image or JSON file is refused.
 
 options:
-  --codec NAME        tile codec (default store; available: %s)
+  --codec NAME        tile codec (default edgebreaker; available: %s)
   --stages LIST       geometry stages every tile runs before the codec, in order: NAME[:KEY=VALUE...][,NAME...]
                       (available: %s); e.g. smooth:iterations=5 (configs/REFERENCE.md, "Stages")
   --bits N            quantization bits, 8..24 (default 16): the largest bounding-box extent is divided into 2^N
