@@ -130,6 +130,7 @@ void expectLevelsReplay(const TileContext& ctx, const QuantizedMesh& tile, std::
   }
   // Pass boundaries of the simplification towards the base, as the encoder does it (pm.cpp: 1/8 of the faces).
   SimplifyOptions so2;
+  so2.endpoints_only = true;  // as pm codes its splits
   so2.weights = opt.weights;
   so2.target_faces = std::max<uint64_t>(16, uint64_t(double(last.triangles.size()) / 8));
   std::set<std::vector<PosTriangle>> states;

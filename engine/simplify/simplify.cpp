@@ -385,9 +385,9 @@ class Simplifier {
         consider(pos_[b], 1);
         const Vec3 mid{(pa[0] + pb[0]) / 2, (pa[1] + pb[1]) / 2, (pa[2] + pb[2]) / 2};
         const Vec3u mid_u = roundToGrid(mid);
-        if (!same(mid_u, pos_[a]) && !same(mid_u, pos_[b])) consider(mid_u, 2);
+        if (!options_.endpoints_only && !same(mid_u, pos_[a]) && !same(mid_u, pos_[b])) consider(mid_u, 2);
         Vec3 opt;
-        if (solve(q, opt)) {
+        if (!options_.endpoints_only && solve(q, opt)) {
           const Vec3 d = sub(opt, mid), ab = sub(pb, pa);
           if (dot(d, d) <= 4 * dot(ab, ab)) {
             const Vec3u u = roundToGrid(opt);

@@ -39,6 +39,10 @@ struct SimplifyOptions {
   // In practice the independence limits a pass to about 5% of the faces on a closed scan (igea: 41 passes to 10%).
   // Must be in (0, 1].
   double pass_fraction = 0.25;
+  // Half-edge collapses only: every placement is one of the edge's endpoints (the paper's index 0/1), never the
+  // midpoint or the quadric's optimum. Slightly less accurate, but a progressive coder then codes one position per
+  // vertex split instead of two (pm's base-to-last-level splits use it; measured in bench/RESULTS.md).
+  bool endpoints_only = false;
 };
 
 // One edge collapse (v_s, v_r) -> v'_s in the paper's notation: `removed` (v_r) disappears, `kept` (v_s) moves to
