@@ -10,12 +10,18 @@
 namespace scanpress {
 namespace {
 
-// Payload floors (FORMAT.md, "Codec registry"). store: every vertex but a few costs at least one bit (a tile with
-// a triangle has two distinct positions, so every coordinate has at least one bit on some axis) and every face three
-// index bits. kdtree and octree: entropy-coded, so far below a bit per element on regular input; the floors are what
-// their headers already enforced (at most 1024 points per payload byte, 64 triangles per point).
-constexpr PayloadFloor kStoreFloor{1.0, 3.0, 64};
-constexpr PayloadFloor kHierarchyFloor{8.0 / 1024, 8.0 / (1024 * 64), 1024};
+// Payload floors (FORMAT.md, "The index bounds the decoder"). They bound what an index may claim per payload byte,
+// so that decoding a container of B bytes needs O(B) memory: no container under 1 MiB takes any command past
+// 256 MiB (tests/test_limits.cpp, IndexLimits.Densest*: 217 MiB at most). At the peak of `decode` a kdtree point
+// costs about 90 bytes and a plane vertex with its two faces about 270 (measured), so a vertex must cost 6 bits
+// and a face 3.
+// Codecs that compress below this (a dense lattice codes at 0.15 bit per point with kdtree, a dense plane at 0.5 bit
+// per vertex with its faces) pad their payloads up to the floor. Normal and color bits are raw in every codec and
+// come on top (PayloadFloor::admits).
+// The slack is small because a tile costs only 92 bytes of chunk header and index entry: a larger one would let
+// many small tiles claim more than the floor (with 1024 bytes of slack, 11,000 tiles of 1 MiB could claim 15M points).
+constexpr PayloadFloor kStoreFloor{6.0, 3.0, 8};
+constexpr PayloadFloor kHierarchyFloor{6.0, 3.0, 8};
 
 constexpr std::array<CodecInfo, 3> kCodecs = {{
     {CodecId::kStore, "store", 1, kStoreFloor, &storeEncode, &storeDecode},
@@ -71,9 +77,24 @@ void addLevelBytes(std::span<const CodecLevel> levels, std::vector<uint64_t>& to
   }
 }
 
-bool PayloadFloor::admits(uint64_t vertices, uint64_t faces, uint64_t payload_bytes) const {
-  const double need_bits = double(vertices) * bits_per_vertex + double(faces) * bits_per_face;
+namespace {
+double needBits(const PayloadFloor& f, const AttributeLayout& layout, uint64_t vertices, uint64_t faces) {
+  const double attribute_bits = 2.0 * layout.normal_bits + 8.0 * layout.color_channels;
+  return double(vertices) * (f.bits_per_vertex + attribute_bits) + double(faces) * f.bits_per_face;
+}
+}  // namespace
+
+bool PayloadFloor::admits(const AttributeLayout& layout, uint64_t vertices, uint64_t faces,
+                          uint64_t payload_bytes) const {
+  const double need_bits = needBits(*this, layout, vertices, faces);
   return need_bits <= 8.0 * (double(payload_bytes) + double(slack_bytes));
+}
+
+uint64_t PayloadFloor::minPayloadBytes(const AttributeLayout& layout, uint64_t vertices, uint64_t faces) const {
+  const double bytes = std::ceil(needBits(*this, layout, vertices, faces) / 8.0) - double(slack_bytes);
+  uint64_t n = bytes > 0 ? static_cast<uint64_t>(bytes) : 0;
+  while (!admits(layout, vertices, faces, n)) ++n;  // rounding of the double products
+  return n;
 }
 
 Result<EncodedTile> encodeMesh(const CodecInfo& codec, const TileContext& ctx, const QuantizedMesh& mesh,
