@@ -124,7 +124,9 @@ Result<QuantizedMesh> decodeChosen(const ContainerFile& file, const std::vector<
   });
   for (const Status& e : errors) SP_RETURN_IF_ERROR(e);
   if (decoded.empty()) return QuantizedMesh();
-  if (std::find(complete.begin(), complete.end(), 0) == complete.end()) return weldTiles(decoded);
+  const bool all_complete = std::find(complete.begin(), complete.end(), 0) == complete.end();
+  if (all_complete && decoded.size() == 1) return std::move(decoded[0]);  // what weldTiles would copy
+  if (all_complete) return weldTiles(decoded);
   QuantizedMesh welded = weldTiles(decoded, WeldBy::kPosition);
   deriveAttributes(welded, file.header().layout);
   return welded;
@@ -203,6 +205,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   result.tiles = static_cast<uint32_t>(chosen.size());
   result.double_positions = !floatPositionsSuffice(q, header.grid);
   const Mesh mesh = dequantizeMesh(q, header.grid, header.layout);
+  q = QuantizedMesh();  // the decoded mesh's memory is bounded by the container's size (FORMAT.md): held once
   SP_RETURN_IF_ERROR(writeMeshFile(settings.output, mesh, WriteOptions{result.double_positions}));
   return result;
 }

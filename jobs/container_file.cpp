@@ -9,8 +9,9 @@ Result<ContainerFile> ContainerFile::open(const std::string& path) {
   std::vector<uint8_t> buf;
   const uint64_t size = cf.file_->size();
   if (size < kHeaderSize + kFooterSize)
-    return makeError(ErrorCode::kTruncated,
-                     path + ": " + std::to_string(size) + " bytes is too short for a scanpress container");
+    return makeError(ErrorCode::kTruncated, path + ": the file ends at byte " + std::to_string(size) +
+                                                ", too short for a scanpress container (" +
+                                                std::to_string(kHeaderSize + kFooterSize) + " bytes at least)");
   SP_RETURN_IF_ERROR(cf.file_->read(0, kHeaderSize, buf));
   SP_ASSIGN_OR_RETURN(cf.header_, parseHeader(buf, path));
   SP_RETURN_IF_ERROR(cf.file_->read(size - kFooterSize, kFooterSize, buf));

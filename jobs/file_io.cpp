@@ -252,9 +252,11 @@ Status RandomAccessFile::read(uint64_t offset, size_t n, std::vector<uint8_t>& o
     const ssize_t got = ::pread(fd_, out.data() + done, n - done, static_cast<off_t>(offset + done));
     if (got < 0) {
       if (errno == EINTR) continue;
-      return errnoStatus(errno, path_, "read failed");
+      return errnoStatus(errno, path_, "read failed at byte " + std::to_string(offset + done));
     }
-    if (got == 0) return makeError(ErrorCode::kTruncated, path_ + ": file shrank while reading");
+    if (got == 0)
+      return makeError(ErrorCode::kTruncated,
+                       path_ + ": file shrank while reading (at byte " + std::to_string(offset + done) + ")");
     done += static_cast<size_t>(got);
   }
   return Status::ok();

@@ -39,6 +39,11 @@ QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by) {
   };
   std::unordered_map<Key, Owner, KeyHash> first;
   std::vector<uint32_t> remap;
+  size_t vertices = 0, triangles = 0;
+  for (const QuantizedMesh& tile : tiles) vertices += tile.positions.size(), triangles += tile.triangles.size();
+  first.reserve(vertices);
+  out.positions.reserve(vertices);  // an upper bound: no doubling copies at the peak
+  out.triangles.reserve(triangles);
   for (uint32_t t = 0; t < tiles.size(); ++t) {
     const QuantizedMesh& tile = tiles[t];
     remap.assign(tile.positions.size(), 0);

@@ -23,7 +23,7 @@ const CodecInfo& codec() { return *findCodec(CodecId::kEdgebreaker); }
 void expectRoundTrip(const TileContext& ctx, const QuantizedMesh& q) {
   auto enc = encodeMesh(codec(), ctx, q);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-  EXPECT_TRUE(codec().floor.admits(enc->decoded.vertices, enc->decoded.faces, enc->payload.size()));
+  EXPECT_TRUE(codec().floor.admits(ctx.layout, enc->decoded.vertices, enc->decoded.faces, enc->payload.size()));
   auto d = codec().decode(ctx, 1, enc->payload, limitsOf(enc->decoded));
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   EXPECT_EQ(d->triangles.size(), q.triangles.size());

@@ -155,3 +155,10 @@ TEST(IndexLimits, WriterRefusesCountsBelowTheFloor) {
 
 }  // namespace
 }  // namespace scanpress
+
+namespace scanpress {
+namespace {
+
+
+}  // namespace
+}  // namespace scanpress

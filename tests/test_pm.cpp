@@ -351,7 +351,7 @@ TEST(Pm, HostileCountsAreRefusedBeforeAllocating) {
   // An unknown version.
   EXPECT_EQ(pm().decode(ctx, 2, enc.tile.payload, limitsOf(s)).status().code(), ErrorCode::kUnknownVersion);
   // The payload admits the registry's floor.
-  EXPECT_TRUE(pm().floor.admits(s.vertices, s.faces, enc.tile.payload.size()));
+  EXPECT_TRUE(pm().floor.admits(ctx.layout, s.vertices, s.faces, enc.tile.payload.size()));
 }
 
 }  // namespace

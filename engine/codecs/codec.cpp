@@ -10,12 +10,18 @@
 namespace scanpress {
 namespace {
 
-// Payload floors (FORMAT.md, "Codec registry"). store: every vertex but a few costs at least one bit (a tile with
-// a triangle has two distinct positions, so every coordinate has at least one bit on some axis) and every face three
-// index bits. kdtree and octree: entropy-coded, so far below a bit per element on regular input; the floors are what
-// their headers already enforced (at most 1024 points per payload byte, 64 triangles per point).
-constexpr PayloadFloor kStoreFloor{1.0, 3.0, 64};
-constexpr PayloadFloor kHierarchyFloor{8.0 / 1024, 8.0 / (1024 * 64), 1024};
+// Payload floors (FORMAT.md, "The index bounds the decoder"). They bound what an index may claim per payload byte,
+// so that decoding costs memory in proportion to the file. store cannot code a vertex in fewer than 6 bits nor a
+// face in fewer than 3 (a tile below, repeated points, widens its coordinate fields). The entropy coders go far
+// lower on legitimate input (kdtree: 0.15 bit per point on a dense lattice, 0.49 bit per vertex with its faces on a
+// dense plane; edgebreaker codes real scans at 6-11 bits per vertex with their faces at 12 grid bits), so their floors
+// are set below what they reach, and a payload below them is padded (hierarchy.cpp). A 6-bit floor for them (which
+// keeps every container under 1 MiB under 256 MiB of decode memory) would pad real scans coded at low bits by up to
+// half: that bound needs bounded-memory decoding instead (issue 23).
+// The slack is small because a tile costs only 92 bytes of chunk header and index entry: a larger one would let
+// many small tiles claim more than the floor.
+constexpr PayloadFloor kStoreFloor{6.0, 3.0, 8};
+constexpr PayloadFloor kHierarchyFloor{1.0 / 8, 1.0 / 16, 8};
 
 // edgebreaker: every point codes three residual classes and every face a symbol, each at least the cost of a
 // model's likeliest symbol (a width of 2^15 less one per other symbol); the slack covers the header and flush.
@@ -23,7 +29,7 @@ constexpr PayloadFloor kEdgebreakerFloor{8.0 / 2048, 8.0 / 65536, 1024};
 // pm: its base mesh is coded by store, kdtree or octree, and every vertex split costs at least its split flag, a
 // placement symbol and three residual buckets, each a few thousandths of a bit at the models' most skewed
 // probabilities: half the hierarchy codecs' floor per vertex and face.
-constexpr PayloadFloor kPmFloor{4.0 / 1024, 4.0 / (1024 * 64), 1024};
+constexpr PayloadFloor kPmFloor{4.0 / 1024, 4.0 / (1024 * 64), 1024, false};
 
 constexpr std::array<CodecInfo, 5> kCodecs = {{
     {CodecId::kStore, "store", 1, kStoreFloor, &storeEncode, &storeDecode},
@@ -81,9 +87,24 @@ void addLevelBytes(std::span<const CodecLevel> levels, std::vector<uint64_t>& to
   }
 }
 
-bool PayloadFloor::admits(uint64_t vertices, uint64_t faces, uint64_t payload_bytes) const {
-  const double need_bits = double(vertices) * bits_per_vertex + double(faces) * bits_per_face;
+namespace {
+double needBits(const PayloadFloor& f, const AttributeLayout& layout, uint64_t vertices, uint64_t faces) {
+  const double attribute_bits = f.raw_attributes ? 2.0 * layout.normal_bits + 8.0 * layout.color_channels : 0.0;
+  return double(vertices) * (f.bits_per_vertex + attribute_bits) + double(faces) * f.bits_per_face;
+}
+}  // namespace
+
+bool PayloadFloor::admits(const AttributeLayout& layout, uint64_t vertices, uint64_t faces,
+                          uint64_t payload_bytes) const {
+  const double need_bits = needBits(*this, layout, vertices, faces);
   return need_bits <= 8.0 * (double(payload_bytes) + double(slack_bytes));
+}
+
+uint64_t PayloadFloor::minPayloadBytes(const AttributeLayout& layout, uint64_t vertices, uint64_t faces) const {
+  const double bytes = std::ceil(needBits(*this, layout, vertices, faces) / 8.0) - double(slack_bytes);
+  uint64_t n = bytes > 0 ? static_cast<uint64_t>(bytes) : 0;
+  while (!admits(layout, vertices, faces, n)) ++n;  // rounding of the double products
+  return n;
 }
 
 Result<EncodedTile> encodeMesh(const CodecInfo& codec, const TileContext& ctx, const QuantizedMesh& mesh,

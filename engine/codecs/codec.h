@@ -124,7 +124,11 @@ struct PayloadFloor {
   double bits_per_vertex = 0;
   double bits_per_face = 0;
   uint64_t slack_bytes = 0;
-  bool admits(uint64_t vertices, uint64_t faces, uint64_t payload_bytes) const;
+  bool raw_attributes = true;  // false: the codec keeps no normals or colors (pm v1), so they cost nothing
+  // Every codec that keeps attributes spends a vertex's normal and color bits raw (2 x normal_bits + 8 x color_channels), on top of bits_per_vertex.
+  bool admits(const AttributeLayout& layout, uint64_t vertices, uint64_t faces, uint64_t payload_bytes) const;
+  // The fewest payload bytes that admit these counts (0 when the slack covers them): what an encoder pads to.
+  uint64_t minPayloadBytes(const AttributeLayout& layout, uint64_t vertices, uint64_t faces) const;
 };
 
 struct CodecInfo {

@@ -105,8 +105,9 @@ void rootCube(const Points& pts, int bits, const Axes& axes, int& k0, Vec3u& roo
   for (int a = 0; a < 3; ++a) root[a] = k0 == 0 ? 0 : (pts.pos[0][a] >> (bits - k0)) << (bits - k0);
 }
 
-void writeHeader(const HeaderFormat& f, const Header& h, int bits, const std::vector<std::vector<u8>>& segments,
-                 std::vector<u8>& out) {
+void writeHeader(const HeaderFormat& f, const Header& h, int bits, const AttributeLayout& layout,
+                 const std::vector<std::vector<u8>>& segments, std::vector<u8>& out) {
+  const size_t start = out.size();
   ByteWriter w(out);
   w.varint(h.n);
   w.varint(h.t);
@@ -115,8 +116,28 @@ void writeHeader(const HeaderFormat& f, const Header& h, int bits, const std::ve
   if (f.axis_order) w.u8(static_cast<u8>(axisOrderIndex(h.axes)));
   for (int a = 0; a < 3; ++a) w.varint(h.k0 == 0 ? 0 : h.root[a] >> (bits - h.k0));
   w.varint(segments.size());
-  for (const auto& s : segments) w.varint(s.size());
+  // A payload below its codec's floor (FORMAT.md: dense lattices code at 0.15 bit per point) is padded with zero
+  // bytes at the end of its last segment, which the range decoder never reads: the floor bounds what an index may
+  // claim per byte, and every tile the encoder meets stays writable.
+  auto varintSize = [](u64 v) {
+    u64 n = 1;
+    while (v >= 0x80) v >>= 7, ++n;
+    return n;
+  };
+  u64 data = 0;
+  for (const auto& s : segments) data += s.size();
+  const u64 need = findCodec(f.codec)->floor.minPayloadBytes(layout, h.n, h.t);
+  u64 pad = 0;
+  for (;;) {  // a longer last segment may take a longer varint
+    u64 head = out.size() - start;
+    for (size_t i = 0; i < segments.size(); ++i)
+      head += varintSize(segments[i].size() + (i + 1 == segments.size() ? pad : 0));
+    if (head + data + pad >= need) break;
+    pad = need - head - data;
+  }
+  for (size_t i = 0; i < segments.size(); ++i) w.varint(segments[i].size() + (i + 1 == segments.size() ? pad : 0));
   for (const auto& s : segments) w.bytes(s);
+  out.resize(out.size() + pad, 0);
 }
 
 Status checkVersion(std::string_view codec, uint16_t version) {

@@ -61,8 +61,9 @@ struct HeaderFormat {
   bool axis_order = false;  // the header names the axis order (one of the six permutations)
   size_t segments(int bits, int k0) const { return size_t(bits - k0 + 1); }
 };
-void writeHeader(const HeaderFormat& f, const Header& h, int bits, const std::vector<std::vector<u8>>& segments,
-                 std::vector<u8>& out);
+// Pads the last segment with zero bytes up to the codec's payload floor.
+void writeHeader(const HeaderFormat& f, const Header& h, int bits, const AttributeLayout& layout,
+                 const std::vector<std::vector<u8>>& segments, std::vector<u8>& out);
 // Checks the counts against `limits` (the index's) before anything is allocated.
 Result<Header> readHeader(const HeaderFormat& f, const TileContext& ctx, std::span<const u8> payload,
                           const DecodeLimits& limits);

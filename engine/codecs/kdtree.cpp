@@ -282,14 +282,15 @@ class Engine {
   }
 
   // The mesh of the level reached: cells at their centers (lossless at the last level).
-  QuantizedMesh mesh(const AttributeLayout& layout) const {
+  // Moves the lossless level's arrays out (the engine is done with them): held once at the decoder's peak.
+  QuantizedMesh mesh(const AttributeLayout& layout) {
     QuantizedMesh m;
     if (n_ == 0) return m;
     if (level_ == bits_) {
-      m.positions = lo_;
-      m.triangles = triangles_;
-      m.normals = normals_;
-      m.colors = colors_;
+      m.positions = std::move(lo_);
+      m.triangles = std::move(triangles_);
+      m.normals = std::move(normals_);
+      m.colors = std::move(colors_);
       return m;
     }
     std::vector<u32> index(n_, UINT32_MAX);
@@ -698,9 +699,14 @@ class Engine {
   }
 
   // Orientation and multiplicity of the final triangles.
+  // The complex's per-vertex lists are the largest structure (about 180 bytes per vertex of a mesh) and are not
+  // needed once the keys are read from them: freed before the triangles are coded, which is the decoder's peak
+  // (FORMAT.md, the payload floor).
   Status codeTriangles() {
     io_.meter(&CodecStats::connectivity_bits);
-    return codeFaceCopies(io_, "kdtree", models_.orient.data(), triangleKeys(), truth_, max_triangles_, triangles_);
+    std::vector<std::array<u32, 3>> keys = triangleKeys();
+    cx_ = Complex();
+    return codeFaceCopies(io_, "kdtree", models_.orient.data(), keys, truth_, max_triangles_, triangles_);
   }
 
   void codeAttributes() {
@@ -756,7 +762,7 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
     stats->triangles = mesh.triangles.size();
   }
   if (n == 0) {
-    writeHeader(kFormat, h, ctx.bits, {}, out);
+    writeHeader(kFormat, h, ctx.bits, ctx.layout, {}, out);
     if (stats) stats->payload_bytes = out.size() - start;
     return Status::ok();
   }
@@ -833,7 +839,7 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
   SP_RETURN_IF_ERROR(engine.run(ctx.bits));
   h.k0 = k0;
   h.root = root;
-  writeHeader(kFormat, h, ctx.bits, io.segments, out);
+  writeHeader(kFormat, h, ctx.bits, ctx.layout, io.segments, out);
   if (stats) {
     stats->splits = engine.splits_;
     stats->edge_expansions = engine.expansions_;

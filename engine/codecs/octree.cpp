@@ -164,14 +164,15 @@ class Engine {
 
   // The mesh of the level reached: vertices at their cells' centers, the cliques as triangles (lossless once
   // complete).
-  Result<QuantizedMesh> mesh(const AttributeLayout& layout) const {
+  // Moves the lossless level's arrays out (the engine is done with them): held once at the decoder's peak.
+  Result<QuantizedMesh> mesh(const AttributeLayout& layout) {
     QuantizedMesh m;
     if (n_ == 0) return m;
     if (complete_) {
-      m.positions = lo_;
-      m.triangles = triangles_;
-      m.normals = normals_;
-      m.colors = colors_;
+      m.positions = std::move(lo_);
+      m.triangles = std::move(triangles_);
+      m.normals = std::move(normals_);
+      m.colors = std::move(colors_);
       return m;
     }
     const u32 half = (1u << (bits_ - level_)) >> 1;
@@ -582,7 +583,7 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
     stats->triangles = h.t;
   }
   if (h.n == 0) {
-    writeHeader(kFormat, h, ctx.bits, {}, out);
+    writeHeader(kFormat, h, ctx.bits, ctx.layout, {}, out);
     if (stats) stats->payload_bytes = out.size() - start;
     return Status::ok();
   }
@@ -609,7 +610,7 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
   engine.layout = ctx.layout;
   engine.flat_ = !contexts;
   SP_RETURN_IF_ERROR(engine.run(ctx.bits));
-  writeHeader(kFormat, h, ctx.bits, io.segments, out);
+  writeHeader(kFormat, h, ctx.bits, ctx.layout, io.segments, out);
   if (stats) {
     stats->splits = engine.splits_;
     stats->payload_bytes = out.size() - start;

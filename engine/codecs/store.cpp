@@ -33,15 +33,29 @@ Result<EncodedTile> storeEncode(const TileContext& ctx, const TileView& tile, co
   const Vec3u& lo = result.decoded.lo;
   const Vec3u& hi = result.decoded.hi;
   int axis_bits[3];
+  for (int a = 0; a < 3; ++a) axis_bits[a] = bitsFor(hi[a] - lo[a]);
+  // A tile below the codec's floor (FORMAT.md; a dense lattice spends few bits per vertex) spends more coordinate
+  // bits than its range needs, up to the grid's: the decoder accepts any width within the grid.
+  const int index_bits = bitsFor(n - 1);
+  const int extra_bits = 2 * ctx.layout.normal_bits + 8 * ctx.layout.color_channels;
+  const uint64_t need = findCodec(CodecId::kStore)->floor.minPayloadBytes(ctx.layout, n, mesh.triangles.size());
+  auto payloadBytes = [&] {
+    const uint64_t bits = uint64_t(axis_bits[0] + axis_bits[1] + axis_bits[2] + extra_bits) * n +
+                          uint64_t(mesh.triangles.size()) * 3 * index_bits;
+    return out.size() + 15 + (bits + 7) / 8;
+  };
+  while (payloadBytes() < need) {
+    int* a = std::min_element(axis_bits, axis_bits + 3);
+    if (*a >= ctx.bits) break;  // the writer refuses the tile, as it does every tile below its floor
+    ++*a;
+  }
   for (int a = 0; a < 3; ++a) {
-    axis_bits[a] = bitsFor(hi[a] - lo[a]);
     w.u32(lo[a]);
     w.u8(static_cast<uint8_t>(axis_bits[a]));
   }
   BitWriter bw(out);
   for (const auto& p : mesh.positions)
     for (int a = 0; a < 3; ++a) bw.put(p[a] - lo[a], axis_bits[a]);
-  const int index_bits = bitsFor(n - 1);
   for (const auto& t : mesh.triangles)
     for (uint32_t v : t) bw.put(v, index_bits);
   if (ctx.layout.hasNormals())

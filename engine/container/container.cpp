@@ -102,7 +102,7 @@ Status ContainerWriter::begin() {
 Status ContainerWriter::addTile(uint32_t tile_id, const CodecInfo& codec, const TileSummary& decoded,
                                 std::span<const uint8_t> payload) {
   if (entries_.size() >= kMaxTiles) return makeError(ErrorCode::kLimitExceeded, "too many tiles");
-  if (!codec.floor.admits(decoded.vertices, decoded.faces, payload.size()))
+  if (!codec.floor.admits(header_.layout, decoded.vertices, decoded.faces, payload.size()))
     return makeError(ErrorCode::kInternal, "tile " + std::to_string(tile_id) + ": " + std::string(codec.name) +
                                                " wrote " + std::to_string(payload.size()) + " bytes for " +
                                                std::to_string(decoded.vertices) + " vertices and " +
@@ -161,8 +161,8 @@ Status ContainerWriter::finish() {
 Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::string& what) {
   const std::string where = what + ": header";
   if (bytes.size() < kHeaderSize)
-    return makeError(ErrorCode::kTruncated, where + ": file has " + std::to_string(bytes.size()) +
-                                                " bytes, a container header needs " + std::to_string(kHeaderSize));
+    return makeError(ErrorCode::kTruncated, where + ": the file ends at byte " + std::to_string(bytes.size()) +
+                                                ", a container header needs " + std::to_string(kHeaderSize) + " bytes");
   if (std::memcmp(bytes.data(), kHeaderMagic, 8) != 0)
     return makeError(ErrorCode::kMalformed, where + " at byte 0: not a scanpress container (bad magic)");
   ByteReader r(bytes.first(kHeaderSize), where);
@@ -178,7 +178,8 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
   SP_RETURN_IF_ERROR(r.u32(header_size));
   uint32_t stored_crc = 0;
   std::memcpy(&stored_crc, bytes.data() + kHeaderSize - 4, 4);
-  SP_RETURN_IF_ERROR(checkCrc(stored_crc, bytes.first(kHeaderSize - 4), where));
+  SP_RETURN_IF_ERROR(checkCrc(stored_crc, bytes.first(kHeaderSize - 4),
+                              where + " at byte " + std::to_string(kHeaderSize - 4)));
   if (header_size != kHeaderSize)
     return makeError(ErrorCode::kMalformed, where + " at byte 12: header size " + std::to_string(header_size));
   for (double& c : h.grid.origin) SP_RETURN_IF_ERROR(r.f64(c));
@@ -204,7 +205,9 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
   if (h.layout.color_channels != 0 && h.layout.color_channels != 3 && h.layout.color_channels != 4)
     return makeError(ErrorCode::kMalformed,
                      where + " at byte 50: color channels " + std::to_string(h.layout.color_channels));
-  if (reserved != 0 || reserved32 != 0) return makeError(ErrorCode::kMalformed, where + ": reserved bytes not 0");
+  if (reserved != 0 || reserved32 != 0)
+    return makeError(ErrorCode::kMalformed,
+                     where + " at byte " + std::string(reserved != 0 ? "51" : "72") + ": reserved bytes not 0");
   if (h.tile_count > kMaxTiles)
     return makeError(ErrorCode::kLimitExceeded, where + " at byte 52: " + std::to_string(h.tile_count) + " tiles");
   return h;
@@ -213,7 +216,8 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
 Result<Footer> parseFooter(std::span<const uint8_t> last, uint64_t file_size, const std::string& what) {
   const std::string where = what + ": footer";
   if (file_size < kHeaderSize + kFooterSize || last.size() < kFooterSize)
-    return makeError(ErrorCode::kTruncated, where + ": file too short (" + std::to_string(file_size) + " bytes)");
+    return makeError(ErrorCode::kTruncated,
+                     where + ": the file ends at byte " + std::to_string(file_size) + ", too short for a container");
   last = last.last(kFooterSize);
   const uint64_t base = file_size - kFooterSize;
   if (std::memcmp(last.data() + 24, kFooterMagic, 8) != 0)
@@ -226,9 +230,10 @@ Result<Footer> parseFooter(std::span<const uint8_t> last, uint64_t file_size, co
   SP_RETURN_IF_ERROR(r.u64(f.index_bytes));
   SP_RETURN_IF_ERROR(r.u32(version));
   SP_RETURN_IF_ERROR(r.u32(stored_crc));
-  SP_RETURN_IF_ERROR(checkCrc(stored_crc, last.first(20), where));
+  SP_RETURN_IF_ERROR(checkCrc(stored_crc, last.first(20), where + " at byte " + std::to_string(base + 20)));
   if (version != kContainerVersion)
-    return makeError(ErrorCode::kUnknownVersion, where + ": container format version " + std::to_string(version));
+    return makeError(ErrorCode::kUnknownVersion, where + " at byte " + std::to_string(base + 16) +
+                                                     ": container format version " + std::to_string(version));
   if (f.index_offset < kHeaderSize || f.index_bytes < 12 || f.index_offset > base ||
       f.index_bytes != base - f.index_offset)
     return makeError(ErrorCode::kMalformed,
@@ -240,10 +245,12 @@ Result<std::vector<TileEntry>> parseIndex(std::span<const uint8_t> bytes, const 
                                           const Footer& footer, const std::string& what) {
   const std::string where = what + ": tile index";
   if (bytes.size() != footer.index_bytes)
-    return makeError(ErrorCode::kTruncated, where + ": expected " + std::to_string(footer.index_bytes) + " bytes");
+    return makeError(ErrorCode::kTruncated, where + " at byte " + std::to_string(footer.index_offset) + ": expected " +
+                                                std::to_string(footer.index_bytes) + " bytes");
   uint32_t stored_crc = 0;
   std::memcpy(&stored_crc, bytes.data() + bytes.size() - 4, 4);
-  SP_RETURN_IF_ERROR(checkCrc(stored_crc, bytes.first(bytes.size() - 4), where));
+  SP_RETURN_IF_ERROR(checkCrc(stored_crc, bytes.first(bytes.size() - 4),
+                              where + " at byte " + std::to_string(footer.index_offset + bytes.size() - 4)));
   ByteReader r(bytes, where, footer.index_offset);
   uint32_t magic = 0, count = 0;
   SP_RETURN_IF_ERROR(r.u32(magic));
@@ -275,7 +282,7 @@ Result<std::vector<TileEntry>> parseIndex(std::span<const uint8_t> bytes, const 
     next_offset = e.offset + e.chunk_bytes;
     // The counts bound the decoder, so they must be what the payload's size can hold (unknown codecs fail later).
     if (const CodecInfo* codec = findCodec(e.codec);
-        codec && !codec->floor.admits(e.vertices, e.faces, e.chunk_bytes - kChunkHeaderSize))
+        codec && !codec->floor.admits(header.layout, e.vertices, e.faces, e.chunk_bytes - kChunkHeaderSize))
       return r.error(ErrorCode::kMalformed,
                      "tile " + std::to_string(e.tile_id) + " claims " + std::to_string(e.vertices) + " vertices and " +
                          std::to_string(e.faces) + " faces in " + std::to_string(e.chunk_bytes - kChunkHeaderSize) +
@@ -287,17 +294,21 @@ Result<std::vector<TileEntry>> parseIndex(std::span<const uint8_t> bytes, const 
         return r.error(ErrorCode::kMalformed, "tile id " + std::to_string(e.tile_id) + " appears twice");
   }
   if (next_offset != footer.index_offset)
-    return makeError(ErrorCode::kMalformed, where + ": tile chunks do not end where the index starts");
+    return makeError(ErrorCode::kMalformed, where + " at byte " + std::to_string(footer.index_offset) +
+                                                ": tile chunks end at byte " + std::to_string(next_offset) +
+                                                ", not where the index starts");
   if (vertices != header.vertices || faces != header.faces)
-    return makeError(ErrorCode::kMalformed, where + ": tile counts do not add up to the header's totals");
+    return makeError(ErrorCode::kMalformed, where + " at byte " + std::to_string(footer.index_offset) +
+                                                ": tile counts do not add up to the header's totals (at byte 56)");
   return entries;
 }
 
 Result<std::span<const uint8_t>> parseTileChunk(std::span<const uint8_t> chunk, const TileEntry& e,
                                                 const std::string& what) {
   const std::string where = what + ": tile " + std::to_string(e.tile_id);
+  const std::string at = " at byte " + std::to_string(e.offset);
   if (chunk.size() != e.chunk_bytes || chunk.size() < kChunkHeaderSize)
-    return makeError(ErrorCode::kTruncated, where + ": chunk is shorter than the index says");
+    return makeError(ErrorCode::kTruncated, where + at + ": chunk is shorter than the index says");
   ByteReader r(chunk, where, e.offset);
   uint32_t magic = 0, tile_id = 0, vertices = 0, faces = 0, payload_crc = 0, head_crc = 0;
   uint16_t codec = 0, version = 0;
@@ -313,12 +324,13 @@ Result<std::span<const uint8_t>> parseTileChunk(std::span<const uint8_t> chunk, 
   SP_RETURN_IF_ERROR(r.u32(head_crc));
   if (magic != kChunkMagic)
     return makeError(ErrorCode::kMalformed, where + ": bad chunk magic at byte " + std::to_string(e.offset));
-  SP_RETURN_IF_ERROR(checkCrc(head_crc, chunk.first(kChunkHeaderSize - 4), where + " chunk header"));
+  SP_RETURN_IF_ERROR(checkCrc(head_crc, chunk.first(kChunkHeaderSize - 4), where + " chunk header" + at));
   if (tile_id != e.tile_id || codec != static_cast<uint16_t>(e.codec) || version != e.codec_version ||
       vertices != e.vertices || faces != e.faces || payload_bytes != e.chunk_bytes - kChunkHeaderSize)
-    return makeError(ErrorCode::kMalformed, where + ": chunk header disagrees with the tile index");
+    return makeError(ErrorCode::kMalformed, where + " chunk header" + at + ": disagrees with the tile index");
   const auto payload = chunk.subspan(kChunkHeaderSize);
-  SP_RETURN_IF_ERROR(checkCrc(payload_crc, payload, where + " payload"));
+  SP_RETURN_IF_ERROR(checkCrc(payload_crc, payload,
+                              where + " payload at byte " + std::to_string(e.offset + kChunkHeaderSize)));
   return payload;
 }
 
