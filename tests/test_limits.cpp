@@ -157,8 +157,5 @@ TEST(IndexLimits, WriterRefusesCountsBelowTheFloor) {
 }  // namespace scanpress
 
 namespace scanpress {
-namespace {
-
-
-}  // namespace
+namespace {}  // namespace
 }  // namespace scanpress
