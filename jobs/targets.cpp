@@ -331,7 +331,7 @@ class TargetSearch {
 
 }  // namespace
 
-double measureMargin(ErrorMetric metric) { return metric == ErrorMetric::kMax ? 0.06 : 0.02; }
+double measureMargin(ErrorMetric metric) { return metric == ErrorMetric::kMax ? 0.12 : 0.02; }
 
 int predictBits(double max_error, ErrorMetric metric, double extent_over_diagonal, double share) {
   // RMS: a surface sample's displacement blends its triangle's three independent vertex displacements with its
