@@ -309,11 +309,11 @@ TEST(Simplify, UglyInputsKeepTheContracts) {
   // A non-manifold fan: five triangles on one edge, each with a small strip beyond it.
   {
     QuantizedMesh m;
-    m.positions = {{1000, 1000, 1000}, {1000, 1000, 3000}};
+    m.positions = {{2000, 2000, 1000}, {2000, 2000, 3000}};
     for (int k = 0; k < 5; ++k) {
       const double a = k * 2 * M_PI / 5;
-      for (int r = 1; r <= 3; ++r)
-        m.positions.push_back({uint32_t(1000 + 500 * r * std::cos(a)), uint32_t(1000 + 500 * r * std::sin(a)),
+      for (int r = 1; r <= 3; ++r)  // (around the center, far enough from 0 that no coordinate goes negative)
+        m.positions.push_back({uint32_t(2000 + 500 * r * std::cos(a)), uint32_t(2000 + 500 * r * std::sin(a)),
                                uint32_t(2000 + 37 * r * (k + 1))});
       const uint32_t b = 2 + 3 * k;
       m.triangles.push_back({0, 1, b});

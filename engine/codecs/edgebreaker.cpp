@@ -320,7 +320,10 @@ class Engine {
   u32 codeDistance(u32 d) {
     const int cls = int(io_.sym(models_.distance, u32(bitLength(d))));
     if (cls <= 1) return u32(cls);
-    return (1u << (cls - 1)) | io_.bits(d & ((1u << (cls - 1)) - 1), cls - 1);
+    // A hostile stream can name a class past 32 bits: the shifts are 64-bit, and the value (cut to 32 bits) is then
+    // checked by the caller like any other distance.
+    const uint64_t top = uint64_t(1) << (cls - 1);
+    return u32(top | io_.bits(u32(d & (top - 1)), std::min(cls - 1, 32)));
   }
 
   // Walks `steps` border elements from `from`, forward or backward.
