@@ -50,6 +50,8 @@ Status renderErrorPicture(const EncodeSettings& s, const std::string& png, std::
   rs.height = s.measure.render_height;
   rs.azimuth = s.measure.view_azimuth;
   rs.elevation = s.measure.view_elevation;
+  rs.scale_max_relative = s.measure.scale_max;
+  rs.title = std::filesystem::path(s.input).filename().string();
   SP_ASSIGN_OR_RETURN(RenderResult picture, renderMesh(decoded, rs, device, &original));
   return writePng(png, picture.image);
 }
@@ -274,6 +276,11 @@ std::string settingsFingerprint(const EncodeSettings& s) {
            (m.render ? ",render=" + std::to_string(m.render_width) + "x" + std::to_string(m.render_height) + "@" +
                            std::to_string(m.view_azimuth) + "," + std::to_string(m.view_elevation)
                      : "");
+  if (m.enabled && m.render && m.scale_max > 0) {  // appended only when set, so earlier runs' keys still match
+    char buf[48];
+    std::snprintf(buf, sizeof buf, ",scale_max=%.17g", m.scale_max);
+    key += buf;
+  }
   struct stat st {};
   if (::stat(s.input.c_str(), &st) == 0)
     key += "|size=" + std::to_string(st.st_size) + "|mtime=" + std::to_string(st.st_mtim.tv_sec) + "." +

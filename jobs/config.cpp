@@ -270,7 +270,8 @@ std::vector<std::string> knownConfigKeys() {
           "/measure/vertices",
           "/measure/render",
           "/measure/render_size",
-          "/measure/view"};
+          "/measure/view",
+          "/measure/scale_max"};
 }
 
 Result<JobSettings> parseJobConfig(const std::string& text, const std::string& config_path) {
@@ -353,6 +354,7 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     m.boolean("render", ms.render);
     m.integerPair("render_size", 16, 8192, ms.render_width, ms.render_height);
     m.numberPair("view", -360, 360, ms.view_azimuth, ms.view_elevation);
+    m.number("scale_max", 0, 1e6, ms.scale_max);  // 0: each picture's own scale
     m.finish();
     if (error.isOk() && ms.render && !ms.enabled) m.fail("/measure/render", "needs /measure/enabled");
   }

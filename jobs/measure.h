@@ -28,6 +28,7 @@ struct MeasureSettings {
   bool render = false;
   int render_width = 800, render_height = 600;
   double view_azimuth = 30, view_elevation = 20;  // degrees
+  double scale_max = 0;  // top of the color bar in units of the diagonal, the same for every picture; 0: per picture
 };
 
 struct MeasureResult {

@@ -5,10 +5,13 @@
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <optional>
+#include <utility>
 
 #include "engine/geometry.h"
 #include "engine/quantize.h"
@@ -32,7 +35,7 @@ std::array<double, 3> colormap(double t) {
           kStops[i][2] + (kStops[i + 1][2] - kStops[i][2]) * f};
 }
 
-// 5x7 glyphs for the scale labels.
+// 5x7 glyphs for the scale labels and titles (titles are drawn in capitals; 'e' and 'd' are the labels' own).
 const char* glyph(char c) {
   switch (c) {
     case '0': return "01110100011001110101110011000101110";
@@ -48,8 +51,38 @@ const char* glyph(char c) {
     case '.': return "00000000000000000000000000110001100";
     case '-': return "00000000000000011111000000000000000";
     case '+': return "00000001000010011111001000010000000";
+    case '_': return "00000000000000000000000000000011111";
+    case '=': return "00000000001111100000111110000000000";
+    case '(': return "00010001000100001000010000010000010";
+    case ')': return "01000001000001000010000100010001000";
     case 'e': return "00000000000111010001111111000001110";
     case 'd': return "00001000010110110011100011000101111";
+    case 'A': return "01110100011000111111100011000110001";
+    case 'B': return "11110100011000111110100011000111110";
+    case 'C': return "01110100011000010000100001000101110";
+    case 'D': return "11100100101000110001100011001011100";
+    case 'E': return "11111100001000011110100001000011111";
+    case 'F': return "11111100001000011110100001000010000";
+    case 'G': return "01110100011000010111100011000101111";
+    case 'H': return "10001100011000111111100011000110001";
+    case 'I': return "01110001000010000100001000010001110";
+    case 'J': return "00111000100001000010000101001001100";
+    case 'K': return "10001100101010011000101001001010001";
+    case 'L': return "10000100001000010000100001000011111";
+    case 'M': return "10001110111010110101100011000110001";
+    case 'N': return "10001100011100110101100111000110001";
+    case 'O': return "01110100011000110001100011000101110";
+    case 'P': return "11110100011000111110100001000010000";
+    case 'Q': return "01110100011000110001101011001001101";
+    case 'R': return "11110100011000111110101001001010001";
+    case 'S': return "01111100001000001110000010000111110";
+    case 'T': return "11111001000010000100001000010000100";
+    case 'U': return "10001100011000110001100011000101110";
+    case 'V': return "10001100011000110001100010101000100";
+    case 'W': return "10001100011000110101101011010101010";
+    case 'X': return "10001100010101000100010101000110001";
+    case 'Y': return "10001100011000101010001000010000100";
+    case 'Z': return "11111000010001000100010001000011111";
     default: return "00000000000000000000000000000000000";
   }
 }
@@ -71,6 +104,25 @@ void drawText(Image& img, int x, int y, const std::string& text, int scale) {
   }
 }
 
+// The vertex colors at `p` on triangle `t`, interpolated barycentrically (as fractions of 255).
+std::array<double, 3> vertexColor(const Mesh& mesh, uint32_t t, const Vec3d& p) {
+  const auto& tri = mesh.triangles[t];
+  const Vec3d a = mesh.positions[tri[0]], e1 = vsub(mesh.positions[tri[1]], a), e2 = vsub(mesh.positions[tri[2]], a);
+  const Vec3d d = vsub(p, a);
+  const double d11 = vdot(e1, e1), d12 = vdot(e1, e2), d22 = vdot(e2, e2), d1 = vdot(d, e1), d2 = vdot(d, e2);
+  const double den = d11 * d22 - d12 * d12;
+  double u = 0, v = 0;
+  if (den > 0) {
+    u = std::clamp((d22 * d1 - d12 * d2) / den, 0.0, 1.0);
+    v = std::clamp((d11 * d2 - d12 * d1) / den, 0.0, 1.0 - u);
+  }
+  const double w[3] = {1 - u - v, u, v};
+  std::array<double, 3> c{0, 0, 0};
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 3; ++j) c[k] += w[j] * mesh.colors[tri[j]][k] / 255.0;
+  return c;
+}
+
 }  // namespace
 
 Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& s, std::shared_ptr<EmbreeDevice> device,
@@ -88,38 +140,66 @@ Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& s, std::
     SP_ASSIGN_OR_RETURN(SurfaceIndex r, SurfaceIndex::build(device, against->positions, against->triangles));
     reference.emplace(std::move(r));
   }
-  // Camera: looking at the box center from (azimuth, elevation), the bounding sphere filling the view.
-  const BoundingBox mbox = boundingBox(mesh);
-  const Vec3d center = vmul(vadd(mbox.lo, mbox.hi), 0.5);
-  const double radius = std::max(mbox.diagonal() / 2, 1e-30);
+  // Layout: a title band on top, the scale bar on the right, the model in the rest.
+  const int text_scale = std::max(1, s.height / 300);
+  const int title_h = s.title.empty() ? 0 : 11 * text_scale;
+  const int bar = against ? std::max(60, s.width / 8) : 0;
+  const int view_w = s.width - bar, view_h = s.height - title_h;
+  if (view_w < 8 || view_h < 8) return makeError(ErrorCode::kInvalidArgument, "picture too small for its labels");
+  // Camera: from (azimuth, elevation), framing the model's vertices to kFill of the view's smaller extent. The
+  // look-at point centers their projection along the view plane; the distance is the smallest at which every vertex
+  // projects inside the filled frame (exact under perspective, per vertex), so elongated scans fill the view too
+  // rather than their bounding sphere.
+  constexpr double kFill = 0.9;
   const double az = s.azimuth * kPi / 180, el = s.elevation * kPi / 180;
   const Vec3d to_eye{std::cos(el) * std::sin(az), std::sin(el), std::cos(el) * std::cos(az)};
-  const double fov = 35 * kPi / 180;
-  const double aspect = double(s.width) / s.height;
-  const double fit = std::min(1.0, aspect);  // the sphere must fit the narrower side
-  const double dist = radius / std::sin(fov / 2 * fit) * 1.05;
-  const Vec3d eye = vadd(center, vmul(to_eye, dist));
   const Vec3d forward = vmul(to_eye, -1.0);
   Vec3d up{0, 1, 0};
   if (std::fabs(vdot(up, forward)) > 0.999) up = {0, 0, 1};
   Vec3d right = vcross(forward, up);
   right = vmul(right, 1.0 / vlen(right));
   up = vcross(right, forward);
+  const double fov = 35 * kPi / 180;
+  const double aspect = double(view_w) / view_h;
   const double half_h = std::tan(fov / 2), half_w = half_h * aspect;
-  const int bar = against ? std::max(60, s.width / 8) : 0;  // room for the scale bar on the right
-  const int view_w = s.width - bar;
+  const BoundingBox mbox = boundingBox(mesh);
+  Vec3d center = vmul(vadd(mbox.lo, mbox.hi), 0.5);
+  std::vector<uint8_t> used(mesh.positions.size(), 0);
+  for (const auto& t : mesh.triangles)
+    for (uint32_t v : t)
+      if (v < used.size()) used[v] = 1;
+  double a_lo = HUGE_VAL, a_hi = -HUGE_VAL, b_lo = HUGE_VAL, b_hi = -HUGE_VAL;
+  for (size_t v = 0; v < used.size(); ++v) {
+    if (!used[v]) continue;
+    const Vec3d d = vsub(mesh.positions[v], center);
+    a_lo = std::min(a_lo, vdot(d, right)), a_hi = std::max(a_hi, vdot(d, right));
+    b_lo = std::min(b_lo, vdot(d, up)), b_hi = std::max(b_hi, vdot(d, up));
+  }
+  center = vadd(center, vadd(vmul(right, (a_lo + a_hi) / 2), vmul(up, (b_lo + b_hi) / 2)));
+  double dist = 0;
+  for (size_t v = 0; v < used.size(); ++v) {
+    if (!used[v]) continue;
+    const Vec3d d = vsub(mesh.positions[v], center);
+    dist = std::max(dist, vdot(d, to_eye) + std::max(std::fabs(vdot(d, right)) / (kFill * half_w),
+                                                     std::fabs(vdot(d, up)) / (kFill * half_h)));
+  }
+  dist = std::max(dist, std::max(mbox.diagonal(), 1e-30) * 1e-3);  // a point-like or degenerate model
+  const Vec3d eye = vadd(center, vmul(to_eye, dist));
+  const bool vertex_colors = !against && !mesh.colors.empty() && mesh.colors.size() == mesh.positions.size();
 
   std::vector<double> shade(size_t(s.width) * s.height, -1), error(size_t(s.width) * s.height, -1);
-  tbb::parallel_for(0, s.height, [&](int y) {
+  std::vector<std::array<double, 3>> albedo(vertex_colors ? shade.size() : 0);
+  tbb::parallel_for(title_h, s.height, [&](int y) {
     uint32_t hint = UINT32_MAX;  // neighbouring pixels see nearby surface points
     for (int x = 0; x < view_w; ++x) {
-      const double px = ((x + 0.5) / s.width * 2 - 1) * half_w, py = (1 - (y + 0.5) / s.height * 2) * half_h;
+      const double px = ((x + 0.5) / view_w * 2 - 1) * half_w, py = (1 - (y - title_h + 0.5) / view_h * 2) * half_h;
       Vec3d dir = vadd(forward, vadd(vmul(right, px), vmul(up, py)));
       dir = vmul(dir, 1.0 / vlen(dir));
       const auto hit = scene.intersect(eye, dir);
       if (!hit.hit) continue;
       const size_t i = size_t(y) * s.width + x;
       shade[i] = 0.25 + 0.75 * std::fabs(vdot(hit.normal, dir));
+      if (vertex_colors) albedo[i] = vertexColor(mesh, hit.triangle, vadd(eye, vmul(dir, hit.t)));
       if (reference) {
         const auto c = reference->closest(vadd(eye, vmul(dir, hit.t)), hint);
         error[i] = c.distance;
@@ -127,7 +207,10 @@ Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& s, std::
       }
     }
   });
-  if (reference) {  // the bar tops at the 99.5th percentile of visible distances, so one outlier cannot wash it out
+  if (reference && s.scale_max_relative > 0) {
+    out.scale_max = s.scale_max_relative * out.diagonal;
+  } else if (reference) {  // the bar tops at the 99.5th percentile of visible distances, so one outlier cannot
+                           // wash it out
     std::vector<double> visible;
     for (double e : error)
       if (e >= 0) visible.push_back(e);
@@ -146,23 +229,33 @@ Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& s, std::
     if (shade[i] < 0) continue;
     std::array<double, 3> c{0.85, 0.85, 0.85};
     if (reference) c = colormap(error[i] / out.scale_max);
+    else if (vertex_colors) c = albedo[i];
     for (int k = 0; k < 3; ++k)
       img.rgb[3 * i + k] = static_cast<uint8_t>(std::clamp(c[k] * shade[i], 0.0, 1.0) * 255 + 0.5);
   }
-  if (reference) {  // the scale bar with labels in units of the diagonal
-    const int scale = std::max(1, s.height / 300);
-    const int x0 = view_w + bar / 6, x1 = view_w + bar / 3, y0 = s.height / 8, y1 = s.height - s.height / 8;
-    for (int y = y0; y <= y1; ++y) {
+  if (reference) {  // the scale bar, its top labelled in units of the diagonal and in the scan's own units
+    const int scale = text_scale, line = 10 * scale;
+    const int x0 = view_w + bar / 6, x1 = view_w + bar / 3;
+    const int y0 = title_h + 2 * line + 4 * scale, y1 = std::max(y0 + 1, s.height - line - 2 * scale);
+    for (int y = y0; y <= y1 && y < s.height; ++y) {
       const auto c = colormap(double(y1 - y) / (y1 - y0));
       for (int x = x0; x <= x1; ++x)
         for (int k = 0; k < 3; ++k)
           img.rgb[3 * (size_t(y) * s.width + x) + k] = static_cast<uint8_t>(c[k] * 255 + 0.5);
     }
-    char label[32];
-    std::snprintf(label, sizeof label, "%.1e d", out.diagonal > 0 ? out.scale_max / out.diagonal : 0.0);
-    const int label_w = static_cast<int>(std::strlen(label)) * 6 * scale;
-    drawText(img, std::max(0, std::min(view_w + 2, s.width - label_w - 2)), y0 - 10 * scale, label, scale);
-    drawText(img, view_w + 2, y1 + 3 * scale, "0 d", scale);
+    char relative[32], absolute[32];
+    std::snprintf(relative, sizeof relative, "%.1e d", out.diagonal > 0 ? out.scale_max / out.diagonal : 0.0);
+    std::snprintf(absolute, sizeof absolute, "%.2e", out.scale_max);
+    for (auto [text, y] : {std::pair<const char*, int>{relative, y0 - 2 * line}, {absolute, y0 - line}}) {
+      const int w = static_cast<int>(std::strlen(text)) * 6 * scale;
+      drawText(img, std::max(0, std::min(view_w + 2, s.width - w - 2)), y, text, scale);
+    }
+    drawText(img, view_w + 2, y1 + 3 * scale, "0", scale);
+  }
+  if (!s.title.empty()) {
+    std::string caps = s.title;
+    for (char& c : caps) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    drawText(img, 2 * text_scale, 2 * text_scale, caps, text_scale);
   }
   return out;
 }

@@ -1,6 +1,6 @@
 // Pictures of meshes: Embree ray casting with a headlight, optionally colored by the distance to another mesh
-// (the original), with a color scale bar labelled in units of the original's bounding-box diagonal. PNG output
-// (libpng), written all-or-nothing.
+// (the original), with a color scale bar labelled in units of the original's bounding-box diagonal and in absolute
+// units; otherwise by the scan's vertex colors when it has them. PNG output (libpng), written all-or-nothing.
 #pragma once
 
 #include <cstdint>
@@ -18,6 +18,10 @@ class EmbreeDevice;
 struct RenderSettings {
   int width = 800, height = 600;
   double azimuth = 30, elevation = 20;  // degrees; y is up
+  // Top of the color bar in units of the reference's diagonal; 0: the 99.5th percentile of the visible distances.
+  // A fixed value gives every picture of a batch the same scale.
+  double scale_max_relative = 0;
+  std::string title;  // drawn in a band at the top (e.g. the file name); none when empty
 };
 
 struct Image {

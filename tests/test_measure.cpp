@@ -23,6 +23,7 @@
 #include "engine/quantize.h"
 #include "engine/shapes.h"
 #include "jobs/commands.h"
+#include "jobs/config.h"
 #include "jobs/measure.h"
 #include "jobs/render.h"
 #include "jobs/mesh_io/mesh_reader.h"
@@ -430,6 +431,202 @@ TEST(Render, ShadedAndErrorColoredPicturesAreDeterministic) {
   EXPECT_FALSE(renderMesh(Mesh(), s, device()).isOk());
 }
 
+// The bounding box of the pixels that are not background, as {x0, y0, x1, y1} (inclusive); x0 > x1 when none.
+std::array<int, 4> foreground(const Image& img, int x_end) {
+  std::array<int, 4> b{img.width, img.height, -1, -1};
+  for (int y = 0; y < img.height; ++y)
+    for (int x = 0; x < x_end; ++x) {
+      const uint8_t* p = &img.rgb[3 * (size_t(y) * img.width + x)];
+      if (p[0] == 245 && p[1] == 245 && p[2] == 245) continue;
+      b = {std::min(b[0], x), std::min(b[1], y), std::max(b[2], x), std::max(b[3], y)};
+    }
+  return b;
+}
+
+// A square [-h, h]^2 at height z (facing +z).
+Mesh square(double h, double z) {
+  Mesh m;
+  m.positions = {{-h, -h, z}, {h, -h, z}, {h, h, z}, {-h, h, z}};
+  m.triangles = {{0, 1, 2}, {0, 2, 3}};
+  return m;
+}
+
+TEST(Render, TheCameraFramesTheModel) {
+  // A sphere fills 90% of the smaller side; its box diagonal (what the camera used to fit) is sqrt(3) times wider.
+  RenderSettings s;
+  s.width = 160;
+  s.height = 120;
+  for (double az : {0.0, 30.0, 135.0}) {
+    s.azimuth = az;
+    auto r = renderMesh(icosphere(3), s, device());
+    ASSERT_TRUE(r.isOk());
+    const auto b = foreground(r->image, s.width);
+    const double fx = double(b[2] - b[0] + 1) / s.width, fy = double(b[3] - b[1] + 1) / s.height;
+    EXPECT_GE(std::max(fx, fy), 0.8) << az;
+    EXPECT_LE(std::max(fx, fy), 0.95) << az;
+    EXPECT_GT(b[0], 0);  // not cut
+    EXPECT_GT(b[1], 0);
+    EXPECT_LT(b[2], s.width - 1);
+    EXPECT_LT(b[3], s.height - 1);
+    EXPECT_LE(std::abs((b[0] + b[2]) - (s.width - 1)), 4) << az;  // centered
+  }
+  // A long thin strip seen from the front fills the width (its bounding sphere would fill the height).
+  Mesh strip = square(1, 0);
+  for (auto& p : strip.positions) p[0] *= 8, p[1] *= 0.5;
+  s.azimuth = s.elevation = 0;
+  auto r = renderMesh(strip, s, device());
+  ASSERT_TRUE(r.isOk());
+  const auto b = foreground(r->image, s.width);
+  EXPECT_GE(double(b[2] - b[0] + 1) / s.width, 0.85);
+}
+
+TEST(Render, AFixedScaleGivesTheSameColorForTheSameDistance) {
+  // Squares at distance 0.01 and 0.02 above a larger one; seen head-on, shading is 1 at the center, so a pixel
+  // is the color ramp at distance / scale_max. With the bar fixed at 0.04 both pictures share one scale;
+  // per-picture scales would paint both at the top of the ramp.
+  const Mesh base = square(2, 0);
+  RenderSettings s;
+  s.width = 200;
+  s.height = 160;
+  s.azimuth = s.elevation = 0;
+  const double diagonal = std::sqrt(32.0);
+  s.scale_max_relative = 0.04 / diagonal;
+  const int view_w = 200 - 60;
+  struct Case {
+    double z;
+    std::array<int, 3> rgb;  // the ramp at z / 0.04, worked out by hand from its control points
+  };
+  for (const Case& c : {Case{0.01, {29, 191, 212}}, Case{0.02, {159, 242, 75}}}) {
+    auto r = renderMesh(square(1, c.z), s, device(), &base);
+    ASSERT_TRUE(r.isOk());
+    EXPECT_NEAR(r->scale_max, 0.04, 1e-12);
+    const uint8_t* p = &r->image.rgb[3 * (size_t(80) * 200 + view_w / 2)];
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(p[k], c.rgb[k], 3) << c.z << " channel " << k;
+  }
+}
+
+TEST(Render, ScaleLabelsInAbsoluteUnitsToo) {
+  // The same scene ten times larger: the same picture in units of the diagonal, but the absolute label differs.
+  const Mesh sphere = icosphere(4), ico = icosphere(1);
+  Mesh big_sphere = sphere, big_ico = ico;
+  for (auto& p : big_sphere.positions) p = vmul(p, 10.0);
+  for (auto& p : big_ico.positions) p = vmul(p, 10.0);
+  RenderSettings s;
+  s.width = 200;
+  s.height = 150;
+  s.scale_max_relative = 0.01;
+  auto a = renderMesh(ico, s, device(), &sphere), b = renderMesh(big_ico, s, device(), &big_sphere);
+  ASSERT_TRUE(a.isOk() && b.isOk());
+  EXPECT_NEAR(b->scale_max, 10 * a->scale_max, 1e-9);
+  const int view_w = 200 - 60;
+  size_t label_diff = 0;
+  for (int y = 0; y < 30; ++y)  // the two label lines above the bar
+    for (int x = view_w; x < 200; ++x)
+      label_diff += a->image.rgb[3 * (size_t(y) * 200 + x)] != b->image.rgb[3 * (size_t(y) * 200 + x)];
+  EXPECT_GT(label_diff, 5u);
+}
+
+TEST(Render, VertexColorsShadeTheSurface) {
+  Mesh ico = icosphere(2);
+  ico.colors.assign(ico.positions.size(), Rgba8{230, 30, 30, 255});
+  for (size_t v = 0; v < ico.positions.size(); ++v)
+    if (ico.positions[v][1] > 0) ico.colors[v] = {30, 30, 230, 255};
+  ico.color_channels = 3;
+  RenderSettings s;
+  s.width = 160;
+  s.height = 120;
+  auto r = renderMesh(ico, s, device());
+  ASSERT_TRUE(r.isOk());
+  size_t red = 0, blue = 0;
+  for (size_t i = 0; i < r->image.rgb.size(); i += 3) {
+    const int R = r->image.rgb[i], G = r->image.rgb[i + 1], B = r->image.rgb[i + 2];
+    red += R > G + 60 && R > B + 60;
+    blue += B > G + 60 && B > R + 60;
+  }
+  EXPECT_GT(red, 1000u);
+  EXPECT_GT(blue, 1000u);
+  // Through a PLY file (the reader keeps the colors).
+  testing::TempDir dir;
+  ASSERT_TRUE(writePly(dir.file("c.ply"), ico).isOk());
+  std::string out;
+  ASSERT_EQ(testing::runScanpress("render '" + dir.file("c.ply") + "' '" + dir.file("c.png") + "' --size 160,120",
+                                  &out),
+            0)
+      << out;
+  const Image img = decodePng(testing::readBytes(dir.file("c.png")));
+  ASSERT_EQ(img.width, 160);
+  size_t colored = 0;
+  for (size_t i = 0; i < img.rgb.size(); i += 3) colored += img.rgb[i] > img.rgb[i + 1] + 60;
+  EXPECT_GT(colored, 1000u);
+  // With --against the distance colors win.
+  auto against = renderMesh(ico, s, device(), &ico);
+  ASSERT_TRUE(against.isOk());
+  size_t red_against = 0;
+  for (size_t i = 0; i < against->image.rgb.size(); i += 3)
+    red_against += against->image.rgb[i] > 200 && against->image.rgb[i + 1] < 60 && against->image.rgb[i + 2] < 60;
+  EXPECT_LT(red_against, 50u);
+}
+
+// Text pixels (the font's ink, 20,20,20) in rows [y0, y1).
+size_t inkRows(const Image& img, int y0, int y1) {
+  size_t n = 0;
+  for (int y = y0; y < y1; ++y)
+    for (int x = 0; x < img.width; ++x) {
+      const uint8_t* p = &img.rgb[3 * (size_t(y) * img.width + x)];
+      n += p[0] == 20 && p[1] == 20 && p[2] == 20;
+    }
+  return n;
+}
+
+TEST(Render, TheTitleIsDrawnOnTop) {
+  RenderSettings s;
+  s.width = 160;
+  s.height = 120;
+  auto plain = renderMesh(icosphere(1), s, device());
+  s.title = "bun_zipper.ply";
+  auto titled = renderMesh(icosphere(1), s, device());
+  ASSERT_TRUE(plain.isOk() && titled.isOk());
+  EXPECT_EQ(inkRows(plain->image, 0, 11), 0u);
+  EXPECT_GT(inkRows(titled->image, 0, 11), 100u);  // 14 glyphs of about 15 pixels each
+  EXPECT_EQ(inkRows(titled->image, 11, 120), 0u);  // the model below the band, not overdrawn
+  // The CLI draws the mesh's file name.
+  testing::TempDir dir;
+  ASSERT_TRUE(writePly(dir.file("named.ply"), icosphere(1)).isOk());
+  ASSERT_EQ(testing::runScanpress("render '" + dir.file("named.ply") + "' '" + dir.file("n.png") + "' --size 160,120"),
+            0);
+  EXPECT_GT(inkRows(decodePng(testing::readBytes(dir.file("n.png"))), 0, 11), 50u);
+}
+
+TEST(Render, ScaleMaxOptionAndKeyAreValidated) {
+  testing::TempDir dir;
+  ASSERT_TRUE(writePly(dir.file("a.ply"), icosphere(1)).isOk());
+  const std::string base = "render '" + dir.file("a.ply") + "' '" + dir.file("o.png") + "' ";
+  for (const char* bad : {"-1", "0", "nan", "inf", "x", "1e400"}) {
+    std::string out;
+    EXPECT_NE(testing::runScanpress(base + "--against '" + dir.file("a.ply") + "' --scale-max " + bad, &out), 0) << bad;
+    EXPECT_NE(out.find("--scale-max"), std::string::npos) << bad << ": " << out;
+  }
+  std::string out;
+  EXPECT_NE(testing::runScanpress(base + "--scale-max 0.01", &out), 0);
+  EXPECT_NE(out.find("--scale-max"), std::string::npos) << out;
+  EXPECT_EQ(testing::runScanpress(base + "--against '" + dir.file("a.ply") + "' --scale-max 0.01", &out), 0) << out;
+
+  // (1e400 fails in the JSON parser itself, which names the number rather than the key.)
+  for (const char* bad : {"-1", "\"x\"", "2e6"}) {
+    auto job =
+        parseJobConfig(std::string(R"({"inputs": ["a.ply"], "measure": {"enabled": true, "scale_max": )") + bad + "}}",
+                       "/x/j.json");
+    ASSERT_FALSE(job.isOk()) << bad;
+    EXPECT_NE(job.status().message().find("/measure/scale_max"), std::string::npos) << job.status().message();
+  }
+  auto job = parseJobConfig(R"({"inputs": ["a.ply"], "measure": {"enabled": true, "scale_max": 0.002}})", "/x/j.json");
+  ASSERT_TRUE(job.isOk()) << job.status().message();
+  EXPECT_EQ(job->encode.measure.scale_max, 0.002);
+  job = parseJobConfig(R"({"inputs": ["a.ply"], "measure": {"enabled": true, "scale_max": 0}})", "/x/j.json");
+  ASSERT_TRUE(job.isOk()) << job.status().message();  // 0, the default: each picture's own scale
+  EXPECT_EQ(job->encode.measure.scale_max, 0.0);
+}
+
 TEST(Render, JobWritesTheErrorPicture) {
   testing::TempDir dir;
   const std::string bunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
@@ -437,12 +634,13 @@ TEST(Render, JobWritesTheErrorPicture) {
                       "{\"inputs\": [\"" + bunny +
                           "\"], \"output\": {\"directory\": \"out\"}, "
                           "\"codec\": {\"bits\": 9}, \"measure\": {\"enabled\": true, \"render\": "
-                          "true, \"render_size\": [200, 150]}}");
+                          "true, \"render_size\": [200, 150], \"scale_max\": 0.001}}");
   const std::string cmd = std::string("'") + SCANPRESS_BIN + "' run '" + dir.file("job.json") + "' --quiet";
   ASSERT_EQ(std::system(cmd.c_str()), 0);
   const Image img = decodePng(testing::readBytes(dir.file("out/bun_zipper.error.png")));
   EXPECT_EQ(img.width, 200);
   EXPECT_EQ(img.height, 150);
+  EXPECT_GT(inkRows(img, 0, 11), 50u);  // the input's name
   const std::string report(reinterpret_cast<const char*>(testing::readBytes(dir.file("out/bun_zipper.report.json"))
                                                              .data()),
                            testing::readBytes(dir.file("out/bun_zipper.report.json")).size());

@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <exception>
+#include <filesystem>
 #include <limits>
 #include <optional>
 #include <string>
@@ -136,13 +137,15 @@ options:
 constexpr const char* kRenderHelp = R"(usage: scanpress render MESH OUT.png [options]
 
 Ray-casts MESH (Embree) with a headlight. With --against, the surface is colored by its distance to ORIGINAL,
-with a color scale bar labelled in units of ORIGINAL's bounding-box diagonal (the bar tops at the 99.5th
-percentile of the visible distances).
+with a color scale bar labelled in units of ORIGINAL's bounding-box diagonal (d) and in absolute units (the bar
+tops at the 99.5th percentile of the visible distances, or at --scale-max). Without --against, a scan with vertex
+colors is shaded with them. The camera frames the model to 90% of the view; MESH's file name is drawn on top.
 
 options:
   --against ORIGINAL   color by distance to this mesh
   --view AZ,EL         camera azimuth and elevation in degrees (default 30,20; y is up)
   --size W,H           picture size in pixels (default 800,600)
+  --scale-max E        top of the color bar at E diagonals (E > 0), so every picture of a batch shares one scale
 )";
 
 constexpr const char* kSynthHelp = R"(usage: scanpress synth OUT.ply --triangles N [options]
@@ -609,7 +612,7 @@ int runMeasure(int argc, char** argv) {
 int runRender(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {"--against", "--view", "--size"}, {"--help"}, args, error))
+  if (!parseArgs(argc, argv, 2, {"--against", "--view", "--size", "--scale-max"}, {"--help"}, args, error))
     return usage(error, "render");
   if (args.has("--help")) return std::fputs(kRenderHelp, stdout), 0;
   if (args.positional.size() != 2) return usage("render needs MESH and OUT.png", "render");
@@ -628,6 +631,14 @@ int runRender(int argc, char** argv) {
     s.width = static_cast<int>((*size)[0]);
     s.height = static_cast<int>((*size)[1]);
   }
+  if (const auto* v = args.get("--scale-max")) {
+    if (!args.has("--against")) return usage("--scale-max needs --against (it scales the distance colors)", "render");
+    auto e = parseNumber(*v, 0, 1e6, "--scale-max");
+    if (!e.isOk()) return usage(e.status().message(), "render");
+    if (!(*e > 0)) return usage("--scale-max must be positive, got '" + *v + "'", "render");
+    s.scale_max_relative = *e;
+  }
+  s.title = std::filesystem::path(args.positional[0]).filename().string();
   std::vector<std::string> inputs = {args.positional[0]};
   if (const auto* a = args.get("--against")) inputs.push_back(*a);
   if (Status ok = checkOutputPath(args.positional[1], inputs); !ok.isOk()) return fail(ok);
