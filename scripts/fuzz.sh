@@ -28,6 +28,21 @@ for t in $targets; do build_targets+=("fuzz_$t"); done
 cmake --build "$dir" -j "$(nproc)" --target "${build_targets[@]}"
 
 status=0
+failed=()
+mkdir -p "$dir/logs"
+# Runs a fuzzer with its output in build-fuzz/logs/ (libFuzzer's progress lines and dictionary run to thousands of
+# lines); prints the last lines, and keeps the log's name when it fails.
+run_logged() {
+  local t=$1 phase=$2 log="$dir/logs/$1.$2.log"
+  shift 2
+  if "$@" >"$log" 2>&1; then
+    grep -E '^(Done|stat::)' "$log" || true
+  else
+    tail -n 30 "$log"
+    failed+=("$log")
+    return 1
+  fi
+}
 for t in $targets; do
   corpus=tests/fuzz/corpus/$t
   mkdir -p "$dir/corpus/$t" "$dir/crashers/$t"
@@ -35,13 +50,25 @@ for t in $targets; do
   flags=(-rss_limit_mb=2048 -malloc_limit_mb=256 -timeout=10 -artifact_prefix="$dir/crashers/$t/" -print_final_stats=1
     -seed="${SCANPRESS_FUZZ_SEED:-1}")
   echo "== fuzz_$t: replaying $(find "$corpus" -type f | wc -l) corpus files"
-  "$dir/bin/fuzz_$t" "${flags[@]}" -runs=0 "$corpus" || status=1
+  run_logged "$t" replay "$dir/bin/fuzz_$t" "${flags[@]}" -runs=0 "$corpus" || status=1
   if [ "$seconds" -gt 0 ]; then
     echo "== fuzz_$t: fuzzing for $seconds s"
-    "$dir/bin/fuzz_$t" "${flags[@]}" -max_total_time="$seconds" "$dir/corpus/$t" "$corpus" || status=1
+    run_logged "$t" fuzz "$dir/bin/fuzz_$t" "${flags[@]}" -max_total_time="$seconds" "$dir/corpus/$t" "$corpus" ||
+      status=1
   fi
 done
 if [ "$status" != 0 ]; then
+  # Repeated at the end, where a CI log's tail shows it: which target failed, the report, the input.
   echo "fuzz.sh: a target failed; its input is in $dir/crashers/" >&2
+  for f in "${failed[@]}"; do
+    echo "---- $f: the report" >&2
+    grep -E -A40 '^==[0-9]+==|^(ERROR|SUMMARY|INFO: Test unit|MS: |artifact_prefix)|runtime error|out-of-memory|timeout' \
+      "$f" | head -60 >&2 || true
+  done
+  for c in "$dir"/crashers/*/*; do
+    [ -f "$c" ] || continue
+    echo "---- $c ($(stat -c %s "$c") bytes), base64:" >&2
+    head -c 4096 "$c" | base64 -w 120 >&2
+  done
 fi
 exit "$status"
