@@ -251,6 +251,7 @@ int main(int argc, char** argv) {
   std::string data = SCANPRESS_SHARED_DATA, json_path = "compare.json", md_path = "compare.md", plot_dir;
   std::vector<int> bits = {12, 14};
   std::string only;  // comma-separated name prefixes (igea,horse): only those scans
+  bool targets = false;
   Options opt;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -260,6 +261,7 @@ int main(int argc, char** argv) {
     else if (a == "--markdown") md_path = next();
     else if (a == "--runs") opt.runs = std::max(1, std::atoi(next().c_str()));
     else if (a == "--rd") opt.rd = true;
+    else if (a == "--targets") opt.rd = targets = true;
     else if (a == "--plots") plot_dir = next();
     else if (a == "--scans") only = next();
     else if (a == "--bits") {
@@ -274,9 +276,11 @@ int main(int argc, char** argv) {
       std::fprintf(
           stderr,
           "usage: scanpress-compare [--data DIR] [--bits 12,14] [--runs 5] [--json F] [--markdown F]\n"
-          "                         [--scans igea,horse] [--rd [--plots DIR]]\n"
+          "                         [--scans igea,horse] [--rd [--plots DIR]] [--targets]\n"
           "  --rd: rate-distortion: the error of every result, the lossy anchors (Draco -qp 8..12, meshoptimizer's\n"
-          "        simplifier + Draco, gltfpack -si R -cc), pm's points against their envelope, bpv-error plots\n");
+          "        simplifier + Draco, gltfpack -si R -cc), pm's points against their envelope, bpv-error plots\n"
+          "  --targets: --rd, and pm's error targets (--max-error 5e-5..5e-4, rms and max) measured independently\n"
+          "        against the anchors' best size within each target\n");
       return 1;
     }
   }
@@ -305,11 +309,20 @@ int main(int argc, char** argv) {
     opt.device = *device;
   }
   std::vector<Row> rows;
-  for (const auto& s : scans)
+  std::vector<TargetRow> target_rows;
+  for (const auto& s : scans) {
     for (int b : bits) {
       std::fprintf(stderr, "%s at %d bits\n", fs::path(s).filename().c_str(), b);
       runScan(s, b, bits.front(), opt, rows);
     }
+    if (!targets) continue;
+    auto mesh = readMeshFile(s);
+    if (!mesh.isOk()) continue;
+    std::vector<Row> anchors;
+    for (const auto& r : rows)
+      if (r.anchor && r.scan == fs::path(s).filename().string()) anchors.push_back(r);
+    runTargets(s, *mesh, anchors, opt, target_rows);
+  }
   nlohmann::json j = nlohmann::json::array();
   for (const auto& r : rows)
     j.push_back({{"scan", r.scan},
@@ -358,6 +371,7 @@ int main(int argc, char** argv) {
       md << line;
     }
     writeEnvelopeTable(md, rows);
+    writeTargetsTable(md, target_rows);
     if (!plot_dir.empty()) {
       // Per scan, bits per original vertex against the symmetric RMS and against the symmetric max (Hausdorff).
       fs::create_directories(plot_dir);

@@ -46,4 +46,25 @@ void runPmSweep(const std::string& scan, const Mesh& mesh, const Grid& grid, con
 // anchors (interpolated in log RMS) at symmetric RMS between 5e-5 and 3e-4 of the diagonal; the median ratio.
 void writeEnvelopeTable(std::ostream& md, const std::vector<CompareRow>& rows);
 
+// One error target of issue 19 (`--targets`): scanpress encode --codec pm --max-error E --error metric on a scan,
+// measured independently afterwards, against the smallest size the anchors reach within E.
+struct TargetRow {
+  std::string scan;
+  std::string metric;  // "rms" or "max"
+  double target = 0;   // relative to the diagonal
+  uint64_t vertices = 0, bytes = 0;
+  int bits = 0;
+  bool encoded = false;  // the encoder reported the target met (else `failure` says why)
+  std::string failure;
+  double achieved = -1;    // independent measurement (scanpress measure's defaults, another seed), relative
+  double anchor_bpv = -1;  // the anchors' lower envelope at the target (interpolated in log error); -1: none reaches
+  double seconds = 0;
+};
+
+// Runs the targets 5e-5, 1e-4, 2e-4, 5e-4 (rms and max) on `path` and appends their rows; `anchors` are the scan's
+// anchor rows (runAnchors) for the envelope.
+void runTargets(const std::string& path, const Mesh& mesh, const std::vector<CompareRow>& anchors,
+                const CompareOptions& opt, std::vector<TargetRow>& out);
+void writeTargetsTable(std::ostream& md, const std::vector<TargetRow>& rows);
+
 }  // namespace scanpress

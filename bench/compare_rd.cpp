@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -22,7 +23,9 @@
 
 #include "bench/compare.h"
 #include "engine/codecs/codec.h"
+#include "jobs/commands.h"
 #include "jobs/measure.h"
+#include "jobs/pipeline.h"
 
 namespace scanpress {
 namespace {
@@ -392,6 +395,116 @@ void writeEnvelopeTable(std::ostream& md, const std::vector<CompareRow>& rows) {
   if (medians.empty()) return;
   std::sort(medians.begin(), medians.end());
   std::snprintf(line, sizeof line, "\nMedian over scans: %.3f (target: at most 0.9)\n", medians[medians.size() / 2]);
+  md << line;
+}
+
+namespace {
+
+// The anchors' lower envelope of bits per original vertex against the error (`max`: Hausdorff, else RMS), at
+// `error`: interpolated in log error between the envelope's points; beyond its least-error point, that point's bpv
+// (every anchor with less error is larger). -1 when no anchor reaches `error`.
+double envelopeAt(const std::vector<CompareRow>& anchors, bool max, double error) {
+  std::vector<std::pair<double, double>> pts;  // (error, bpv)
+  for (const auto& a : anchors) {
+    const double e = max ? a.max_rel : a.rms_rel;
+    if (a.anchor && e > 0 && a.vertices) pts.push_back({e, 8.0 * a.bytes / a.vertices});
+  }
+  std::sort(pts.begin(), pts.end());
+  std::vector<std::pair<double, double>> env;
+  for (const auto& p : pts)
+    if (env.empty() || p.second < env.back().second) env.push_back(p);
+  if (env.empty() || env.front().first > error) return -1;
+  for (size_t i = 0; i + 1 < env.size(); ++i)
+    if (error >= env[i].first && error < env[i + 1].first) {
+      const double t = std::log(error / env[i].first) / std::log(env[i + 1].first / env[i].first);
+      return env[i].second + t * (env[i + 1].second - env[i].second);
+    }
+  return env.back().second;
+}
+
+}  // namespace
+
+void runTargets(const std::string& path, const Mesh& mesh, const std::vector<CompareRow>& anchors,
+                const CompareOptions& opt, std::vector<TargetRow>& out) {
+  const fs::path dir = fs::temp_directory_path() / ("scanpress-targets-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string scan = fs::path(path).filename().string();
+  for (const bool max : {false, true})
+    for (double e : {5e-5, 1e-4, 2e-4, 5e-4}) {
+      TargetRow row;
+      row.scan = scan;
+      row.metric = max ? "max" : "rms";
+      row.target = e;
+      row.vertices = mesh.positions.size();
+      row.anchor_bpv = envelopeAt(anchors, max, e);
+      EncodeSettings s;
+      s.input = path;
+      s.output = (dir / "t.spz").string();
+      s.codec = "pm";
+      s.threads = 1;
+      s.target.kind = TargetKind::kMaxError;
+      s.target.max_error = e;
+      s.target.metric = max ? ErrorMetric::kMax : ErrorMetric::kRms;
+      const auto t0 = std::chrono::steady_clock::now();
+      auto r = encodeFile(s, nullptr, opt.device);
+      row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      if (!r.isOk()) {
+        row.failure = r.status().toString();
+      } else if (r->target && !r->target->met) {
+        row.failure = r->target->status.toString();
+      } else {
+        row.encoded = true;
+        row.bytes = r->bytes;
+        row.bits = r->grid.bits;
+        ContainerHeader header;
+        auto q = decodeContainer(s.output, std::nullopt, &header);
+        if (q.isOk()) {
+          Mesh decoded;
+          for (const auto& p : q->positions) decoded.positions.push_back(header.grid.dequantize(p));
+          decoded.triangles = q->triangles;
+          MeasureSettings ms;  // scanpress measure's defaults, another seed than the encoder's search
+          ms.seed = 12345;
+          auto m = measureMeshes(mesh, decoded, ms, opt.device);
+          if (m.isOk()) row.achieved = (max ? m->symmetric.max : m->symmetric.rms) / m->diagonal;
+        } else {
+          row.failure = "decode: " + q.status().toString();
+        }
+      }
+      std::fprintf(stderr, "  %s %s %.0e: %s %.3e, %.2f bpv (anchors %.2f), %.1f s\n", scan.c_str(),
+                   row.metric.c_str(), e, row.encoded ? "achieved" : "FAILED", row.achieved,
+                   8.0 * row.bytes / std::max<uint64_t>(1, row.vertices), row.anchor_bpv, row.seconds);
+      out.push_back(row);
+    }
+  fs::remove_all(dir);
+}
+
+void writeTargetsTable(std::ostream& md, const std::vector<TargetRow>& rows) {
+  if (rows.empty()) return;
+  md << "\n### Error targets: `encode --codec pm --max-error E --error M`, measured independently\n\n"
+     << "| scan | metric | target | achieved | met | bits | bpv | anchors' best bpv within E | ratio | seconds |\n"
+     << "|---|---|---:|---:|---|---:|---:|---:|---:|---:|\n";
+  char line[512];
+  int met = 0, total = 0, within = 0, compared = 0;
+  std::vector<double> ratios;
+  for (const auto& r : rows) {
+    ++total;
+    const bool ok = r.encoded && r.achieved >= 0 && r.achieved <= r.target;
+    met += ok;
+    const double bpv = 8.0 * r.bytes / std::max<uint64_t>(1, r.vertices);
+    const double ratio = ok && r.anchor_bpv > 0 ? bpv / r.anchor_bpv : -1;
+    if (ratio > 0) ratios.push_back(ratio), ++compared, within += ratio <= 1.1;
+    std::snprintf(line, sizeof line, "| %s | %s | %.0e | %.3e | %s | %d | %.2f | %s | %s | %.1f |\n", r.scan.c_str(),
+                  r.metric.c_str(), r.target, r.achieved, ok ? "yes" : (r.encoded ? "NO" : "failed"), r.bits, bpv,
+                  r.anchor_bpv > 0 ? std::to_string(r.anchor_bpv).substr(0, 5).c_str() : "none",
+                  ratio > 0 ? std::to_string(ratio).substr(0, 5).c_str() : "-", r.seconds);
+    md << line;
+    if (!r.encoded) md << "|  | " << r.failure.substr(0, 200) << " | | | | | | | | |\n";
+  }
+  std::sort(ratios.begin(), ratios.end());
+  std::snprintf(line, sizeof line,
+                "\nMet (independent measurement): %d of %d. Within 10%% of the anchors' best size: %d of %d compared "
+                "(median ratio %.3f).\n",
+                met, total, within, compared, ratios.empty() ? 0.0 : ratios[ratios.size() / 2]);
   md << line;
 }
 
