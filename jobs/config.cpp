@@ -332,8 +332,8 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     // A target chooses the bits unless they are given.
     s.encode.target.fixed_bits = codec->is_object() && codec->contains("bits");
     c.finish();
-    if (error.isOk() && !findCodec(s.encode.codec)) {
-      c.fail("/codec/name", "unknown codec '" + s.encode.codec + "' (available: " + codecNames() + ")");
+    if (error.isOk() && !knownCodecName(s.encode.codec)) {
+      c.fail("/codec/name", "unknown codec '" + s.encode.codec + "' (available: " + codecNames() + ", auto)");
     }
   }
   if (const json* stages = top.object("stages")) readStages(*stages, config_path, error, s.encode.stages);

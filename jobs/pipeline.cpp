@@ -719,9 +719,16 @@ ErrorKnob errorKnobOf(CodecId id) {
   return nullptr;
 }
 
+bool knownCodecName(const std::string& name) { return name == kAutoCodec || findCodec(name) != nullptr; }
+
 Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progress,
                                 std::shared_ptr<EmbreeDevice> device, const PipelineHooks* hooks) {
   if (s.target.active()) return encodeToTarget(s, progress, std::move(device), hooks);
+  if (s.codec == kAutoCodec) {
+    EncodeSettings lossless = s;
+    lossless.codec = "edgebreaker";
+    return encodeFileOnce(lossless, progress, std::move(device), hooks);
+  }
   return encodeFileOnce(s, progress, std::move(device), hooks);
 }
 

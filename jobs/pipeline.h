@@ -86,6 +86,14 @@ struct EncodeSettings {
   double knob_cells = -1;
 };
 
+// `--codec auto` (/codec/name "auto"): under an error or size target, the target search runs for pm and for
+// edgebreaker and keeps the smaller result that meets an error target (the least error that fits a size target);
+// simplification wins at loose RMS targets, plain quantization at tight ones and under the max metric (bench/
+// RESULTS.md, "Error targets"). Without a target, auto is edgebreaker, the smallest lossless codec.
+inline constexpr const char* kAutoCodec = "auto";
+// Whether `name` is a codec or auto.
+bool knownCodecName(const std::string& name);
+
 // A lossy codec's error knob: sets how far the codec may depart from the tile, in grid cells (pm:
 // PmOptions::max_error). nullptr for a codec without one (every lossless codec).
 using ErrorKnob = void (*)(CodecOptions& options, double cells);
@@ -120,6 +128,7 @@ struct TileReport {
 
 // What the target search did (jobs/targets.cpp), for the report.
 struct TargetAttempt {
+  std::string codec;  // the codec of this pass (with --codec auto, each candidate's)
   int bits = 0;
   double knob_cells = -1;  // global knob (size targets with a knob codec), or -1
   uint64_t bytes = 0;

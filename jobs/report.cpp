@@ -98,7 +98,7 @@ json targetJson(const TargetReport& t) {
   if (!t.status.isOk()) j["failure"] = t.status.toString();
   json attempts = json::array();
   for (const TargetAttempt& a : t.attempts) {
-    json e = {{"bits", a.bits}, {"bytes", a.bytes}, {"vertices", a.vertices}, {"met", a.met}};
+    json e = {{"codec", a.codec}, {"bits", a.bits}, {"bytes", a.bytes}, {"vertices", a.vertices}, {"met", a.met}};
     if (a.knob_cells >= 0) e["knob_cells"] = a.knob_cells;
     if (a.error >= 0) e["error"] = a.error;
     if (!a.refused.empty()) e["refused"] = a.refused;

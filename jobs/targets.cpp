@@ -56,6 +56,15 @@ class TargetSearch {
     return finish();
   }
 
+  // For auto: the kept container stays under its tracked temporary name (kept()) instead of being renamed into
+  // place; the caller renames or removes it.
+  void keepInPlace() { keep_in_place_ = true; }
+  struct Kept {
+    std::string path;  // empty: nothing was kept
+    uint64_t tracked = 0;
+  };
+  const Kept& kept() const { return kept_; }
+
  private:
   struct Pass {
     Status status;  // a setting the pipeline refuses (kLimitExceeded: degenerate triangles) counts as a miss
@@ -79,6 +88,8 @@ class TargetSearch {
     const fs::path target(s_.output);
     std::string name = ".";  // appended piecewise: GCC 12 warns (-Wrestrict) on "." + std::string
     name += target.filename().string();
+    name += ".";
+    name += s_.codec;  // distinct per codec: --codec auto keeps one search's result while the next runs
     name += ".target";
     name += std::to_string(passes_.size());
     name += ".tmp-";
@@ -97,6 +108,7 @@ class TargetSearch {
       out.result = std::move(r).value();
     }
     TargetAttempt a;
+    a.codec = s_.codec;
     a.bits = bits;
     a.knob_cells = knob_cells;
     if (out.status.isOk()) {
@@ -263,7 +275,9 @@ class TargetSearch {
     std::error_code ec;
     for (const Pass& p : passes_)
       if (&p != chosen_ || !(met || result.failed_tiles > 0)) remove(p);
-    if (met || result.failed_tiles > 0) {  // failed tiles: the container is kept, as without a target
+    if ((met || result.failed_tiles > 0) && keep_in_place_) {
+      kept_ = {chosen_->path, chosen_->tracked};
+    } else if (met || result.failed_tiles > 0) {  // failed tiles: the container is kept, as without a target
       fs::rename(chosen_->path, s_.output, ec);
       untrack(chosen_->tracked);
       if (ec)
@@ -323,6 +337,8 @@ class TargetSearch {
   std::shared_ptr<EmbreeDevice> device_;
   const PipelineHooks* hooks_;
   bool knob_ = false;
+  bool keep_in_place_ = false;
+  Kept kept_;
   std::deque<Pass> passes_;  // stable addresses
   Pass* chosen_ = nullptr;   // the pass reported (and kept when met)
   Pass* best_ = nullptr;     // the pass that meets the target at the finest setting (or fewest bits)
@@ -345,11 +361,76 @@ int predictBits(double max_error, ErrorMetric metric, double extent_over_diagona
   return std::clamp(static_cast<int>(std::ceil(need - 1e-9)), kMinGridBits, kMaxGridBits);
 }
 
+namespace {
+
+// --codec auto under a target: the search for each candidate codec, then the better result that meets the target
+// (an error target: the fewest bytes; a size target: the least RMS error, so both are measured). Each search keeps
+// its result under its tracked temporary name until one is chosen; every attempt is in the report.
+Result<EncodeResult> encodeToTargetAuto(const EncodeSettings& settings, ProgressListener* progress,
+                                        std::shared_ptr<EmbreeDevice> device, const PipelineHooks* hooks) {
+  if (!device) {
+    SP_ASSIGN_OR_RETURN(device, EmbreeDevice::create());
+  }
+  struct Candidate {
+    EncodeResult result;
+    TargetSearch::Kept kept;
+  };
+  std::vector<Candidate> done;
+  auto discard = [](const TargetSearch::Kept& k) {
+    std::error_code ec;
+    if (!k.path.empty()) fs::remove(k.path, ec);
+    untrack(k.tracked);
+  };
+  std::vector<TargetAttempt> attempts;
+  for (const char* codec : {"pm", "edgebreaker"}) {
+    EncodeSettings c = settings;
+    c.codec = codec;
+    if (settings.target.kind != TargetKind::kMaxError) c.measure.enabled = true;
+    TargetSearch search(c, progress, device, hooks);
+    search.keepInPlace();
+    auto r = search.run();
+    if (!r.isOk()) {
+      for (auto& d : done) discard(d.kept);
+      return r.status();
+    }
+    if (r->target) attempts.insert(attempts.end(), r->target->attempts.begin(), r->target->attempts.end());
+    done.push_back({std::move(r).value(), search.kept()});
+  }
+  auto metOf = [](const Candidate& c) { return c.result.target && c.result.target->met; };
+  auto better = [&](const Candidate& a, const Candidate& b) {  // a is better than b
+    if (metOf(a) != metOf(b)) return metOf(a);
+    if (settings.target.kind == TargetKind::kMaxError) return a.result.bytes < b.result.bytes;
+    return errorOf(a.result, ErrorMetric::kRms) < errorOf(b.result, ErrorMetric::kRms);
+  };
+  size_t best = 0;
+  for (size_t i = 1; i < done.size(); ++i)
+    if (better(done[i], done[best])) best = i;
+  if (!metOf(done[best])) best = done.size() - 1;  // none met: the lossless codec's miss names the finest grid
+  for (size_t i = 0; i < done.size(); ++i)
+    if (i != best) discard(done[i].kept);
+  Candidate& chosen = done[best];
+  if (!chosen.kept.path.empty()) {
+    std::error_code ec;
+    fs::rename(chosen.kept.path, settings.output, ec);
+    untrack(chosen.kept.tracked);
+    if (ec) {
+      fs::remove(chosen.kept.path, ec);
+      return makeError(ErrorCode::kIo, settings.output + ": cannot rename the chosen result into place");
+    }
+  }
+  EncodeResult result = std::move(chosen.result);
+  if (result.target) result.target->attempts = std::move(attempts);
+  return result;
+}
+
+}  // namespace
+
 Result<EncodeResult> encodeToTarget(const EncodeSettings& settings, ProgressListener* progress,
                                     std::shared_ptr<EmbreeDevice> device, const PipelineHooks* hooks) {
   // The passes write temporaries next to the output, which the pipeline's own check cannot relate to the input:
   // `encode X X --max-error E` must not replace X when the chosen pass is renamed into place.
   SP_RETURN_IF_ERROR(checkOutputPath(settings.output, {settings.input}));
+  if (settings.codec == kAutoCodec) return encodeToTargetAuto(settings, progress, std::move(device), hooks);
   return TargetSearch(settings, progress, std::move(device), hooks).run();
 }
 

@@ -10,6 +10,8 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <set>
 #include <sstream>
 
 #include "engine/quantize.h"
@@ -589,6 +591,111 @@ TEST(Targets, PmMeetsASizeTarget) {
     finer_missed |= a.knob_cells < r->target->knob_cells && !a.met;
   }
   EXPECT_TRUE(finer_missed);
+}
+
+// --codec auto: both searches run, and the kept result is the smaller of what pm and edgebreaker each choose on
+// their own (an error target), or the one with less error (a size target); every attempt of both is in the report,
+// no temporary is left. On the bunny the max metric keeps edgebreaker (simplifying leaves too little of a max
+// budget) and a loose RMS target keeps pm. The sanitizer build runs a small sphere (the bunny's pm searches take
+// minutes there).
+TEST(Targets, AutoKeepsTheBetterOfPmAndEdgebreaker) {
+  testing::TempDir dir;
+#if defined(__SANITIZE_ADDRESS__)
+  const std::string input = sphereFile(dir);
+  const std::vector<std::pair<ErrorMetric, double>> cases = {{ErrorMetric::kRms, 1e-3}};
+#else
+  const std::string input = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
+  const std::vector<std::pair<ErrorMetric, double>> cases = {{ErrorMetric::kMax, 2e-4}, {ErrorMetric::kRms, 5e-4}};
+#endif
+  for (const auto& [metric, e] : cases) {
+    SCOPED_TRACE(std::string(errorMetricName(metric)) + " " + std::to_string(e));
+    std::map<std::string, uint64_t> alone;
+    for (const char* codec : {"pm", "edgebreaker"}) {
+      EncodeSettings s = targetSettings(input, dir.file(std::string(codec) + ".spz"), metric, e);
+      s.codec = codec;
+      s.tile_triangles = 131072;
+      auto r = encodeFile(s, nullptr, testing::device());
+      ASSERT_TRUE(r.isOk()) << r.status().toString();
+      ASSERT_TRUE(r->target && r->target->met) << codec;
+      alone[codec] = r->bytes;
+    }
+    EncodeSettings s = targetSettings(input, dir.file("auto.spz"), metric, e);
+    s.codec = kAutoCodec;
+    s.tile_triangles = 131072;
+    auto r = encodeFile(s, nullptr, testing::device());
+    ASSERT_TRUE(r.isOk()) << r.status().toString();
+    ASSERT_TRUE(r->target && r->target->met) << r->target->status.toString();
+    const std::string expect = alone["pm"] < alone["edgebreaker"] ? "pm" : "edgebreaker";
+    EXPECT_EQ(r->codec, expect);
+    EXPECT_EQ(r->bytes, std::min(alone["pm"], alone["edgebreaker"]));
+    EXPECT_EQ(fs::file_size(s.output), r->bytes);
+    EXPECT_LE(independentError(input, s.output, metric), e);
+    std::set<std::string> codecs;
+    for (const TargetAttempt& a : r->target->attempts) codecs.insert(a.codec);
+    EXPECT_EQ(codecs, (std::set<std::string>{"pm", "edgebreaker"}));
+    size_t temporaries = 0;
+    for (const auto& f : fs::directory_iterator(dir.path()))
+      temporaries += f.path().filename().string().find(".tmp-") != std::string::npos;
+    EXPECT_EQ(temporaries, 0u);
+    EXPECT_EQ(trackedCount(), 0u);
+#if !defined(__SANITIZE_ADDRESS__)
+    EXPECT_EQ(r->codec, metric == ErrorMetric::kMax ? "edgebreaker" : "pm");
+#endif
+    std::printf("%s %.0e: auto kept %s, %llu B (pm %llu B, edgebreaker %llu B)\n", errorMetricName(metric), e,
+                r->codec.c_str(), static_cast<unsigned long long>(r->bytes),
+                static_cast<unsigned long long>(alone["pm"]), static_cast<unsigned long long>(alone["edgebreaker"]));
+  }
+}
+
+// --codec auto under a size target keeps, of the two that fit, the one with less RMS error; without a target it is
+// edgebreaker; the CLI and job files accept it.
+TEST(Targets, AutoUnderASizeTargetAndWithoutOne) {
+  testing::TempDir dir;
+  const std::string input = sphereFile(dir);
+  EncodeSettings s;
+  s.input = input;
+  s.output = dir.file("auto.spz");
+  s.codec = kAutoCodec;
+  s.bits = 12;
+  s.target.kind = TargetKind::kMaxBytes;
+  s.target.fixed_bits = true;
+  s.target.max_bytes = 6000;
+  auto r = encodeFile(s, nullptr, testing::device());
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  ASSERT_TRUE(r->target && r->target->met) << r->target->status.toString();
+  EXPECT_LE(fs::file_size(s.output), s.target.max_bytes);
+  std::map<std::string, double> error;
+  for (const char* codec : {"pm", "edgebreaker"}) {
+    EncodeSettings c = s;
+    c.codec = codec;
+    c.output = dir.file(std::string(codec) + ".spz");
+    c.measure.enabled = true;
+    auto one = encodeFile(c, nullptr, testing::device());
+    ASSERT_TRUE(one.isOk()) << one.status().toString();
+    if (!one->target->met) continue;
+    const ErrorStats sym = symmetricOf(statsOf(one->forward), statsOf(one->backward));
+    error[codec] = sym.rms;
+  }
+  ASSERT_FALSE(error.empty());
+  std::string best = error.begin()->first;
+  for (const auto& [codec, e] : error)
+    if (e < error[best]) best = codec;
+  EXPECT_EQ(r->codec, best);
+  EXPECT_EQ(trackedCount(), 0u);
+
+  EncodeSettings plain;
+  plain.input = input;
+  plain.output = dir.file("plain.spz");
+  plain.codec = kAutoCodec;
+  auto p = encodeFile(plain, nullptr, testing::device());
+  ASSERT_TRUE(p.isOk()) << p.status().toString();
+  EXPECT_EQ(p->codec, "edgebreaker");
+  EXPECT_EQ(testing::runScanpress("encode '" + input + "' '" + dir.file("cli.spz") + "' --codec auto --quiet"), 0);
+  auto job = parseJobConfig(R"({"inputs": ["a.ply"], "codec": {"name": "auto"}})", "/x/j.json");
+  EXPECT_TRUE(job.isOk()) << job.status().toString();
+  job = parseJobConfig(R"({"inputs": ["a.ply"], "codec": {"name": "automatic"}})", "/x/j.json");
+  ASSERT_FALSE(job.isOk());
+  EXPECT_NE(job.status().message().find("auto"), std::string::npos);
 }
 
 }  // namespace

@@ -62,7 +62,8 @@ mesh from stdin (with --format), OUT `-` writes the container to stdout (message
 folder is created; an OUT named like a mesh, glTF, image or JSON file is refused.
 
 options:
-  --codec NAME        tile codec (default edgebreaker; available: %s)
+  --codec NAME        tile codec (default edgebreaker; available: %s); auto: with a target, the
+                      smaller result of pm and edgebreaker that meets it (else edgebreaker)
   --stages LIST       geometry stages every tile runs before the codec, in order: NAME[:KEY=VALUE...][,NAME...]
                       (available: %s); e.g. smooth:iterations=5 (configs/REFERENCE.md, "Stages")
   --bits N            quantization bits, 8..24 (default 16): the largest bounding-box extent is divided into 2^N
@@ -331,7 +332,8 @@ int runEncode(int argc, char** argv) {
   s.input = args.positional[0];
   s.output = args.positional[1];
   if (const auto* c = args.get("--codec")) s.codec = *c;
-  if (!findCodec(s.codec)) return usage("unknown codec '" + s.codec + "' (available: " + codecNames() + ")", "encode");
+  if (!knownCodecName(s.codec))
+    return usage("unknown codec '" + s.codec + "' (available: " + codecNames() + ", auto)", "encode");
   if (const auto* st = args.get("--stages")) {
     auto stages = parseStagesOption(*st, "--stages");
     if (!stages.isOk()) return usage(stages.status().message(), "encode");
