@@ -49,7 +49,7 @@ void writeEnvelopeTable(std::ostream& md, const std::vector<CompareRow>& rows);
 // One error target of issue 19 (`--targets`): scanpress encode --codec pm --max-error E --error metric on a scan,
 // measured independently afterwards, against the smallest size the anchors reach within E.
 struct TargetRow {
-  std::string scan;
+  std::string scan, codec;
   std::string metric;  // "rms" or "max"
   double target = 0;   // relative to the diagonal
   uint64_t vertices = 0, bytes = 0;
@@ -61,8 +61,8 @@ struct TargetRow {
   double seconds = 0;
 };
 
-// Runs the targets 5e-5, 1e-4, 2e-4, 5e-4 (rms and max) on `path` and appends their rows; `anchors` are the scan's
-// anchor rows (runAnchors) for the envelope.
+// Runs the targets 5e-5, 1e-4, 2e-4, 5e-4 (rms and max) on `path` with pm and with edgebreaker (whose better result
+// is what --codec auto keeps) and appends their rows; `anchors` are the scan's anchor rows (runAnchors).
 void runTargets(const std::string& path, const Mesh& mesh, const std::vector<CompareRow>& anchors,
                 const CompareOptions& opt, std::vector<TargetRow>& out);
 void writeTargetsTable(std::ostream& md, const std::vector<TargetRow>& rows);

@@ -50,6 +50,7 @@ class Scanner {
 
   // Binary: reads exactly `n` bytes or fails with kTruncated.
   Status read(void* dst, size_t n) {
+    if (n == 0) return Status::ok();  // dst may be an empty vector's null data(): memcpy must not see it
     if (end_ - pos_ >= n) {
       std::memcpy(dst, buf_.data() + pos_, n);
       pos_ += n;
