@@ -13,6 +13,7 @@
 #include "jobs/container_file.h"
 #include "jobs/errors.h"
 #include "jobs/file_io.h"
+#include "jobs/html_report.h"
 #include "jobs/progress.h"
 #include "jobs/render.h"
 #include "jobs/report.h"
@@ -103,6 +104,7 @@ Status checkJobOutputs(const JobSettings& job, const std::vector<JobInput>& inpu
       SP_RETURN_IF_ERROR(plan((dir / outputName(kErrorPictureName, in, sub)).string(), "/measure/render"));
   }
   if (!job.summary_name.empty()) SP_RETURN_IF_ERROR(plan((dir / job.summary_name).string(), "/output/summary"));
+  if (!job.html_name.empty()) SP_RETURN_IF_ERROR(plan((dir / job.html_name).string(), "/output/html"));
   return Status::ok();
 }
 
@@ -365,9 +367,11 @@ static void encodeOne(const JobSettings& job, const EncodeSettings& s, const std
           break;
         }
     if (s.measure.render && f.state == FileOutcome::State::kOk) {
-      Status w = renderErrorPicture(
-          s, (fs::path(job.output_directory) / outputName(kErrorPictureName, f.input, f.subfolder)).string(), device);
+      const std::string png =
+          (fs::path(job.output_directory) / outputName(kErrorPictureName, f.input, f.subfolder)).string();
+      Status w = renderErrorPicture(s, png, device);
       if (!w.isOk()) f.state = FileOutcome::State::kFailed, f.error = w;
+      if (w.isOk()) f.picture = png;
     }
     if (!f.report.empty()) {
       Status w = writeText(f.report, encodeReportJson(s, f.result, fingerprint));
@@ -429,6 +433,11 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options, co
           FileOutcome::Counts{previous->vertices,    previous->faces,        previous->bytes,       previous->tiles, 0,
                               previous->input_bytes, previous->rms_relative, previous->max_relative};
       f.report_written = true;
+      if (s.measure.enabled && s.measure.render) {  // the picture of the run that made the output, if still there
+        const std::string png =
+            (fs::path(job.output_directory) / outputName(kErrorPictureName, f.input, f.subfolder)).string();
+        if (fs::exists(png, ec)) f.picture = png;
+      }
       batch.files.push_back(std::move(f));
       continue;
     }
@@ -465,6 +474,9 @@ Result<BatchResult> runJob(const JobSettings& job, const RunOptions& options, co
                    path.c_str(), other->c_str());
     SP_RETURN_IF_ERROR(writeText(path,
                                  batchSummaryJson(job.config_path, batch, options.shard ? &*options.shard : nullptr)));
+    // The page shows the whole job: a shard leaves it to `run --merge`.
+    if (!job.html_name.empty() && !options.shard)
+      SP_RETURN_IF_ERROR(writeHtmlReport(path, (fs::path(job.output_directory) / job.html_name).string(), {}, device));
   }
   return batch;
 }
@@ -504,7 +516,10 @@ Result<MergedSummary> mergeJobShards(const JobSettings& job) {
   std::vector<std::string> expected;
   for (const auto& in : inputs) expected.push_back(in.path);
   SP_ASSIGN_OR_RETURN(MergedSummary merged, mergeShardSummaries(job.config_path, paths, expected));
-  SP_RETURN_IF_ERROR(writeText((fs::path(job.output_directory) / job.summary_name).string(), merged.json));
+  const std::string summary = (fs::path(job.output_directory) / job.summary_name).string();
+  SP_RETURN_IF_ERROR(writeText(summary, merged.json));
+  if (!job.html_name.empty())
+    SP_RETURN_IF_ERROR(writeHtmlReport(summary, (fs::path(job.output_directory) / job.html_name).string(), {}));
   return merged;
 }
 

@@ -25,6 +25,7 @@ struct RunOptions {
 struct FileOutcome {
   enum class State { kOk, kSkipped, kFailed };
   std::string input, output, report;
+  std::string picture;    // the error heat map (/measure/render), when it exists
   std::string subfolder;  // the input's subfolder ({dir} in output names)
   State state = State::kFailed;
   Status error;

@@ -245,6 +245,7 @@ std::vector<std::string> knownConfigKeys() {
           "/output/name",
           "/output/report",
           "/output/summary",
+          "/output/html",
           "/codec/name",
           "/codec/bits",
           "/codec/normal_bits",
@@ -296,7 +297,13 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     o.string("name", s.output_name, false);
     o.string("report", s.report_name);
     o.string("summary", s.summary_name);
+    o.string("html", s.html_name);
     o.finish();
+    if (error.isOk() && !s.html_name.empty() && s.summary_name.empty())
+      o.fail("/output/html", "needs /output/summary (the page is made from the batch summary)");
+    if (error.isOk() && !s.html_name.empty() && lowerExtension(s.html_name) != ".html" &&
+        lowerExtension(s.html_name) != ".htm")
+      o.fail("/output/html", "must end in .html, got '" + s.html_name + "'");
     if (error.isOk() && !validPattern(s.output_name))
       o.fail("/output/name", "unknown placeholder (use {stem}, {name} or {dir})");
     if (error.isOk())
@@ -307,15 +314,18 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     // right after `{dir}`, the input's subfolder (which never holds `..`: see expandInputs).
     for (auto [pointer, name] : {std::pair<const char*, const std::string*>{"/output/name", &s.output_name},
                                  {"/output/report", &s.report_name},
-                                 {"/output/summary", &s.summary_name}}) {
+                                 {"/output/summary", &s.summary_name},
+                                 {"/output/html", &s.html_name}}) {
+      if (name->empty() && name == &s.html_name) continue;  // none
       std::string plain = *name;
       for (size_t at; (at = plain.find("{dir}/")) != std::string::npos;) plain.erase(at, 6);
       if (error.isOk() && (plain.find('/') != std::string::npos || plain.empty() || plain == "." || plain == ".."))
         o.fail(pointer, std::string("must be a file name (no '/'") +
-                            (*name == s.summary_name ? "" : " but after {dir}") +
+                            (name == &s.summary_name || name == &s.html_name ? "" : " but after {dir}") +
                             "): files are written inside /output/directory");
-      if (error.isOk() && name == &s.summary_name && name->find("{dir}") != std::string::npos)
-        o.fail(pointer, "must be a file name: the summary is one file for the whole job");
+      if (error.isOk() && (name == &s.summary_name || name == &s.html_name) && name->find("{dir}") != std::string::npos)
+        o.fail(pointer, std::string("must be a file name: the ") + (name == &s.html_name ? "page" : "summary") +
+                            " is one file for the whole job");
     }
     if (error.isOk() && s.report_name == s.output_name)
       o.fail("/output/report", "must differ from /output/name: the report would replace the container");

@@ -23,6 +23,7 @@ struct JobSettings {
   std::string output_name = "{stem}.spz";          // {stem}: file name without mesh extensions; {name}: file name
   std::string report_name = "{stem}.report.json";  // "" for no per-file report (then resume is off)
   std::string summary_name = "summary.json";       // batch summary in the output directory; "" for none
+  std::string html_name;  // report.html of the summary (jobs/html_report.h) in the output directory; "" for none
   bool resume = true;     // skip inputs whose output is complete and was made with the same settings
   EncodeSettings encode;  // input and output are filled in per file
 };

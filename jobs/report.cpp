@@ -236,6 +236,7 @@ std::string batchSummaryJson(const std::string& config_path, const BatchResult& 
   for (const auto& f : batch.files) {
     json e = {{"input", f.input}, {"output", f.output}, {"seconds", f.seconds}};
     if (f.report_written) e["report"] = f.report;  // only a report that exists
+    if (!f.picture.empty()) e["picture"] = f.picture;
     switch (f.state) {
       case FileOutcome::State::kOk: e["status"] = "ok"; break;
       case FileOutcome::State::kSkipped: e["status"] = "skipped"; break;

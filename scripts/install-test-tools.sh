@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Optional tools some tests use to check outputs against independent truth: node with the Khronos glTF validator
-# (npm package gltf-validator). Best effort: when they cannot be installed (no network for npm), those tests skip
-# and say why.
+# (npm package gltf-validator), and headless Chromium (Debian `chromium`) that loads report.html. Best effort: when
+# they cannot be installed (no network), those tests skip and say why.
 set -uo pipefail
 source "$(dirname "$0")/lib.sh"
 if ! command -v node >/dev/null; then
@@ -11,5 +11,8 @@ if command -v node >/dev/null && command -v npm >/dev/null &&
   ! NODE_PATH="$(npm root -g 2>/dev/null)" node -e "require('gltf-validator')" >/dev/null 2>&1; then
   timeout 300 npm install -g --no-fund --no-audit gltf-validator >/dev/null 2>&1 ||
     echo "note: npm could not install gltf-validator; glTF validation tests will skip"
+fi
+if ! command -v chromium >/dev/null; then
+  (install_missing_packages chromium) || echo "note: chromium could not be installed; the report.html browser test will skip"
 fi
 exit 0

@@ -6,7 +6,6 @@
 #include <oneapi/tbb/task_arena.h>
 
 #include <nlohmann/json.hpp>
-#include <png.h>
 
 #include <algorithm>
 #include <cmath>
@@ -31,6 +30,7 @@
 #include "spatial/surface_index.h"
 #include "spatial_util.h"
 #include "jobs_util.h"
+#include "png_util.h"
 
 namespace scanpress {
 namespace {
@@ -384,19 +384,7 @@ TEST(Measure, CliJson) {
 namespace scanpress {
 namespace {
 
-Image decodePng(const std::vector<uint8_t>& bytes) {
-  png_image img;
-  std::memset(&img, 0, sizeof img);
-  img.version = PNG_IMAGE_VERSION;
-  Image out;
-  if (!png_image_begin_read_from_memory(&img, bytes.data(), bytes.size())) return out;
-  img.format = PNG_FORMAT_RGB;
-  out.width = static_cast<int>(img.width);
-  out.height = static_cast<int>(img.height);
-  out.rgb.resize(PNG_IMAGE_SIZE(img));
-  if (!png_image_finish_read(&img, nullptr, out.rgb.data(), 0, nullptr)) out = Image();
-  return out;
-}
+using testing::decodePng;
 
 TEST(Render, ShadedAndErrorColoredPicturesAreDeterministic) {
   const Mesh sphere = icosphere(4), ico = icosphere(1);

@@ -21,6 +21,7 @@
 #include "jobs/config.h"
 #include "jobs/container_file.h"
 #include "jobs/file_io.h"
+#include "jobs/html_report.h"
 #include "jobs/measure.h"
 #include "jobs/mesh_io/mesh_reader.h"
 #include "jobs/numbers.h"
@@ -48,6 +49,7 @@ commands:
   info     describe a container
   measure  surface distance between two meshes (Metro-style, both directions, Embree)
   render   a PNG picture of a mesh, optionally colored by its distance to the original
+  report   report.html of a batch: a sortable table of every scan with thumbnails and error heat maps
   synth    write a deterministic scan-like mesh of N triangles (for tests and benchmarks)
 
 'scanpress <command> --help' shows a command's options.
@@ -147,6 +149,19 @@ options:
   --view AZ,EL         camera azimuth and elevation in degrees (default 30,20; y is up)
   --size W,H           picture size in pixels (default 800,600)
   --scale-max E        top of the color bar at E diagonals (E > 0), so every picture of a batch shares one scale
+)";
+
+constexpr const char* kReportHelp = R"(usage: scanpress report DIR|SUMMARY.json [options]
+
+Writes a page of a batch's results (the summary.json that `run` wrote in DIR, or the summary given): a table of
+every scan (input and output size, bits per vertex, ratio, measured error, time, tiles, status) with a thumbnail of
+each decoded container and the error heat map the job rendered (/measure/render). Click a column to sort it
+(`report.html#sort=-bpv` opens sorted). One self-contained file: it opens in a browser without a server (the heat
+maps are linked relative to it). A job writes it itself with /output/html.
+
+options:
+  --out FILE.html    where to write it (default: report.html beside the summary)
+  --no-thumbnails    no decode and render per scan (fast for large batches)
 )";
 
 constexpr const char* kSynthHelp = R"(usage: scanpress synth OUT.ply --triangles N [options]
@@ -661,6 +676,26 @@ int runRender(int argc, char** argv) {
   return 0;
 }
 
+int runReport(int argc, char** argv) {
+  Args args;
+  std::string error;
+  if (!parseArgs(argc, argv, 2, {"--out"}, {"--help", "--no-thumbnails"}, args, error)) return usage(error, "report");
+  if (args.has("--help")) return std::fputs(kReportHelp, stdout), 0;
+  if (args.positional.size() != 1) return usage("report needs DIR or SUMMARY.json", "report");
+  const std::string summary = summaryPathOf(args.positional[0]);
+  std::string out = (std::filesystem::path(summary).parent_path() / "report.html").string();
+  if (const auto* o = args.get("--out")) out = *o;
+  const std::string ext = lowerExtension(out);
+  if (ext != ".html" && ext != ".htm")
+    return usage("report writes HTML: --out must end in .html, got '" + out + "'", "report");
+  if (Status ok = checkOutputPath(out, {summary}); !ok.isOk()) return fail(ok);
+  HtmlReportOptions options;
+  options.thumbnails = !args.has("--no-thumbnails");
+  if (Status ok = writeHtmlReport(summary, out, options); !ok.isOk()) return fail(ok);
+  std::fprintf(stderr, "%s -> %s\n", summary.c_str(), out.c_str());
+  return 0;
+}
+
 int runSynth(int argc, char** argv) {
   Args args;
   std::string error;
@@ -697,6 +732,7 @@ int run(int argc, char** argv) {
       if (sub == "synth") return std::fputs(kSynthHelp, stdout), 0;
       if (sub == "measure") return std::fputs(kMeasureHelp, stdout), 0;
       if (sub == "render") return std::fputs(kRenderHelp, stdout), 0;
+      if (sub == "report") return std::fputs(kReportHelp, stdout), 0;
     }
     return std::fputs(kMainHelp, stdout), 0;
   }
@@ -708,6 +744,7 @@ int run(int argc, char** argv) {
   if (cmd == "synth") return runSynth(argc, argv);
   if (cmd == "measure") return runMeasure(argc, argv);
   if (cmd == "render") return runRender(argc, argv);
+  if (cmd == "report") return runReport(argc, argv);
   std::fprintf(stderr, "scanpress: error: unknown command '%s'\n\n%s", cmd.c_str(), kMainHelp);
   return 1;
 }
