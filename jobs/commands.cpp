@@ -7,6 +7,7 @@
 
 #include "jobs/container_file.h"
 #include "jobs/file_io.h"
+#include "jobs/mesh_io/gltf_writer.h"
 #include "jobs/mesh_io/mesh_writer.h"
 #include "spatial/weld.h"
 
@@ -198,6 +199,32 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     if (*level < bytes.size()) result.level_bytes = bytes[*level];
     result.level = level;
   }
+  const std::string ext = lowerExtension(settings.output);
+  const bool gltf = ext == ".glb" || ext == ".gltf";
+  if (!gltf && (settings.gltf_tile_nodes || settings.gltf_compression != GltfCompression::kNone))
+    return makeError(ErrorCode::kInvalidArgument, settings.output +
+                                                      ": --gltf-compression and --gltf-nodes are for glTF output "
+                                                      "(.glb, .gltf)");
+  WriteOptions write;
+  write.gltf_compression = settings.gltf_compression;
+  write.grid = &header.grid;
+  if (settings.gltf_tile_nodes) {  // one node per tile, each decoded on its own (border vertices in both)
+    std::vector<Mesh> meshes;
+    std::vector<std::string> names;
+    for (const TileEntry* t : chosen) {
+      SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeChosen(file, {t}, level));
+      if (settings.crop) q = cropToBox(q, header.grid, *settings.box);
+      result.vertices += q.positions.size();
+      result.faces += q.triangles.size();
+      meshes.push_back(dequantizeMesh(q, header.grid, header.layout));
+      names.push_back("tile " + std::to_string(t->tile_id));
+    }
+    std::vector<GltfPart> parts;
+    for (size_t i = 0; i < meshes.size(); ++i) parts.push_back({names[i], &meshes[i]});
+    result.tiles = static_cast<uint32_t>(chosen.size());
+    SP_RETURN_IF_ERROR(writeGltfParts(settings.output, parts, write));
+    return result;
+  }
   SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeChosen(file, chosen, level));
   if (settings.crop) q = cropToBox(q, header.grid, *settings.box);
   result.vertices = q.positions.size();
@@ -206,7 +233,8 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   result.double_positions = !floatPositionsSuffice(q, header.grid);
   const Mesh mesh = dequantizeMesh(q, header.grid, header.layout);
   q = QuantizedMesh();  // the decoded mesh's memory is bounded by the container's size (FORMAT.md): held once
-  SP_RETURN_IF_ERROR(writeMeshFile(settings.output, mesh, WriteOptions{result.double_positions}));
+  write.double_positions = result.double_positions;
+  SP_RETURN_IF_ERROR(writeMeshFile(settings.output, mesh, write));
   return result;
 }
 

@@ -12,6 +12,7 @@
 #include "engine/quantize.h"
 #include "jobs/measure.h"
 #include "jobs/mesh_io/mesh_reader.h"
+#include "jobs/mesh_io/mesh_writer.h"
 #include "jobs/pipeline.h"
 
 namespace scanpress {
@@ -28,6 +29,10 @@ struct DecodeSettings {
   // cloud keeps the points inside).
   std::optional<std::array<double, 6>> box;
   bool crop = false;
+  // glTF output only: compression (jobs/mesh_io/gltf_writer.h), and one node per decoded tile instead of one mesh
+  // welded from them.
+  GltfCompression gltf_compression = GltfCompression::kNone;
+  bool gltf_tile_nodes = false;
 };
 
 struct DecodeResult {

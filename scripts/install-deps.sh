@@ -3,4 +3,5 @@
 set -euo pipefail
 source "$(dirname "$0")/lib.sh"
 install_missing_packages cmake ninja-build g++ pkg-config zstd libzstd-dev nlohmann-json3-dev libgtest-dev \
-  libbenchmark-dev libtbb-dev libopenvdb-dev libboost-iostreams-dev libembree-dev libpng-dev
+  libbenchmark-dev libtbb-dev libopenvdb-dev libboost-iostreams-dev libembree-dev libpng-dev libdraco-dev \
+  libmeshoptimizer-dev

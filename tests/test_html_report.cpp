@@ -43,10 +43,7 @@ std::vector<uint8_t> unbase64(const std::string& s) {
   return out;
 }
 
-std::string readText(const std::string& path) {
-  const auto b = testing::readBytes(path);
-  return std::string(b.begin(), b.end());
-}
+using testing::readText;
 
 size_t count(const std::string& text, const std::string& what) {
   size_t n = 0;

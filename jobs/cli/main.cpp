@@ -23,6 +23,7 @@
 #include "jobs/file_io.h"
 #include "jobs/html_report.h"
 #include "jobs/measure.h"
+#include "jobs/mesh_io/gltf_writer.h"
 #include "jobs/mesh_io/mesh_reader.h"
 #include "jobs/numbers.h"
 #include "jobs/process.h"
@@ -196,6 +197,11 @@ options:
                       centers with that level's triangles, L = grid bits is lossless)
   --bytes N           progressive codecs: the finest level whose payloads fit in N bytes (info --json lists
                       the bytes of every level)
+  --gltf-compression none|meshopt|draco
+                      glTF output: EXT_meshopt_compression or KHR_draco_mesh_compression (lossless on the decoded
+                      mesh; at most 16 grid bits, positions are the grid's cells with KHR_mesh_quantization)
+  --gltf-nodes one|tiles
+                      glTF output: one mesh welded from the tiles (default), or one node per tile, named "tile ID"
   --quiet             print nothing on success
 )";
 
@@ -462,7 +468,8 @@ int runEncode(int argc, char** argv) {
 int runDecode(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {"--tiles", "--level", "--bytes", "--box", "--format"},
+  if (!parseArgs(argc, argv, 2,
+                 {"--tiles", "--level", "--bytes", "--box", "--format", "--gltf-compression", "--gltf-nodes"},
                  {"--quiet", "--crop", "--help"}, args, error))
     return usage(error, "decode");
   if (args.has("--help")) return std::fputs(kDecodeHelp, stdout), 0;
@@ -482,6 +489,15 @@ int runDecode(int argc, char** argv) {
     std::copy(v->begin(), v->end(), s.box->begin());
   }
   s.crop = args.has("--crop");
+  if (const auto* c = args.get("--gltf-compression")) {
+    auto parsed = parseGltfCompression(*c);
+    if (!parsed.isOk()) return usage("--gltf-compression: " + parsed.status().message(), "decode");
+    s.gltf_compression = *parsed;
+  }
+  if (const auto* n = args.get("--gltf-nodes")) {
+    if (*n != "one" && *n != "tiles") return usage("--gltf-nodes: must be one or tiles, got '" + *n + "'", "decode");
+    s.gltf_tile_nodes = *n == "tiles";
+  }
   if (!unsignedOption(args, "--level", UINT32_MAX, s.level, error) ||
       !unsignedOption(args, "--bytes", UINT64_MAX, s.bytes, error))
     return usage(error, "decode");

@@ -7,13 +7,21 @@
 #include <string>
 
 #include "engine/mesh.h"
+#include "engine/quantize.h"
 #include "engine/status.h"
 
 namespace scanpress {
 
+// glTF output only (jobs/mesh_io/gltf_writer.h).
+enum class GltfCompression : uint8_t { kNone, kMeshopt, kDraco };
+
 struct WriteOptions {
   // Positions as double instead of float (needed when float cannot hold the grid's precision).
   bool double_positions = false;
+  GltfCompression gltf_compression = GltfCompression::kNone;
+  // The grid the positions lie on (decoded containers): with compression and at most 16 bits, glTF positions are
+  // its integer cells (KHR_mesh_quantization, exact). nullptr: float positions.
+  const Grid* grid = nullptr;
 };
 
 Status writePly(const std::string& path, const Mesh& mesh, const WriteOptions& options = {});
