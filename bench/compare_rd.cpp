@@ -445,6 +445,7 @@ void runTargets(const std::string& path, const Mesh& mesh, const std::vector<Com
         s.output = (dir / "t.spz").string();
         s.codec = codec;
         s.threads = 1;
+        s.keep_normals = s.keep_colors = false;  // positions only, as every anchor codes
         s.target.kind = TargetKind::kMaxError;
         s.target.max_error = e;
         s.target.metric = max ? ErrorMetric::kMax : ErrorMetric::kRms;

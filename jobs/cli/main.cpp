@@ -84,7 +84,8 @@ options:
   --no-normals        drop normals
   --no-colors         drop colors
   --allow-degenerate  keep going when quantization makes more than 0.1%% of the triangles degenerate (they are
-                      dropped); without it such a scan fails with exit 2 (raise --bits instead)
+                      dropped); without it such a scan fails with exit 2 (raise --bits instead). Implied by
+                      --max-error, whose measured error accounts for them
   --strict            fail (exit 2) when the input holds anything the container would not keep
                       (texture coordinates, materials, per-vertex scalars such as confidence, per-face
                       properties, extra PLY elements); without it they are dropped with one warning and
