@@ -152,6 +152,70 @@ std::array<double, 6> tileWorldBounds(const TileEntry& tile, const Grid& grid) {
   return b;
 }
 
+Result<MergeResult> mergeContainers(const std::vector<std::string>& parts, const std::string& output) {
+  if (parts.empty()) return makeError(ErrorCode::kInvalidArgument, "merge needs the parts");
+  SP_RETURN_IF_ERROR(checkContainerName(output));
+  SP_RETURN_IF_ERROR(checkOutputPath(output, parts));
+  std::vector<ContainerFile> files;
+  for (const std::string& p : parts) {
+    SP_ASSIGN_OR_RETURN(ContainerFile f, ContainerFile::open(p));
+    files.push_back(std::move(f));
+  }
+  const ContainerHeader& first = files[0].header();
+  if (!first.partial())
+    return makeError(ErrorCode::kInvalidArgument, parts[0] + ": a whole container, not a part (encode --subset i/N)");
+  const uint16_t n = first.subset_count;
+  std::vector<const ContainerFile*> by_index(n, nullptr);
+  for (const ContainerFile& f : files) {
+    const ContainerHeader& h = f.header();
+    if (!h.partial())
+      return makeError(ErrorCode::kInvalidArgument, f.path() + ": a whole container, not a part (encode --subset i/N)");
+    if (h.subset_count != n)
+      return makeError(ErrorCode::kInvalidArgument, f.path() + ": part " + std::to_string(h.subset_index) + " of " +
+                                                        std::to_string(h.subset_count) + ", not of " +
+                                                        std::to_string(n) + " as " + parts[0]);
+    if (h.grid.bits != first.grid.bits || h.grid.cell != first.grid.cell || h.grid.origin != first.grid.origin ||
+        h.layout.normal_bits != first.layout.normal_bits || h.layout.color_channels != first.layout.color_channels)
+      return makeError(ErrorCode::kInvalidArgument, f.path() + ": another grid or attribute layout than " + parts[0] +
+                                                        ": parts of different scans or settings");
+    if (by_index[h.subset_index])
+      return makeError(ErrorCode::kInvalidArgument, f.path() + ": part " + std::to_string(h.subset_index) +
+                                                        " is given twice (also " + by_index[h.subset_index]->path() +
+                                                        ")");
+    by_index[h.subset_index] = &f;
+  }
+  for (uint16_t i = 0; i < n; ++i)
+    if (!by_index[i])
+      return makeError(ErrorCode::kInvalidArgument, "part " + std::to_string(i) + " of " + std::to_string(n) +
+                                                        " is missing (encode --subset " + std::to_string(i) + "/" +
+                                                        std::to_string(n) + ")");
+  // Every tile in tile order, from the part whose share it is.
+  std::vector<std::pair<const TileEntry*, const ContainerFile*>> tiles;
+  for (const ContainerFile& f : files)
+    for (const TileEntry& e : f.tiles()) {
+      if (e.tile_id % n != f.header().subset_index)
+        return makeError(ErrorCode::kMalformed, f.path() + ": tile " + std::to_string(e.tile_id) + " is not of part " +
+                                                    std::to_string(f.header().subset_index) + "'s share");
+      tiles.push_back({&e, &f});
+    }
+  std::sort(tiles.begin(), tiles.end(), [](auto& a, auto& b) { return a.first->tile_id < b.first->tile_id; });
+  SP_ASSIGN_OR_RETURN(auto out, AtomicFile::create(output));
+  ContainerWriter writer(*out, first.grid, first.layout);
+  SP_RETURN_IF_ERROR(writer.begin());
+  std::vector<uint8_t> chunk;
+  for (const auto& [e, f] : tiles) {
+    const CodecInfo* codec = findCodec(e->codec);
+    if (!codec || codec->version != e->codec_version)
+      return makeError(ErrorCode::kUnsupported, f->path() + ": tile " + std::to_string(e->tile_id) +
+                                                    " was coded by a codec version this build does not write");
+    SP_ASSIGN_OR_RETURN(auto payload, f->readPayload(*e, chunk));
+    SP_RETURN_IF_ERROR(writer.addTile(e->tile_id, *codec, TileSummary{e->vertices, e->faces, e->lo, e->hi}, payload));
+  }
+  SP_RETURN_IF_ERROR(writer.finish());
+  SP_RETURN_IF_ERROR(out->commit());
+  return MergeResult{n, static_cast<uint32_t>(tiles.size()), writer.bytesWritten()};
+}
+
 bool floatPositionsSuffice(const QuantizedMesh& mesh, const Grid& grid) {
   // One axis at a time through a float variable: GCC 12 -O3 vectorized the three-lane form of this check and
   // dropped two of the double->float roundings, so the check passed where float did not suffice.
@@ -181,6 +245,8 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   }
   const ContainerHeader& header = file.header();
   DecodeResult result;
+  result.subset_index = header.subset_index;
+  result.subset_count = header.subset_count;
   std::optional<uint32_t> level = settings.level;
   if (settings.level || settings.bytes) {
     SP_ASSIGN_OR_RETURN(auto bytes, levelBytes(file, chosen));

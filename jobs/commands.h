@@ -39,8 +39,9 @@ struct DecodeResult {
   uint64_t vertices = 0, faces = 0;
   uint32_t tiles = 0;
   bool double_positions = false;
-  std::optional<uint32_t> level;  // the level decoded, when one was asked for (directly or by bytes)
-  uint64_t level_bytes = 0;       // payload bytes that level needs, over the decoded tiles
+  std::optional<uint32_t> level;                // the level decoded, when one was asked for (directly or by bytes)
+  uint64_t level_bytes = 0;                     // payload bytes that level needs, over the decoded tiles
+  uint16_t subset_index = 0, subset_count = 0;  // the container is a part (encode --subset): its tiles only
 };
 
 // A tile's bounds in world units: the outer faces of the cells its vertices occupy (min x, y, z, max x, y, z).
@@ -51,6 +52,16 @@ std::array<double, 6> tileWorldBounds(const TileEntry& tile, const Grid& grid);
 Result<QuantizedMesh> decodeContainer(const std::string& path, const std::optional<std::vector<uint32_t>>& tiles,
                                       ContainerHeader* header = nullptr, std::optional<uint32_t> level = std::nullopt);
 Result<DecodeResult> decodeFile(const DecodeSettings& settings);
+
+// `scanpress merge`: joins the N partial containers of one scan (`encode --subset i/N`, i = 0..N-1, in any order)
+// into the whole container, byte for byte what one process writes with the same settings. Fails naming the part
+// when one is missing, repeated, whole, of another split, grid or attribute layout, or holds a tile not of its
+// share; the output appears complete or not at all.
+struct MergeResult {
+  uint32_t parts = 0, tiles = 0;
+  uint64_t bytes = 0;
+};
+Result<MergeResult> mergeContainers(const std::vector<std::string>& parts, const std::string& output);
 
 // Whether float positions requantize to the same cells on this grid (otherwise writers use double).
 bool floatPositionsSuffice(const QuantizedMesh& mesh, const Grid& grid);

@@ -28,10 +28,10 @@ class ContainerFile {
   Status verifyChecksums() const;
   // The levels of a progressive tile (empty for single-rate codecs).
   Result<std::vector<CodecLevel>> tileLevels(const TileEntry& entry) const;
-
- private:
   // Reads a tile's chunk into `chunk` and returns its verified payload (a view into `chunk`).
   Result<std::span<const uint8_t>> readPayload(const TileEntry& entry, std::vector<uint8_t>& chunk) const;
+
+ private:
   std::shared_ptr<RandomAccessFile> file_;
   ContainerHeader header_;
   std::vector<TileEntry> tiles_;

@@ -414,6 +414,7 @@ class ScanEncoder {
     stage("encoding");
     SP_ASSIGN_OR_RETURN(file_, AtomicFile::create(s_.output));
     writer_.emplace(*file_, result_.grid, result_.layout);
+    if (s_.subset_count) writer_->setSubset(s_.subset_index, s_.subset_count);
     SP_RETURN_IF_ERROR(writer_->begin());
     // A point cloud has no surface to sample (jobs/measure.h): it is not measured.
     result_.measured = s_.measure.enabled && !result_.point_cloud;
@@ -425,6 +426,9 @@ class ScanEncoder {
     if (s_.memory_budget > 0)
       in_flight = std::clamp<size_t>(s_.memory_budget / 4 / (target_ * kTileBytesPerTriangle), 1, in_flight);
     result_.tiles.resize(tile_count_);
+    for (uint32_t t = 0; t < tile_count_; ++t) result_.tiles[t].id = t;
+    step_ = s_.subset_count ? s_.subset_count : 1;
+    share_count_ = s_.subset_count ? (tile_count_ + step_ - 1 - s_.subset_index) / step_ : tile_count_;
 
     // More threads than cores: oneTBB's worker limit defaults to the cores, and an arena asking for more
     // printed "TBB Warning: The number of workers is currently limited to ..." on stderr (through --quiet
@@ -436,18 +440,25 @@ class ScanEncoder {
     arena.execute([&] {
       namespace flow = tbb::flow;
       flow::graph g;
-      uint32_t next = 0;
+      // A subset encodes every N-th tile from its index (round robin: neighbouring tiles, of similar sizes, go to
+      // different parts); the sequencer numbers them 0, 1, 2, ... in that order.
+      const uint32_t step = step_;
+      uint32_t next = s_.subset_count ? s_.subset_index : 0;
       flow::input_node<TileJob> source(g, [&](tbb::flow_control& fc) -> TileJob {
         if (next >= tile_count_) {
           fc.stop();
           return TileJob{};
         }
-        return TileJob{next++};
+        const uint32_t t = next;
+        next += step;
+        return TileJob{t};
       });
       flow::limiter_node<TileJob> limiter(g, in_flight);
       flow::function_node<TileJob, TileResult> work(g, flow::unlimited,
                                                     [&](const TileJob& job) { return runTile(job.tile); });
-      flow::sequencer_node<TileResult> order(g, [](const TileResult& r) { return static_cast<size_t>(r.tile); });
+      flow::sequencer_node<TileResult> order(g, [&](const TileResult& r) {
+        return static_cast<size_t>((r.tile - (s_.subset_count ? s_.subset_index : 0)) / step);
+      });
       flow::function_node<TileResult, flow::continue_msg> sink(g, flow::serial, [&](const TileResult& r) {
         writeTile(r);
         return flow::continue_msg();
@@ -461,6 +472,8 @@ class ScanEncoder {
       g.wait_for_all();
     });
     SP_RETURN_IF_ERROR(write_status_);
+    if (s_.subset_count)  // the report lists the tiles this part holds
+      std::erase_if(result_.tiles, [&](const TileReport& t) { return t.id % step_ != s_.subset_index; });
     result_.seconds.encode = clock_.lap();
     return Status::ok();
   }
@@ -668,7 +681,7 @@ class ScanEncoder {
     }
     ++written_;
     triangles_done_ += r.input_faces;
-    if (progress_) progress_->tiles(written_, tile_count_, triangles_done_);
+    if (progress_) progress_->tiles(written_, share_count_, triangles_done_);
   }
 
   const EncodeSettings& s_;
@@ -690,6 +703,8 @@ class ScanEncoder {
   std::optional<TileBins> bins_;
   double area_ = 0;  // of the kept triangles, original positions
   uint32_t tile_count_ = 0;
+  uint32_t share_count_ = 0;  // the tiles this encode codes: all, or a subset's share
+  uint32_t step_ = 1;         // a subset's count N, else 1
   // Encoding and writing.
   double density_ = 0;
   std::unique_ptr<AtomicFile> file_;
@@ -723,6 +738,12 @@ bool knownCodecName(const std::string& name) { return name == kAutoCodec || find
 
 Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progress,
                                 std::shared_ptr<EmbreeDevice> device, const PipelineHooks* hooks) {
+  if (s.subset_count == 1 || (s.subset_count && s.subset_index >= s.subset_count))
+    return makeError(ErrorCode::kInvalidArgument, "--subset i/N needs N >= 2 and i < N");
+  if (s.subset_count && s.target.active())
+    return makeError(ErrorCode::kInvalidArgument,
+                     "--subset and a target (--max-error, --max-bytes, --bpv) do not go together: a target is met by "
+                     "the whole scan, which no part holds");
   if (s.target.active()) return encodeToTarget(s, progress, std::move(device), hooks);
   if (s.codec == kAutoCodec) {
     EncodeSettings lossless = s;

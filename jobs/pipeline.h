@@ -78,6 +78,9 @@ struct EncodeSettings {
   CodecOptions codec_options;        // the codec's typed options
   bool strict = false;               // fail (kUnsupported) when the input holds anything the container drops
   EncodeTarget target;               // none: the settings above are used as they are
+  // A partial container (`--subset i/N`, issue 23): the scan is read and tiled as a whole encode does, and only
+  // the tiles t with t % N == i are encoded; `scanpress merge` joins the N parts. 0 and 0: the whole scan.
+  uint16_t subset_index = 0, subset_count = 0;
   // Set by the target search for one pass (jobs/targets.cpp), not by users. For a codec with an error knob:
   // `tile_error` > 0 makes every tile search the knob so that its measured error (`tile_metric`, relative to the
   // scan's diagonal) stays within it; else `knob_cells` >= 0 sets the knob of every tile to that many grid cells.

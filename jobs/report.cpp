@@ -337,6 +337,7 @@ std::string containerInfoJson(const ContainerFile& file) {
   j["bytes"] = file.size();
   j["bpv"] = h.vertices ? 8.0 * file.size() / h.vertices : 0.0;
   j["counts"] = kInfoCounts;
+  if (h.partial()) j["subset"] = {{"index", h.subset_index}, {"count", h.subset_count}};
   json tiles = json::array();
   // Progressive tiles list their levels (payload bytes needed for each, and what the level means, as the codec
   // states it); the container-wide list sums the bytes over tiles (a tile whose first level is coarser counts its
@@ -384,8 +385,12 @@ std::string containerInfoText(const ContainerFile& file) {
   const ContainerHeader& h = file.header();
   std::ostringstream os;
   os.precision(10);
-  os << file.path() << ": scanpress container v" << h.version << "\n"
-     << "  grid:      " << h.grid.bits << " bits, cell " << h.grid.cell << ", origin (" << h.grid.origin[0] << ", "
+  os << file.path() << ": scanpress container v" << h.version << "\n";
+  if (h.partial())
+    os << "  partial:   part " << h.subset_index << " of " << h.subset_count
+       << " (encode --subset): only the tiles t with t % " << h.subset_count << " == " << h.subset_index
+       << "; scanpress merge joins the parts\n";
+  os << "  grid:      " << h.grid.bits << " bits, cell " << h.grid.cell << ", origin (" << h.grid.origin[0] << ", "
      << h.grid.origin[1] << ", " << h.grid.origin[2] << ")\n"
      << "  vertices:  " << h.vertices << " (decoded, summed over tiles: a border vertex once per tile)\n"
      << "  faces:     " << h.faces << "\n"

@@ -82,7 +82,8 @@ std::vector<uint8_t> serializeHeader(const ContainerHeader& h) {
   w.u32(h.tile_count);
   w.u64(h.vertices);
   w.u64(h.faces);
-  w.u32(0);
+  w.u16(h.subset_index);
+  w.u16(h.subset_count);
   w.u32(crc32c(out));
   return out;
 }
@@ -185,7 +186,6 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
   for (double& c : h.grid.origin) SP_RETURN_IF_ERROR(r.f64(c));
   SP_RETURN_IF_ERROR(r.f64(h.grid.cell));
   uint8_t bits = 0, reserved = 0;
-  uint32_t reserved32 = 0;
   SP_RETURN_IF_ERROR(r.u8(bits));
   SP_RETURN_IF_ERROR(r.u8(h.layout.normal_bits));
   SP_RETURN_IF_ERROR(r.u8(h.layout.color_channels));
@@ -193,7 +193,8 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
   SP_RETURN_IF_ERROR(r.u32(h.tile_count));
   SP_RETURN_IF_ERROR(r.u64(h.vertices));
   SP_RETURN_IF_ERROR(r.u64(h.faces));
-  SP_RETURN_IF_ERROR(r.u32(reserved32));
+  SP_RETURN_IF_ERROR(r.u16(h.subset_index));
+  SP_RETURN_IF_ERROR(r.u16(h.subset_count));
   h.grid.bits = bits;
   if (bits < kMinGridBits || bits > kMaxGridBits)
     return makeError(ErrorCode::kMalformed, where + " at byte 48: grid bits " + std::to_string(bits));
@@ -205,9 +206,10 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
   if (h.layout.color_channels != 0 && h.layout.color_channels != 3 && h.layout.color_channels != 4)
     return makeError(ErrorCode::kMalformed,
                      where + " at byte 50: color channels " + std::to_string(h.layout.color_channels));
-  if (reserved != 0 || reserved32 != 0)
-    return makeError(ErrorCode::kMalformed,
-                     where + " at byte " + std::string(reserved != 0 ? "51" : "72") + ": reserved bytes not 0");
+  if (reserved != 0) return makeError(ErrorCode::kMalformed, where + " at byte 51: reserved byte not 0");
+  if (h.subset_count == 1 || h.subset_index >= std::max<uint16_t>(h.subset_count, 1))
+    return makeError(ErrorCode::kMalformed, where + " at byte 72: subset " + std::to_string(h.subset_index) + " of " +
+                                                std::to_string(h.subset_count));
   if (h.tile_count > kMaxTiles)
     return makeError(ErrorCode::kLimitExceeded, where + " at byte 52: " + std::to_string(h.tile_count) + " tiles");
   return h;

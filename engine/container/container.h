@@ -34,6 +34,10 @@ struct ContainerHeader {
   uint32_t tile_count = 0;
   uint64_t vertices = 0;  // sum over tiles (border vertices count once per tile that holds them)
   uint64_t faces = 0;
+  // A partial container (`encode --subset i/N`): the tiles t with t % N == i of the whole tiling, for `merge`.
+  // 0 and 0: a whole container.
+  uint16_t subset_index = 0, subset_count = 0;
+  bool partial() const { return subset_count != 0; }
 };
 
 struct TileEntry {
@@ -72,6 +76,8 @@ class ContainerWriter {
   Status addTile(uint32_t tile_id, const CodecInfo& codec, const TileSummary& decoded,
                  std::span<const uint8_t> payload);
   Status finish();
+  // Marks the container as subset `index` of `count` (before finish()).
+  void setSubset(uint16_t index, uint16_t count) { header_.subset_index = index, header_.subset_count = count; }
   uint64_t bytesWritten() const { return offset_; }
   const ContainerHeader& header() const { return header_; }
 

@@ -30,6 +30,7 @@
 #include "jobs/progress.h"
 #include "jobs/render.h"
 #include "jobs/report.h"
+#include "jobs/shard.h"
 #include "jobs/stdio.h"
 #include "jobs/synth.h"
 #include "spatial/surface_index.h"
@@ -51,6 +52,7 @@ commands:
   measure  surface distance between two meshes (Metro-style, both directions, Embree)
   render   a PNG picture of a mesh, optionally colored by its distance to the original
   report   report.html of a batch: a sortable table of every scan with thumbnails and error heat maps
+  merge    join the parts of `encode --subset i/N` into the whole container
   synth    write a deterministic scan-like mesh of N triangles (for tests and benchmarks)
 
 'scanpress <command> --help' shows a command's options.
@@ -100,6 +102,10 @@ options:
   --report R.json     write a JSON report (counts, bytes, bits per vertex, seconds per stage, tiles, error);
                       `-` for stdout (not with OUT `-`)
   --format F          the format of a mesh on stdin: ply, obj, stl or off, with .zst when compressed (ply.zst)
+  --subset i/N        one part of a scan spread over N processes or nodes: the scan is read and tiled as a whole
+                      encode does, and only every N-th tile from i is encoded, into a partial container;
+                      `scanpress merge` joins the N parts into the whole container, byte for byte
+                      (not with a target)
   --quiet             print nothing on success, warnings included (progress shows only on a terminal anyway)
 )";
 
@@ -164,6 +170,13 @@ maps are linked relative to it). A job writes it itself with /output/html.
 options:
   --out FILE.html    where to write it (default: report.html beside the summary)
   --no-thumbnails    no decode and render per scan (fast for large batches)
+)";
+
+constexpr const char* kMergeHelp = R"(usage: scanpress merge PART.spz... OUT.spz
+
+Joins the N partial containers of one scan (`encode IN PART_i.spz --subset i/N` for i = 0..N-1, on any machines,
+with the same settings) into OUT.spz: the same bytes as `encode IN OUT.spz` in one process. Fails, writing nothing,
+when a part is missing, given twice, whole, of another split, or of another scan or grid.
 )";
 
 constexpr const char* kSynthHelp = R"(usage: scanpress synth OUT.ply --triangles N [options]
@@ -341,7 +354,7 @@ int runEncode(int argc, char** argv) {
   if (!parseArgs(argc, argv, 2,
                  {"--codec", "--stages", "--bits", "--normal-bits", "--report", "--tile-triangles", "--threads",
                   "--memory-budget", "--scratch-dir", "--samples-per-triangle", "--format", "--max-error", "--error",
-                  "--max-bytes", "--bpv"},
+                  "--max-bytes", "--bpv", "--subset"},
                  {"--no-normals", "--no-colors", "--allow-degenerate", "--strict", "--measure", "--quiet", "--help"},
                  args, error))
     return usage(error, "encode");
@@ -377,6 +390,15 @@ int runEncode(int argc, char** argv) {
   if (s.memory_budget != 0 && s.memory_budget < (16u << 20))
     return usage("--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'", "encode");
   if (const auto* d = args.get("--scratch-dir")) s.scratch_dir = *d;
+  if (const auto* sub = args.get("--subset")) {
+    auto share = parseShard(*sub, "--subset");
+    if (!share.isOk()) return usage(share.status().message(), "encode");
+    if (share->count < 2 || share->count > 65535) return usage("--subset i/N: N must be 2..65535", "encode");
+    if (s.target.active())
+      return usage("--subset does not go with a target: a target is met by the whole scan", "encode");
+    s.subset_index = static_cast<uint16_t>(share->index);
+    s.subset_count = static_cast<uint16_t>(share->count);
+  }
   s.measure.enabled = args.has("--measure");
   if (!numberOption(args, "--samples-per-triangle", 1e-6, 1e6, s.measure.samples_per_triangle, error))
     return usage(error, "encode");
@@ -530,6 +552,12 @@ int runDecode(int argc, char** argv) {
   if (out_stdout)
     if (Status w = spool->writeStdout("stdout." + *format); !w.isOk()) return failStdio(w, spooled_in, spooled_out);
   FILE* say = out_stdout ? stderr : stdout;
+  if (result->subset_count)  // never a silent part-for-whole, --quiet or not
+    std::fprintf(stderr,
+                 "scanpress: warning: %s is part %u of %u (encode --subset): it holds only the tiles t with "
+                 "t %% %u == %u; scanpress merge joins the parts\n",
+                 in_name.c_str(), unsigned(result->subset_index), unsigned(result->subset_count),
+                 unsigned(result->subset_count), unsigned(result->subset_index));
   if (!args.has("--quiet"))
     std::fprintf(say, "%s -> %s: %llu vertices, %llu faces from %u tile(s)%s\n", in_name.c_str(), out_name.c_str(),
                  static_cast<unsigned long long>(result->vertices), static_cast<unsigned long long>(result->faces),
@@ -693,6 +721,21 @@ int runRender(int argc, char** argv) {
   return 0;
 }
 
+int runMerge(int argc, char** argv) {
+  Args args;
+  std::string error;
+  if (!parseArgs(argc, argv, 2, {}, {"--help", "--quiet"}, args, error)) return usage(error, "merge");
+  if (args.has("--help")) return std::fputs(kMergeHelp, stdout), 0;
+  if (args.positional.size() < 2) return usage("merge needs the parts and OUT.spz", "merge");
+  const std::vector<std::string> parts(args.positional.begin(), args.positional.end() - 1);
+  auto merged = mergeContainers(parts, args.positional.back());
+  if (!merged.isOk()) return fail(merged.status());
+  if (!args.has("--quiet"))
+    std::printf("%zu parts -> %s: %u tiles, %llu bytes\n", parts.size(), args.positional.back().c_str(), merged->tiles,
+                static_cast<unsigned long long>(merged->bytes));
+  return 0;
+}
+
 int runReport(int argc, char** argv) {
   Args args;
   std::string error;
@@ -750,6 +793,7 @@ int run(int argc, char** argv) {
       if (sub == "measure") return std::fputs(kMeasureHelp, stdout), 0;
       if (sub == "render") return std::fputs(kRenderHelp, stdout), 0;
       if (sub == "report") return std::fputs(kReportHelp, stdout), 0;
+      if (sub == "merge") return std::fputs(kMergeHelp, stdout), 0;
     }
     return std::fputs(kMainHelp, stdout), 0;
   }
@@ -762,6 +806,7 @@ int run(int argc, char** argv) {
   if (cmd == "measure") return runMeasure(argc, argv);
   if (cmd == "render") return runRender(argc, argv);
   if (cmd == "report") return runReport(argc, argv);
+  if (cmd == "merge") return runMerge(argc, argv);
   std::fprintf(stderr, "scanpress: error: unknown command '%s'\n\n%s", cmd.c_str(), kMainHelp);
   return 1;
 }
