@@ -3,9 +3,15 @@
 
 #include <sys/wait.h>
 
+#include <algorithm>
+#include <array>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <vector>
+
+#include "engine/mesh.h"
 
 #include "test_util.h"
 
@@ -50,6 +56,41 @@ v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[2])), {externalResou
   if (result.find("NO-VALIDATOR") != std::string::npos)
     return "SKIP: gltf-validator not installed (scripts/install-test-tools.sh)";
   return result;
+}
+
+// Base64 (RFC 4648) decoding, for data URIs in written files; stops at the first byte outside the alphabet.
+inline std::vector<uint8_t> unbase64(const std::string& s) {
+  std::vector<uint8_t> out;
+  uint32_t acc = 0;
+  int bits = 0;
+  for (char c : s) {
+    const int v = c >= 'A' && c <= 'Z'   ? c - 'A'
+                  : c >= 'a' && c <= 'z' ? c - 'a' + 26
+                  : c >= '0' && c <= '9' ? c - '0' + 52
+                  : c == '+'             ? 62
+                  : c == '/'             ? 63
+                                         : -1;
+    if (v < 0) break;
+    acc = acc << 6 | uint32_t(v);
+    bits += 6;
+    if (bits >= 8) out.push_back(uint8_t(acc >> (bits -= 8)));
+  }
+  return out;
+}
+
+// A mesh's triangles as corner positions (float, rotated to the smallest corner), sorted: the same surface
+// whatever the vertex order, duplication or split into parts.
+inline std::vector<std::array<std::array<float, 3>, 3>> positionTriangles(const Mesh& m) {
+  std::vector<std::array<std::array<float, 3>, 3>> t;
+  for (const auto& tri : m.triangles) {
+    std::array<std::array<float, 3>, 3> c;
+    for (int k = 0; k < 3; ++k)
+      for (int a = 0; a < 3; ++a) c[k][a] = static_cast<float>(m.positions[tri[k]][a]);
+    std::rotate(c.begin(), std::min_element(c.begin(), c.end()), c.end());
+    t.push_back(c);
+  }
+  std::sort(t.begin(), t.end());
+  return t;
 }
 
 inline std::string sharedDataDir() {

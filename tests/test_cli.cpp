@@ -460,18 +460,7 @@ TEST(Cli, DecodeToEveryFormat) {
   ASSERT_EQ(run("decode '" + spz + "' '" + dir.file("ref.ply") + "' --quiet", &out), 0) << out;
   auto ref = readMeshFile(dir.file("ref.ply"));
   ASSERT_TRUE(ref.isOk());
-  auto triangles = [](const Mesh& m) {  // triangles over float positions, rotated to their smallest corner
-    std::vector<std::array<std::array<float, 3>, 3>> t;
-    for (const auto& tri : m.triangles) {
-      std::array<std::array<float, 3>, 3> c;
-      for (int k = 0; k < 3; ++k)
-        for (int a = 0; a < 3; ++a) c[k][a] = static_cast<float>(m.positions[tri[k]][a]);
-      std::rotate(c.begin(), std::min_element(c.begin(), c.end()), c.end());
-      t.push_back(c);
-    }
-    std::sort(t.begin(), t.end());
-    return t;
-  };
+  const auto triangles = [](const Mesh& m) { return testing::positionTriangles(m); };
   const auto want = triangles(*ref);
   for (const char* name : {"b.obj", "b.stl", "b.off", "b.ply.zst", "b.obj.zst", "b.stl.zst", "b.off.zst"}) {
     SCOPED_TRACE(name);

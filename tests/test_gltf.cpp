@@ -27,25 +27,8 @@ namespace scanpress {
 namespace {
 
 using nlohmann::json;
-
-std::vector<uint8_t> unbase64(const std::string& s) {
-  std::vector<uint8_t> out;
-  uint32_t acc = 0;
-  int bits = 0;
-  for (char c : s) {
-    const int v = c >= 'A' && c <= 'Z'   ? c - 'A'
-                  : c >= 'a' && c <= 'z' ? c - 'a' + 26
-                  : c >= '0' && c <= '9' ? c - '0' + 52
-                  : c == '+'             ? 62
-                  : c == '/'             ? 63
-                                         : -1;
-    if (v < 0) break;
-    acc = acc << 6 | uint32_t(v);
-    bits += 6;
-    if (bits >= 8) out.push_back(uint8_t(acc >> (bits -= 8)));
-  }
-  return out;
-}
+using testing::positionTriangles;
+using testing::unbase64;
 
 // The file's document and buffer 0 (the GLB's BIN chunk, or the .gltf's data URI).
 void load(const std::string& path, json& doc, std::vector<uint8_t>& bin) {
@@ -186,21 +169,6 @@ Mesh readBack(const std::string& path, std::vector<std::string>* node_names = nu
   return out;
 }
 
-// Triangles as corner positions (float, rotated to the smallest corner), sorted: the same surface whatever the
-// vertex order, duplication or node split.
-std::vector<std::array<std::array<float, 3>, 3>> triangles(const Mesh& m) {
-  std::vector<std::array<std::array<float, 3>, 3>> t;
-  for (const auto& tri : m.triangles) {
-    std::array<std::array<float, 3>, 3> c;
-    for (int k = 0; k < 3; ++k)
-      for (int a = 0; a < 3; ++a) c[k][a] = static_cast<float>(m.positions[tri[k]][a]);
-    std::rotate(c.begin(), std::min_element(c.begin(), c.end()), c.end());
-    t.push_back(c);
-  }
-  std::sort(t.begin(), t.end());
-  return t;
-}
-
 TEST(Gltf, CompressedAndTiledOutputsValidateAndReadBackThroughThePeersDecoders) {
   testing::TempDir dir;
   // A sphere with normals and colors, several tiles, 14 bits: quantized positions (KHR_mesh_quantization).
@@ -223,7 +191,7 @@ TEST(Gltf, CompressedAndTiledOutputsValidateAndReadBackThroughThePeersDecoders) 
   ASSERT_TRUE(ref.isOk());
   ASSERT_FALSE(ref->normals.empty());
   ASSERT_FALSE(ref->colors.empty());
-  const auto want = triangles(*ref);
+  const auto want = positionTriangles(*ref);
   // Normal and color per position, for comparing attributes wherever the vertices went.
   std::map<std::array<float, 3>, size_t> at_position;
   for (size_t i = 0; i < ref->positions.size(); ++i)
@@ -240,7 +208,7 @@ TEST(Gltf, CompressedAndTiledOutputsValidateAndReadBackThroughThePeersDecoders) 
             << out;
         std::vector<std::string> names;
         const Mesh back = readBack(dir.file(name), &names);
-        EXPECT_EQ(triangles(back), want);
+        EXPECT_EQ(positionTriangles(back), want);
         if (std::string(nodes) == "tiles") {
           EXPECT_GT(names.size(), 2u);
           EXPECT_EQ(names[0].rfind("tile ", 0), 0u) << names[0];

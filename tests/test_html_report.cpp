@@ -24,26 +24,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::vector<uint8_t> unbase64(const std::string& s) {
-  std::vector<uint8_t> out;
-  uint32_t acc = 0;
-  int bits = 0;
-  for (char c : s) {
-    int v = c >= 'A' && c <= 'Z'   ? c - 'A'
-            : c >= 'a' && c <= 'z' ? c - 'a' + 26
-            : c >= '0' && c <= '9' ? c - '0' + 52
-            : c == '+'             ? 62
-            : c == '/'             ? 63
-                                   : -1;
-    if (v < 0) break;
-    acc = acc << 6 | uint32_t(v);
-    bits += 6;
-    if (bits >= 8) out.push_back(uint8_t(acc >> (bits -= 8)));
-  }
-  return out;
-}
-
 using testing::readText;
+using testing::unbase64;
 
 size_t count(const std::string& text, const std::string& what) {
   size_t n = 0;
