@@ -78,6 +78,21 @@ inline int bitLength(u64 v) {
   return n;
 }
 
+// Sorts sorted-corner keys lexicographically; when the points fit 21 bits a key packs into one u64 whose order is
+// the same, and sorting those is about twice as fast as comparing arrays.
+void sortKeys(std::vector<TriKey>& keys, u32 max_point) {
+  if (max_point >= (1u << 21)) {
+    std::sort(keys.begin(), keys.end());
+    return;
+  }
+  std::vector<u64> packed(keys.size());
+  for (size_t i = 0; i < keys.size(); ++i) packed[i] = (u64(keys[i][0]) << 42) | (u64(keys[i][1]) << 21) | keys[i][2];
+  std::sort(packed.begin(), packed.end());
+  constexpr u64 kMask = (1u << 21) - 1;
+  for (size_t i = 0; i < keys.size(); ++i)
+    keys[i] = {u32(packed[i] >> 42), u32((packed[i] >> 21) & kMask), u32(packed[i] & kMask)};
+}
+
 // The cut mesh (encoder only): an oriented closed manifold over cut vertices, half-edge h = 3f + i from hv[h] to
 // hv[nextIn(h)]. The input's faces come first, then the dummy faces.
 struct CutMesh {
@@ -679,6 +694,8 @@ class Engine {
   // The input's triangles: the cut mesh's faces without a dummy corner, over points; then orientation and copies.
   Status triangles() {
     std::vector<TriKey> keys;
+    keys.reserve(faces_);
+    u32 max_point = 0;
     for (u32 k = 0; k < faces_; ++k) {
       TriKey key;
       bool dummy = false;
@@ -689,9 +706,10 @@ class Engine {
       if (dummy) continue;
       std::sort(key.begin(), key.end());
       if (key[0] == key[1] || key[1] == key[2]) return malformed("triangle with a repeated point");
+      max_point = std::max(max_point, key[2]);
       keys.push_back(key);
     }
-    std::sort(keys.begin(), keys.end());
+    sortKeys(keys, max_point);
     if (std::adjacent_find(keys.begin(), keys.end()) != keys.end()) return malformed("triangle coded twice");
     if (keys.size() > t_) return malformed("more triangles than the header says");
     // The decode-order structures are no longer needed: free them before the triangles are built.
