@@ -42,6 +42,7 @@
 // dummy faces); if N == 0 nothing follows. Then one range-coder stream to the end of the payload: connectivity,
 // geometry, orientation and multiplicity, attributes.
 #include <algorithm>
+#include <bit>
 #include <array>
 #include <cstring>
 #include <string>
@@ -87,7 +88,25 @@ void sortKeys(std::vector<TriKey>& keys, u32 max_point) {
   }
   std::vector<u64> packed(keys.size());
   for (size_t i = 0; i < keys.size(); ++i) packed[i] = (u64(keys[i][0]) << 42) | (u64(keys[i][1]) << 21) | keys[i][2];
-  std::sort(packed.begin(), packed.end());
+  if (packed.size() < 4096) {
+    std::sort(packed.begin(), packed.end());
+  } else {  // LSD radix sort, 16 bits a pass over the bits the points use: linear, where std::sort was 17% of decode
+    const int used = 42 + std::max(1, 32 - std::countl_zero(std::max<u32>(max_point, 1)));
+    std::vector<u64> tmp(packed.size());
+    std::vector<u32> count(1u << 16);
+    for (int shift = 0; shift < used; shift += 16) {
+      std::fill(count.begin(), count.end(), 0);
+      for (u64 k : packed) ++count[(k >> shift) & 0xFFFF];
+      u32 sum = 0;
+      for (u32& c : count) {
+        const u32 n = c;
+        c = sum;
+        sum += n;
+      }
+      for (u64 k : packed) tmp[count[(k >> shift) & 0xFFFF]++] = k;
+      packed.swap(tmp);
+    }
+  }
   constexpr u64 kMask = (1u << 21) - 1;
   for (size_t i = 0; i < keys.size(); ++i)
     keys[i] = {u32(packed[i] >> 42), u32((packed[i] >> 21) & kMask), u32(packed[i] & kMask)};
