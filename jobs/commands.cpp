@@ -229,10 +229,19 @@ bool floatPositionsSuffice(const QuantizedMesh& mesh, const Grid& grid) {
   return true;
 }
 
-Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
+namespace {
+
+// What a decode reads: the container, the chosen tiles (pointers into file.tiles()) and the level.
+struct Selection {
+  ContainerFile file;
+  std::vector<const TileEntry*> chosen;
+  std::optional<uint32_t> level;
+  DecodeResult result;
+};
+
+Result<Selection> selectTiles(const DecodeSettings& settings) {
   if (settings.level && settings.bytes)  // one would silently win over the other
     return makeError(ErrorCode::kInvalidArgument, "--level and --bytes choose the level two ways: give one of them");
-  SP_RETURN_IF_ERROR(checkOutputPath(settings.output, {settings.input}));  // `decode X X` must not replace X
   SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(settings.input));
   if (settings.box && settings.tiles)
     return makeError(ErrorCode::kInvalidArgument, "--box and --tiles choose the tiles two ways: give one of them");
@@ -265,6 +274,35 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     if (*level < bytes.size()) result.level_bytes = bytes[*level];
     result.level = level;
   }
+  Selection sel{std::move(file), std::move(chosen), level, result};
+  return sel;
+}
+
+}  // namespace
+
+Result<DecodedMesh> decodeToMesh(const DecodeSettings& settings) {
+  SP_ASSIGN_OR_RETURN(Selection sel, selectTiles(settings));
+  SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeChosen(sel.file, sel.chosen, sel.level));
+  const ContainerHeader& header = sel.file.header();
+  if (settings.crop) q = cropToBox(q, header.grid, *settings.box);
+  DecodedMesh out;
+  out.result = sel.result;
+  out.result.vertices = q.positions.size();
+  out.result.faces = q.triangles.size();
+  out.result.tiles = static_cast<uint32_t>(sel.chosen.size());
+  out.header = header;
+  out.mesh = dequantizeMesh(q, header.grid, header.layout);
+  return out;
+}
+
+Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
+  SP_RETURN_IF_ERROR(checkOutputPath(settings.output, {settings.input}));  // `decode X X` must not replace X
+  SP_ASSIGN_OR_RETURN(Selection sel, selectTiles(settings));
+  const ContainerFile& file = sel.file;
+  const std::vector<const TileEntry*>& chosen = sel.chosen;
+  const std::optional<uint32_t> level = sel.level;
+  const ContainerHeader& header = file.header();
+  DecodeResult result = sel.result;
   const std::string ext = lowerExtension(settings.output);
   const bool gltf = ext == ".glb" || ext == ".gltf";
   if (!gltf && (settings.gltf_tile_nodes || settings.gltf_compression != GltfCompression::kNone))

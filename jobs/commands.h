@@ -53,6 +53,15 @@ Result<QuantizedMesh> decodeContainer(const std::string& path, const std::option
                                       ContainerHeader* header = nullptr, std::optional<uint32_t> level = std::nullopt);
 Result<DecodeResult> decodeFile(const DecodeSettings& settings);
 
+// The mesh decodeFile would write (tiles, level, box and crop as `settings` choose; `output` and the glTF options
+// are not used), in memory: for library callers (the Python module).
+struct DecodedMesh {
+  Mesh mesh;
+  DecodeResult result;
+  ContainerHeader header;
+};
+Result<DecodedMesh> decodeToMesh(const DecodeSettings& settings);
+
 // `scanpress merge`: joins the N partial containers of one scan (`encode --subset i/N`, i = 0..N-1, in any order)
 // into the whole container, byte for byte what one process writes with the same settings. Fails naming the part
 // when one is missing, repeated, whole, of another split, grid or attribute layout, or holds a tile not of its
