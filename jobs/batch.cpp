@@ -14,6 +14,7 @@
 #include "jobs/errors.h"
 #include "jobs/file_io.h"
 #include "jobs/html_report.h"
+#include "jobs/numbers.h"
 #include "jobs/progress.h"
 #include "jobs/render.h"
 #include "jobs/report.h"
@@ -320,17 +321,10 @@ static std::string totalsLine(const BatchResult& batch) {
     if (f.counts) in += f.counts->input_bytes, out += f.counts->bytes, vertices += f.counts->vertices;
     seconds += f.seconds;
   }
-  auto human = [](uint64_t bytes) {
-    char b[32];
-    if (bytes < 1000000) std::snprintf(b, sizeof b, "%.1f KB", bytes / 1e3);
-    else if (bytes < 1000000000) std::snprintf(b, sizeof b, "%.1f MB", bytes / 1e6);
-    else std::snprintf(b, sizeof b, "%.2f GB", bytes / 1e9);
-    return std::string(b);
-  };
   char buf[256];
   std::snprintf(buf, sizeof buf, "%zu files: %llu ok, %llu skipped, %llu failed; %s -> %s (%.1f:1), %.3f bpv, %.2f s",
                 batch.files.size(), static_cast<unsigned long long>(ok), static_cast<unsigned long long>(skipped),
-                static_cast<unsigned long long>(failed), human(in).c_str(), human(out).c_str(),
+                static_cast<unsigned long long>(failed), humanBytes(in).c_str(), humanBytes(out).c_str(),
                 out ? double(in) / out : 0.0, vertices ? 8.0 * out / vertices : 0.0, seconds);
   return buf;
 }

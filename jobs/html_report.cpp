@@ -15,6 +15,7 @@
 #include "jobs/base64.h"
 #include "jobs/commands.h"
 #include "jobs/file_io.h"
+#include "jobs/numbers.h"
 #include "jobs/render.h"
 #include "spatial/surface_index.h"
 
@@ -42,13 +43,6 @@ std::string format(const char* f, double v) {
   char b[64];
   std::snprintf(b, sizeof b, f, v);
   return b;
-}
-
-std::string bytesText(double b) {
-  const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
-  int u = 0;
-  while (b >= 1024 && u < 4) b /= 1024, ++u;
-  return format(u == 0 ? "%.0f" : "%.1f", b) + " " + units[u];
 }
 
 // A path from the summary: as written when it exists, else the same file name in the summary's folder (a summary
@@ -153,7 +147,8 @@ Status writeHtmlReport(const std::string& summary_path, const std::string& html_
   if (totals.is_object()) {
     const double in_b = totals.value("input_bytes", 0.0), out_b = totals.value("bytes", 0.0);
     if (out_b > 0)
-      h << "; " << bytesText(in_b) << " in, " << bytesText(out_b) << " out, ratio " << format("%.2f", in_b / out_b);
+      h << "; " << humanBytes(uint64_t(in_b)) << " in, " << humanBytes(uint64_t(out_b)) << " out, ratio "
+        << format("%.2f", in_b / out_b);
     if (totals.contains("failed")) h << "; " << totals.value("failed", 0) << " failed";
   }
   h << "; exit code " << j.value("exit_code", 0) << "</div>\n";
@@ -182,8 +177,9 @@ Status writeHtmlReport(const std::string& summary_path, const std::string& html_
     const bool counted = f.contains("bytes");
     auto num = [&](const char* key) { return f.value(key, 0.0); };
     if (counted) {
-      h << cell(num("input_bytes"), bytesText(num("input_bytes"))) << cell(num("bytes"), bytesText(num("bytes")))
-        << cell(num("bpv"), format("%.2f", num("bpv"))) << cell(num("ratio"), format("%.2f", num("ratio")));
+      h << cell(num("input_bytes"), humanBytes(uint64_t(num("input_bytes"))))
+        << cell(num("bytes"), humanBytes(uint64_t(num("bytes")))) << cell(num("bpv"), format("%.2f", num("bpv")))
+        << cell(num("ratio"), format("%.2f", num("ratio")));
     } else {
       h << cell(-1, "-") << cell(-1, "-") << cell(-1, "-") << cell(-1, "-");
     }

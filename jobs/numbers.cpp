@@ -170,4 +170,12 @@ Result<std::vector<double>> parseNumberList(std::string_view text, double lo, do
   return parseList<double>(text, count, what, [&](std::string_view t) { return parseNumber(t, lo, hi, what); });
 }
 
+std::string humanBytes(uint64_t bytes) {
+  char b[32];
+  if (bytes < 1000000) std::snprintf(b, sizeof b, "%.1f KB", bytes / 1e3);
+  else if (bytes < 1000000000) std::snprintf(b, sizeof b, "%.1f MB", bytes / 1e6);
+  else std::snprintf(b, sizeof b, "%.2f GB", bytes / 1e9);
+  return b;
+}
+
 }  // namespace scanpress

@@ -25,6 +25,8 @@ Result<int64_t> parseInteger(std::string_view text, int64_t lo, int64_t hi, std:
 Result<uint64_t> parseUnsigned(std::string_view text, uint64_t hi, std::string_view what);
 Result<double> parseNumber(std::string_view text, double lo, double hi, std::string_view what);
 Result<uint64_t> parseSize(std::string_view text, std::string_view what);
+// A byte count for people: "625.3 KB", "12.3 MB", "1.25 GB" (decimal units, as file managers show sizes).
+std::string humanBytes(uint64_t bytes);
 
 // Comma-separated values, each as parseInteger or parseNumber; `count` > 0 requires exactly that many.
 Result<std::vector<int64_t>> parseIntegerList(std::string_view text, int64_t lo, int64_t hi, size_t count,

@@ -72,7 +72,7 @@ class Builder {
     if (o_.gltf_compression == GltfCompression::kDraco && a.index_count > 0) {
       SP_ASSIGN_OR_RETURN(primitive, dracoPrimitive(mesh, a));
     } else {
-      primitive = plainPrimitive(a);
+      SP_ASSIGN_OR_RETURN(primitive, plainPrimitive(a));
     }
     meshes_.push_back({{"primitives", json::array({primitive})}});
     json node = {{"mesh", meshes_.size() - 1}};
@@ -263,7 +263,7 @@ class Builder {
     return acc;
   }
 
-  Result<json> plainPrimitiveOrError(const Arrays& a) {
+  Result<json> plainPrimitive(const Arrays& a) {
     json attributes;
     json acc = positionAccessor(a, a.vertices);
     SP_ASSIGN_OR_RETURN(acc["bufferView"], view(a.positions, a.vertices, a.positionStride(), kArrayBuffer));
@@ -301,11 +301,6 @@ class Builder {
       primitive["mode"] = 4;
     }
     return primitive;
-  }
-  json plainPrimitive(const Arrays& a) {
-    auto p = plainPrimitiveOrError(a);
-    if (!p.isOk()) status_ = p.status();
-    return p.isOk() ? *p : json::object();
   }
 
   // KHR_draco_mesh_compression: the primitive's data is one Draco stream; the accessors have no buffer views and
@@ -400,10 +395,6 @@ class Builder {
                 {"extensions", {{"KHR_draco_mesh_compression", {{"bufferView", draco_view}, {"attributes", ids}}}}}};
   }
 
- public:
-  Status status() const { return status_; }
-
- private:
   const WriteOptions& o_;
   Vec3d lo_{}, hi_{}, center_{};
   bool quantize_ = false;
@@ -412,7 +403,6 @@ class Builder {
   size_t vertices_ = 0;  // of the part being added (meshopt's index codec bound)
   json views_ = json::array(), accessors_ = json::array(), meshes_ = json::array(), nodes_ = json::array();
   bool used_draco_ = false, used_quantization_ = false;
-  Status status_;
 };
 
 }  // namespace
@@ -437,7 +427,6 @@ Status writeGltfParts(const std::string& path, const std::vector<GltfPart>& part
   Builder b(options, parts);
   for (const auto& part : parts) {
     if (Status st = b.add(part); !st.isOk()) return st.withContext(path);
-    if (!b.status().isOk()) return b.status().withContext(path);
   }
   return b.finish(path);
 }
