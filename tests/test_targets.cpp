@@ -298,17 +298,17 @@ TEST(Targets, JobFileTargets) {
   std::string out;
   job(R"({"max_error": 2e-4, "error": "max"})");
   ASSERT_EQ(testing::runScanpress("run '" + dir.file("j.json") + "' --quiet", &out), 0) << out;
-  auto report = read("sphere.report.json");
+  auto report = read("sphere5.report.json");
   EXPECT_EQ(report["complete"], true);
   EXPECT_EQ(report["target"]["met"], true);
   EXPECT_EQ(report["target"]["error"], "max");
-  EXPECT_LE(independentError(sphere, dir.file("out/sphere.spz"), ErrorMetric::kMax), 2e-4);
+  EXPECT_LE(independentError(sphere, dir.file("out/sphere5.spz"), ErrorMetric::kMax), 2e-4);
   job(R"({"max_bytes": 500})");
   EXPECT_EQ(testing::runScanpress("run '" + dir.file("j.json") + "' --quiet", &out), 2) << out;
   const auto summary = read("summary.json");
   EXPECT_EQ(summary["files"][0]["status"], "failed");
   EXPECT_NE(summary["files"][0]["error"].get<std::string>().find("target not met: --max-bytes 500"), std::string::npos);
-  report = read("sphere.report.json");
+  report = read("sphere5.report.json");
   EXPECT_EQ(report["complete"], false);
   EXPECT_EQ(report["target"]["met"], false);
 }
