@@ -21,13 +21,15 @@ bool endsWith(const std::string& path, const char* ext) {
   return true;
 }
 
+}  // namespace
+
 // Where a writer's bytes go: an AtomicFile, through zstd when the name ends in .zst (level 3: about as fast as the
 // writers, and what `zstd` itself defaults to). Appears complete or not at all.
-class MeshOutput {
+class MeshFileWriter::Output {
  public:
-  static Result<std::unique_ptr<MeshOutput>> create(const std::string& path) {
+  static Result<std::unique_ptr<Output>> create(const std::string& path) {
     SP_ASSIGN_OR_RETURN(auto file, AtomicFile::create(path));
-    auto out = std::unique_ptr<MeshOutput>(new MeshOutput(std::move(file)));
+    auto out = std::unique_ptr<Output>(new Output(std::move(file)));
     if (endsWith(path, ".zst")) {
       out->cctx_ = ZSTD_createCCtx();
       if (!out->cctx_) return makeError(ErrorCode::kIo, path + ": out of memory for zstd");
@@ -36,7 +38,8 @@ class MeshOutput {
     }
     return out;
   }
-  ~MeshOutput() { ZSTD_freeCCtx(cctx_); }
+  ~Output() { ZSTD_freeCCtx(cctx_); }
+  const std::string& path() const { return file_->path(); }
   Status append(std::span<const uint8_t> bytes) { return compress(bytes, ZSTD_e_continue); }
   Status append(std::string_view text) {
     return append(std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(text.data()), text.size()));
@@ -47,7 +50,7 @@ class MeshOutput {
   }
 
  private:
-  explicit MeshOutput(std::unique_ptr<AtomicFile> file) : file_(std::move(file)) {}
+  explicit Output(std::unique_ptr<AtomicFile> file) : file_(std::move(file)) {}
   Status compress(std::span<const uint8_t> bytes, ZSTD_EndDirective mode) {
     if (!cctx_) return mode == ZSTD_e_end ? Status::ok() : file_->append(bytes);
     ZSTD_inBuffer in{bytes.data(), bytes.size(), 0};
@@ -65,11 +68,25 @@ class MeshOutput {
   std::vector<uint8_t> zbuf_;
 };
 
+namespace {
+
 template <typename T>
-void putLe(std::vector<uint8_t>& out, T v) {
-  uint8_t b[sizeof(T)];
+void putLe(std::string& out, T v) {
+  char b[sizeof(T)];
   std::memcpy(b, &v, sizeof(T));
-  out.insert(out.end(), b, b + sizeof(T));
+  out.append(b, sizeof(T));
+}
+
+void putNumber(std::string& out, double v, bool dbl) {
+  char num[64];
+  const auto r = dbl ? std::to_chars(num, num + sizeof num, v) : std::to_chars(num, num + sizeof num, float(v));
+  out.append(num, r.ptr);
+}
+
+void putIndex(std::string& out, uint64_t v) {
+  char num[24];
+  const auto r = std::to_chars(num, num + sizeof num, v);
+  out.append(num, r.ptr);
 }
 
 Status checkMesh(const std::string& path, const Mesh& mesh) {
@@ -77,179 +94,233 @@ Status checkMesh(const std::string& path, const Mesh& mesh) {
     return makeError(ErrorCode::kInternal, path + ": normals do not match vertices");
   if (!mesh.colors.empty() && mesh.colors.size() != mesh.positions.size())
     return makeError(ErrorCode::kInternal, path + ": colors do not match vertices");
-  if (mesh.triangles.size() > 0x7FFFFFFF || mesh.positions.size() > 0x7FFFFFFF)
-    return makeError(ErrorCode::kLimitExceeded, path + ": mesh too large for an int32-indexed PLY/OBJ/OFF");
   return Status::ok();
+}
+
+Status writeWith(const std::string& path, const Mesh& mesh, const WriteOptions& options, MeshFileFormat format) {
+  SP_RETURN_IF_ERROR(checkMesh(path, mesh));
+  MeshFileLayout layout;
+  layout.vertices = mesh.positions.size();
+  layout.faces = mesh.triangles.size();
+  layout.normals = !mesh.normals.empty();
+  layout.color_channels = mesh.colors.empty() ? 0 : (mesh.color_channels == 4 ? 4 : 3);
+  layout.double_positions = options.double_positions;
+  SP_ASSIGN_OR_RETURN(auto writer, MeshFileWriter::create(path, layout, format));
+  if (format.indexed())
+    for (size_t i = 0; i < mesh.positions.size(); ++i)
+      SP_RETURN_IF_ERROR(writer->vertex(mesh.positions[i], layout.normals ? &mesh.normals[i] : nullptr,
+                                        layout.color_channels ? &mesh.colors[i] : nullptr));
+  for (const Triangle& t : mesh.triangles)
+    SP_RETURN_IF_ERROR(writer->face(t, {mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]}));
+  return writer->commit();
 }
 
 }  // namespace
 
-Status writePly(const std::string& path, const Mesh& mesh, const WriteOptions& options) {
-  SP_RETURN_IF_ERROR(checkMesh(path, mesh));
-  SP_ASSIGN_OR_RETURN(auto file, MeshOutput::create(path));
-  const bool normals = !mesh.normals.empty();
-  const bool colors = !mesh.colors.empty();
-  const bool alpha = colors && mesh.color_channels == 4;
-  std::string header = "ply\nformat binary_little_endian 1.0\ncomment written by scanpress\n";
-  header += "element vertex " + std::to_string(mesh.positions.size()) + "\n";
-  const char* t = options.double_positions ? "double" : "float";
-  for (const char* axis : {"x", "y", "z"}) header += std::string("property ") + t + " " + axis + "\n";
-  if (normals) header += "property float nx\nproperty float ny\nproperty float nz\n";
-  if (colors) header += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
-  if (alpha) header += "property uchar alpha\n";
-  header += "element face " + std::to_string(mesh.triangles.size()) + "\n";
-  header += "property list uchar int vertex_indices\nend_header\n";
-  SP_RETURN_IF_ERROR(file->append(header));
-  std::vector<uint8_t> buf;
-  buf.reserve(1u << 20);
-  auto drain = [&]() -> Status {
-    if (buf.size() < (1u << 20) - 64) return Status::ok();
-    Status s = file->append(buf);
-    buf.clear();
-    return s;
-  };
-  for (size_t i = 0; i < mesh.positions.size(); ++i) {
-    for (double c : mesh.positions[i]) {
-      if (options.double_positions) putLe(buf, c);
-      else putLe(buf, static_cast<float>(c));
-    }
-    if (normals)
-      for (float c : mesh.normals[i]) putLe(buf, c);
-    if (colors) buf.insert(buf.end(), mesh.colors[i].begin(), mesh.colors[i].begin() + (alpha ? 4 : 3));
-    SP_RETURN_IF_ERROR(drain());
-  }
-  for (const auto& tri : mesh.triangles) {
-    buf.push_back(3);
-    for (uint32_t v : tri) putLe(buf, static_cast<int32_t>(v));
-    SP_RETURN_IF_ERROR(drain());
-  }
-  SP_RETURN_IF_ERROR(file->append(buf));
-  return file->commit();
+Result<MeshFileFormat> MeshFileFormat::forPath(const std::string& path) {
+  const std::string base = endsWith(path, ".zst") ? path.substr(0, path.size() - 4) : path;
+  if (endsWith(base, ".ply")) return MeshFileFormat(Kind::kPly);
+  if (endsWith(base, ".obj")) return MeshFileFormat(Kind::kObj);
+  if (endsWith(base, ".stl")) return MeshFileFormat(Kind::kStl);
+  if (endsWith(base, ".off")) return MeshFileFormat(Kind::kOff);
+  return makeError(ErrorCode::kInvalidArgument,
+                   path + ": output must end in .ply, .obj, .stl or .off (optionally .zst)");
 }
 
-Status writeObj(const std::string& path, const Mesh& mesh, const WriteOptions& options) {
-  SP_RETURN_IF_ERROR(checkMesh(path, mesh));
-  SP_ASSIGN_OR_RETURN(auto file, MeshOutput::create(path));
-  std::string buf;
-  buf.reserve(1u << 20);
-  char num[64];
-  auto put = [&](double v, bool dbl) {
-    auto r = dbl ? std::to_chars(num, num + sizeof num, v)
-                 : std::to_chars(num, num + sizeof num, static_cast<float>(v));
-    buf.append(num, r.ptr);
-  };
-  auto drain = [&]() -> Status {
-    if (buf.size() < (1u << 20) - 256) return Status::ok();
-    Status s = file->append(buf);
-    buf.clear();
-    return s;
-  };
-  buf += "# written by scanpress\n";
-  const bool colors = !mesh.colors.empty();
-  for (size_t i = 0; i < mesh.positions.size(); ++i) {
-    buf += "v";
-    for (double c : mesh.positions[i]) buf += ' ', put(c, options.double_positions);
-    if (colors)
-      for (int k = 0; k < 3; ++k) buf += ' ', put(mesh.colors[i][k] / 255.0, false);
-    buf += '\n';
-    SP_RETURN_IF_ERROR(drain());
-  }
-  const bool normals = !mesh.normals.empty();
-  for (const auto& n : mesh.normals) {
-    buf += "vn";
-    for (float c : n) buf += ' ', put(c, false);
-    buf += '\n';
-    SP_RETURN_IF_ERROR(drain());
-  }
-  for (const auto& tri : mesh.triangles) {
-    buf += 'f';
-    for (uint32_t v : tri) {
-      buf += ' ';
-      buf += std::to_string(v + 1);
-      if (normals) buf += "//" + std::to_string(v + 1);
+void MeshFileFormat::header(const MeshFileLayout& layout, std::string& out) const {
+  switch (kind_) {
+    case Kind::kPly: {
+      out += "ply\nformat binary_little_endian 1.0\ncomment written by scanpress\n";
+      out += "element vertex " + std::to_string(layout.vertices) + "\n";
+      const char* t = layout.double_positions ? "double" : "float";
+      for (const char* axis : {"x", "y", "z"}) out += std::string("property ") + t + " " + axis + "\n";
+      if (layout.normals) out += "property float nx\nproperty float ny\nproperty float nz\n";
+      if (layout.color_channels) out += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+      if (layout.color_channels == 4) out += "property uchar alpha\n";
+      out += "element face " + std::to_string(layout.faces) + "\n";
+      out += "property list uchar int vertex_indices\nend_header\n";
+      return;
     }
-    buf += '\n';
-    SP_RETURN_IF_ERROR(drain());
+    case Kind::kObj: out += "# written by scanpress\n"; return;
+    case Kind::kStl: {
+      // Binary STL: an 80-byte header (which must not start with "solid", or readers take it for ASCII), the
+      // count, then per triangle its facet normal, three corners (float) and a zero attribute word.
+      const std::string title = "binary STL written by scanpress";
+      out += title + std::string(80 - title.size(), ' ');
+      putLe(out, static_cast<uint32_t>(layout.faces));
+      return;
+    }
+    case Kind::kOff:
+      // COFF when the mesh has colors (RGBA per vertex, as integers), OFF otherwise.
+      out += layout.color_channels ? "COFF\n" : "OFF\n";
+      out += std::to_string(layout.vertices) + " " + std::to_string(layout.faces) + " 0\n";
+      return;
   }
-  SP_RETURN_IF_ERROR(file->append(buf));
-  return file->commit();
 }
 
-Status writeStl(const std::string& path, const Mesh& mesh, const WriteOptions& /*options*/) {
-  SP_RETURN_IF_ERROR(checkMesh(path, mesh));
-  if (mesh.triangles.size() > UINT32_MAX)
+void MeshFileFormat::vertex(const MeshFileLayout& layout, const Vec3d& p, const Vec3f* normal, const Rgba8* color,
+                            std::string& out) const {
+  switch (kind_) {
+    case Kind::kPly:
+      for (double c : p) {
+        if (layout.double_positions) putLe(out, c);
+        else putLe(out, static_cast<float>(c));
+      }
+      if (normal)
+        for (float c : *normal) putLe(out, c);
+      if (color) out.append(reinterpret_cast<const char*>(color->data()), layout.color_channels == 4 ? 4 : 3);
+      return;
+    case Kind::kObj:
+      // Each vertex's normal follows it (`vn` lines count like `v` lines, so face corners use one index).
+      out += 'v';
+      for (double c : p) out += ' ', putNumber(out, c, layout.double_positions);
+      if (color)
+        for (int k = 0; k < 3; ++k) out += ' ', putNumber(out, (*color)[k] / 255.0, false);
+      out += '\n';
+      if (normal) {
+        out += "vn";
+        for (float c : *normal) out += ' ', putNumber(out, c, false);
+        out += '\n';
+      }
+      return;
+    case Kind::kStl: return;
+    case Kind::kOff:
+      for (int k = 0; k < 3; ++k) {
+        putNumber(out, p[k], layout.double_positions);
+        out += k < 2 || color ? ' ' : '\n';
+      }
+      if (color) {
+        for (int k = 0; k < 4; ++k) {
+          putIndex(out, (*color)[k]);
+          out += k < 3 ? ' ' : '\n';
+        }
+      }
+      return;
+  }
+}
+
+void MeshFileFormat::face(const MeshFileLayout& layout, const Triangle& t, const std::array<Vec3d, 3>& corners,
+                          std::string& out) const {
+  switch (kind_) {
+    case Kind::kPly:
+      out += char(3);
+      for (uint32_t v : t) putLe(out, static_cast<int32_t>(v));
+      return;
+    case Kind::kObj:
+      out += 'f';
+      for (uint32_t v : t) {
+        out += ' ';
+        putIndex(out, uint64_t(v) + 1);
+        if (layout.normals) out += "//", putIndex(out, uint64_t(v) + 1);
+      }
+      out += '\n';
+      return;
+    case Kind::kStl: {
+      const Vec3d &a = corners[0], &b = corners[1], &c = corners[2];
+      const Vec3d u{b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v{c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+      const Vec3d n{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+      const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+      for (double x : n) putLe(out, static_cast<float>(len > 0 ? x / len : 0.0));
+      for (const Vec3d& p : corners)
+        for (double x : p) putLe(out, static_cast<float>(x));
+      putLe(out, uint16_t{0});
+      return;
+    }
+    case Kind::kOff:
+      out += "3 ";
+      for (int k = 0; k < 3; ++k) {
+        putIndex(out, t[k]);
+        out += k < 2 ? ' ' : '\n';
+      }
+      return;
+  }
+}
+
+MeshFileWriter::MeshFileWriter(MeshFileFormat format, const MeshFileLayout& layout, std::unique_ptr<Output> out)
+    : format_(format), layout_(layout), out_(std::move(out)) {}
+
+MeshFileWriter::~MeshFileWriter() = default;
+
+Result<std::unique_ptr<MeshFileWriter>> MeshFileWriter::create(const std::string& path, const MeshFileLayout& layout) {
+  SP_ASSIGN_OR_RETURN(MeshFileFormat format, MeshFileFormat::forPath(path));
+  return create(path, layout, format);
+}
+
+Result<std::unique_ptr<MeshFileWriter>> MeshFileWriter::create(const std::string& path, const MeshFileLayout& layout,
+                                                               MeshFileFormat format) {
+  if (format.indexed() && (layout.faces > 0x7FFFFFFF || layout.vertices > 0x7FFFFFFF))
+    return makeError(ErrorCode::kLimitExceeded, path + ": mesh too large for an int32-indexed PLY/OBJ/OFF");
+  if (!format.indexed() && layout.faces > UINT32_MAX)
     return makeError(ErrorCode::kLimitExceeded, path + ": more triangles than binary STL can count");
-  SP_ASSIGN_OR_RETURN(auto file, MeshOutput::create(path));
-  // Binary STL: an 80-byte header (which must not start with "solid", or readers take it for ASCII), the count,
-  // then per triangle its facet normal, three corners (float) and a zero attribute word. Only geometry survives.
-  std::vector<uint8_t> buf(80, ' ');
-  const char title[] = "binary STL written by scanpress";
-  std::memcpy(buf.data(), title, sizeof title - 1);
-  putLe(buf, static_cast<uint32_t>(mesh.triangles.size()));
-  for (const auto& t : mesh.triangles) {
-    const Vec3d& a = mesh.positions[t[0]];
-    const Vec3d& b = mesh.positions[t[1]];
-    const Vec3d& c = mesh.positions[t[2]];
-    const Vec3d u{b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v{c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-    Vec3d n{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
-    const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-    for (double x : n) putLe(buf, static_cast<float>(len > 0 ? x / len : 0.0));
-    for (uint32_t i : t)
-      for (double x : mesh.positions[i]) putLe(buf, static_cast<float>(x));
-    putLe(buf, uint16_t{0});
-    if (buf.size() >= (1u << 20)) {
-      SP_RETURN_IF_ERROR(file->append(buf));
-      buf.clear();
-    }
-  }
-  SP_RETURN_IF_ERROR(file->append(buf));
-  return file->commit();
+  SP_ASSIGN_OR_RETURN(auto out, Output::create(path));
+  auto writer = std::unique_ptr<MeshFileWriter>(new MeshFileWriter(format, layout, std::move(out)));
+  writer->buf_.reserve(1u << 20);
+  format.header(layout, writer->buf_);
+  return writer;
 }
 
+Status MeshFileWriter::drain(bool force) {
+  if (!force && buf_.size() < (1u << 20) - 512) return Status::ok();
+  Status s = out_->append(buf_);
+  buf_.clear();
+  return s;
+}
+
+Status MeshFileWriter::vertex(const Vec3d& p, const Vec3f* normal, const Rgba8* color) {
+  if (!format_.indexed()) return Status::ok();  // STL: the corners come with the faces
+  if (vertices_ == layout_.vertices || faces_ != 0)
+    return makeError(ErrorCode::kInternal, out_->path() + ": more vertices than the header says, or after a face");
+  ++vertices_;
+  format_.vertex(layout_, p, normal, color, buf_);
+  return drain();
+}
+
+Status MeshFileWriter::face(const Triangle& t, const std::array<Vec3d, 3>& corners) {
+  if (faces_ == layout_.faces)
+    return makeError(ErrorCode::kInternal, out_->path() + ": more faces than the header says");
+  ++faces_;
+  format_.face(layout_, t, corners, buf_);
+  return drain();
+}
+
+Status MeshFileWriter::faceBytes(std::span<const uint8_t> bytes, uint64_t count) {
+  if (count > layout_.faces - faces_)
+    return makeError(ErrorCode::kInternal, out_->path() + ": more faces than the header says");
+  faces_ += count;
+  SP_RETURN_IF_ERROR(drain(true));
+  return out_->append(bytes);
+}
+
+Status MeshFileWriter::commit() {
+  if ((format_.indexed() && vertices_ != layout_.vertices) || faces_ != layout_.faces)
+    return makeError(ErrorCode::kInternal, out_->path() + ": " + std::to_string(vertices_) + " vertices and " +
+                                               std::to_string(faces_) + " faces written, the header says " +
+                                               std::to_string(layout_.vertices) + " and " +
+                                               std::to_string(layout_.faces));
+  SP_RETURN_IF_ERROR(drain(true));
+  return out_->commit();
+}
+
+Status writePly(const std::string& path, const Mesh& mesh, const WriteOptions& options) {
+  return writeWith(path, mesh, options, MeshFileFormat::of(MeshFileFormat::Kind::kPly));
+}
+Status writeObj(const std::string& path, const Mesh& mesh, const WriteOptions& options) {
+  return writeWith(path, mesh, options, MeshFileFormat::of(MeshFileFormat::Kind::kObj));
+}
+Status writeStl(const std::string& path, const Mesh& mesh, const WriteOptions& options) {
+  return writeWith(path, mesh, options, MeshFileFormat::of(MeshFileFormat::Kind::kStl));
+}
 Status writeOff(const std::string& path, const Mesh& mesh, const WriteOptions& options) {
-  SP_RETURN_IF_ERROR(checkMesh(path, mesh));
-  SP_ASSIGN_OR_RETURN(auto file, MeshOutput::create(path));
-  // COFF when the mesh has colors (RGBA per vertex, as integers), OFF otherwise.
-  const bool colors = !mesh.colors.empty();
-  std::string buf = std::string(colors ? "COFF\n" : "OFF\n") + std::to_string(mesh.positions.size()) + " " +
-                    std::to_string(mesh.triangles.size()) + " 0\n";
-  char num[64];
-  for (size_t i = 0; i < mesh.positions.size(); ++i) {
-    for (int k = 0; k < 3; ++k) {
-      const auto r = options.double_positions
-                         ? std::to_chars(num, num + sizeof num, mesh.positions[i][k])
-                         : std::to_chars(num, num + sizeof num, static_cast<float>(mesh.positions[i][k]));
-      buf.append(num, r.ptr);
-      buf += k < 2 ? ' ' : (colors ? ' ' : '\n');
-    }
-    if (colors)
-      buf += std::to_string(mesh.colors[i][0]) + " " + std::to_string(mesh.colors[i][1]) + " " +
-             std::to_string(mesh.colors[i][2]) + " " + std::to_string(mesh.colors[i][3]) + "\n";
-    if (buf.size() >= (1u << 20)) {
-      SP_RETURN_IF_ERROR(file->append(buf));
-      buf.clear();
-    }
-  }
-  for (const auto& t : mesh.triangles) {
-    buf += "3 " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " + std::to_string(t[2]) + "\n";
-    if (buf.size() >= (1u << 20)) {
-      SP_RETURN_IF_ERROR(file->append(buf));
-      buf.clear();
-    }
-  }
-  SP_RETURN_IF_ERROR(file->append(buf));
-  return file->commit();
+  return writeWith(path, mesh, options, MeshFileFormat::of(MeshFileFormat::Kind::kOff));
 }
 
 Status writeMeshFile(const std::string& path, const Mesh& mesh, const WriteOptions& options) {
-  const std::string base = endsWith(path, ".zst") ? path.substr(0, path.size() - 4) : path;
-  if (endsWith(base, ".ply")) return writePly(path, mesh, options);
-  if (endsWith(base, ".obj")) return writeObj(path, mesh, options);
-  if (endsWith(base, ".stl")) return writeStl(path, mesh, options);
-  if (endsWith(base, ".off")) return writeOff(path, mesh, options);
-  if (base == path && (endsWith(path, ".glb") || endsWith(path, ".gltf"))) return writeGltf(path, mesh, options);
-  return makeError(ErrorCode::kInvalidArgument,
-                   path + ": output must end in .ply, .obj, .stl or .off (optionally .zst), .glb or .gltf");
+  if (endsWith(path, ".glb") || endsWith(path, ".gltf")) return writeGltf(path, mesh, options);
+  auto format = MeshFileFormat::forPath(path);
+  if (!format.isOk())
+    return makeError(ErrorCode::kInvalidArgument,
+                     path + ": output must end in .ply, .obj, .stl or .off (optionally .zst), .glb or .gltf");
+  return writeWith(path, mesh, options, *format);
 }
 
 }  // namespace scanpress
