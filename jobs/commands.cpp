@@ -9,6 +9,7 @@
 #include "jobs/file_io.h"
 #include "jobs/mesh_io/gltf_writer.h"
 #include "jobs/mesh_io/mesh_writer.h"
+#include "jobs/stream_decode.h"
 #include "spatial/weld.h"
 
 namespace scanpress {
@@ -37,9 +38,7 @@ Result<std::vector<const TileEntry*>> tilesInBox(const ContainerFile& file, cons
 QuantizedMesh cropToBox(const QuantizedMesh& q, const Grid& grid, const std::array<double, 6>& box) {
   std::vector<uint8_t> inside(q.positions.size());
   for (size_t v = 0; v < q.positions.size(); ++v) {
-    const Vec3d p = grid.dequantize(q.positions[v]);
-    inside[v] = p[0] >= box[0] && p[1] >= box[1] && p[2] >= box[2] && p[0] <= box[3] && p[1] <= box[4] &&
-                p[2] <= box[5];
+    inside[v] = insideBox(grid.dequantize(q.positions[v]), box);
   }
   std::vector<uint32_t> remap(q.positions.size(), UINT32_MAX);
   QuantizedMesh out;
@@ -108,24 +107,13 @@ Result<std::vector<uint64_t>> levelBytes(const ContainerFile& file, const std::v
 Result<QuantizedMesh> decodeChosen(const ContainerFile& file, const std::vector<const TileEntry*>& chosen,
                                    std::optional<uint32_t> level) {
   // Tiles decode independently: in parallel, then welded in index order (deterministic).
-  std::vector<QuantizedMesh> decoded(chosen.size());
-  std::vector<Status> errors(chosen.size());
-  std::vector<uint8_t> complete(chosen.size(), 1);
-  tbb::parallel_for(size_t(0), chosen.size(), [&](size_t i) {
-    try {
-      bool done = true;
-      auto m = file.decodeTile(*chosen[i], level, &done);
-      complete[i] = done;
-      if (m.isOk()) decoded[i] = std::move(m).value();
-      else errors[i] = m.status();
-    } catch (const std::exception& e) {
-      errors[i] = makeError(ErrorCode::kInternal,
-                            file.path() + ": tile " + std::to_string(chosen[i]->tile_id) + ": " + e.what());
-    }
-  });
-  for (const Status& e : errors) SP_RETURN_IF_ERROR(e);
+  SP_ASSIGN_OR_RETURN(auto tiles, decodeTiles(file, chosen, level));
+  std::vector<QuantizedMesh> decoded;
+  decoded.reserve(tiles.size());
+  bool all_complete = true;
+  for (DecodedTile& t : tiles) decoded.push_back(std::move(t.mesh)), all_complete &= t.complete;
+  tiles.clear();
   if (decoded.empty()) return QuantizedMesh();
-  const bool all_complete = std::find(complete.begin(), complete.end(), 0) == complete.end();
   if (all_complete && decoded.size() == 1) return std::move(decoded[0]);  // what weldTiles would copy
   if (all_complete) return weldTiles(decoded);
   QuantizedMesh welded = weldTiles(decoded, WeldBy::kPosition);
@@ -216,17 +204,26 @@ Result<MergeResult> mergeContainers(const std::vector<std::string>& parts, const
   return MergeResult{n, static_cast<uint32_t>(tiles.size()), writer.bytesWritten()};
 }
 
-bool floatPositionsSuffice(const QuantizedMesh& mesh, const Grid& grid) {
+bool floatPositionSuffices(const Vec3u& q, const Grid& grid) {
   // One axis at a time through a float variable: GCC 12 -O3 vectorized the three-lane form of this check and
   // dropped two of the double->float roundings, so the check passed where float did not suffice.
   const double max_coord = grid.maxCoord();
-  for (const auto& q : mesh.positions)
-    for (int a = 0; a < 3; ++a) {
-      const float f = static_cast<float>(grid.origin[a] + (q[a] + 0.5) * grid.cell);
-      const double t = std::floor((static_cast<double>(f) - grid.origin[a]) / grid.cell);
-      if ((t < 0.0 ? 0.0 : (t > max_coord ? max_coord : t)) != q[a]) return false;
-    }
+  for (int a = 0; a < 3; ++a) {
+    const float f = static_cast<float>(grid.origin[a] + (q[a] + 0.5) * grid.cell);
+    const double t = std::floor((static_cast<double>(f) - grid.origin[a]) / grid.cell);
+    if ((t < 0.0 ? 0.0 : (t > max_coord ? max_coord : t)) != q[a]) return false;
+  }
   return true;
+}
+
+bool floatPositionsSuffice(const QuantizedMesh& mesh, const Grid& grid) {
+  for (const auto& q : mesh.positions)
+    if (!floatPositionSuffices(q, grid)) return false;
+  return true;
+}
+
+bool insideBox(const Vec3d& p, const std::array<double, 6>& box) {
+  return p[0] >= box[0] && p[1] >= box[1] && p[2] >= box[2] && p[0] <= box[3] && p[1] <= box[4] && p[2] <= box[5];
 }
 
 namespace {
@@ -309,6 +306,26 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     return makeError(ErrorCode::kInvalidArgument, settings.output +
                                                       ": --gltf-compression and --gltf-nodes are for glTF output "
                                                       "(.glb, .gltf)");
+  result.tiles = static_cast<uint32_t>(chosen.size());
+  if (settings.memory_budget > 0 && inMemoryDecodeBytes(chosen) > settings.memory_budget) {
+    if (gltf)
+      return makeError(ErrorCode::kLimitExceeded,
+                       settings.output + ": glTF output is built in memory, about " +
+                           std::to_string(inMemoryDecodeBytes(chosen) >> 20) +
+                           " MiB here, over the memory budget of " + std::to_string(settings.memory_budget >> 20) +
+                           " MiB: raise --memory-budget, or decode to .ply, .obj, .stl or .off (those stream)");
+    StreamDecodeSettings stream;
+    stream.level = level;
+    if (settings.crop) stream.crop = settings.box;
+    stream.memory_budget = settings.memory_budget;
+    stream.scratch_parent = settings.scratch_dir;
+    SP_ASSIGN_OR_RETURN(StreamDecodeResult streamed, streamDecode(file, chosen, settings.output, stream));
+    result.vertices = streamed.vertices;
+    result.faces = streamed.faces;
+    result.double_positions = streamed.double_positions;
+    result.streamed = true;
+    return result;
+  }
   WriteOptions write;
   write.gltf_compression = settings.gltf_compression;
   write.grid = &header.grid;

@@ -17,6 +17,10 @@
 
 namespace scanpress {
 
+// What `decode` may use by default: enough for the in-memory decode of scans to about 1.5M vertices; larger ones
+// stream.
+constexpr uint64_t kDefaultDecodeBudget = uint64_t(256) << 20;
+
 struct DecodeSettings {
   std::string input;
   std::string output;
@@ -33,6 +37,11 @@ struct DecodeSettings {
   // welded from them.
   GltfCompression gltf_compression = GltfCompression::kNone;
   bool gltf_tile_nodes = false;
+  // Bytes the decode may use (jobs/stream_decode.h): when the in-memory decode would need more, PLY, OBJ, STL
+  // and OFF output streams through scratch files in `scratch_dir` (empty: the system temp directory), glTF is
+  // refused. 0: no limit.
+  uint64_t memory_budget = kDefaultDecodeBudget;
+  std::string scratch_dir;
 };
 
 struct DecodeResult {
@@ -42,6 +51,7 @@ struct DecodeResult {
   std::optional<uint32_t> level;                // the level decoded, when one was asked for (directly or by bytes)
   uint64_t level_bytes = 0;                     // payload bytes that level needs, over the decoded tiles
   uint16_t subset_index = 0, subset_count = 0;  // the container is a part (encode --subset): its tiles only
+  bool streamed = false;                        // decoded tile batch by tile batch under the memory budget
 };
 
 // A tile's bounds in world units: the outer faces of the cells its vertices occupy (min x, y, z, max x, y, z).
@@ -74,5 +84,9 @@ Result<MergeResult> mergeContainers(const std::vector<std::string>& parts, const
 
 // Whether float positions requantize to the same cells on this grid (otherwise writers use double).
 bool floatPositionsSuffice(const QuantizedMesh& mesh, const Grid& grid);
+bool floatPositionSuffices(const Vec3u& q, const Grid& grid);
+
+// Whether a world point lies in a box (xmin, ymin, zmin, xmax, ymax, zmax; closed).
+bool insideBox(const Vec3d& p, const std::array<double, 6>& box);
 
 }  // namespace scanpress

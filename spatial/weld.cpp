@@ -4,31 +4,24 @@
 #include <unordered_map>
 
 namespace scanpress {
-namespace {
 
-// A vertex's identity for welding: position and attributes.
-struct Key {
-  Vec3u p;
-  OctNormal n;
-  Rgba8 c;
-  bool operator==(const Key& o) const { return p == o.p && n == o.n && c == o.c; }
-};
+size_t WeldKeyHash::operator()(const WeldKey& k) const {
+  uint64_t a;
+  uint32_t b;
+  std::memcpy(&a, &k.n, 4);
+  std::memcpy(&b, &k.c, 4);
+  uint64_t h = k.p[0] * 0x9E3779B97F4A7C15ull;
+  h ^= (h >> 29) ^ (k.p[1] * 0xC2B2AE3D27D4EB4Full);
+  h ^= (h >> 31) ^ (k.p[2] * 0x165667B19E3779F9ull);
+  h ^= (h >> 27) ^ ((a << 32 | b) * 0x27D4EB2F165667C5ull);
+  return static_cast<size_t>(h ^ (h >> 32));
+}
 
-struct KeyHash {
-  size_t operator()(const Key& k) const {
-    uint64_t a;
-    uint32_t b;
-    std::memcpy(&a, &k.n, 4);
-    std::memcpy(&b, &k.c, 4);
-    uint64_t h = k.p[0] * 0x9E3779B97F4A7C15ull;
-    h ^= (h >> 29) ^ (k.p[1] * 0xC2B2AE3D27D4EB4Full);
-    h ^= (h >> 31) ^ (k.p[2] * 0x165667B19E3779F9ull);
-    h ^= (h >> 27) ^ ((a << 32 | b) * 0x27D4EB2F165667C5ull);
-    return static_cast<size_t>(h ^ (h >> 32));
-  }
-};
-
-}  // namespace
+WeldKey weldKey(const QuantizedMesh& mesh, size_t v, WeldBy by) {
+  const bool attributes = by == WeldBy::kPositionAndAttributes;
+  return WeldKey{mesh.positions[v], !attributes || mesh.normals.empty() ? OctNormal{0, 0} : mesh.normals[v],
+                 !attributes || mesh.colors.empty() ? Rgba8{0, 0, 0, 0} : mesh.colors[v]};
+}
 
 QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by) {
   if (tiles.size() == 1) return tiles[0];
@@ -37,7 +30,7 @@ QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by) {
     uint32_t index;
     uint32_t tile;
   };
-  std::unordered_map<Key, Owner, KeyHash> first;
+  std::unordered_map<WeldKey, Owner, WeldKeyHash> first;
   std::vector<uint32_t> remap;
   size_t vertices = 0, triangles = 0;
   for (const QuantizedMesh& tile : tiles) vertices += tile.positions.size(), triangles += tile.triangles.size();
@@ -48,9 +41,7 @@ QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by) {
     const QuantizedMesh& tile = tiles[t];
     remap.assign(tile.positions.size(), 0);
     for (size_t v = 0; v < tile.positions.size(); ++v) {
-      const bool attributes = by == WeldBy::kPositionAndAttributes;
-      const Key key{tile.positions[v], !attributes || tile.normals.empty() ? OctNormal{0, 0} : tile.normals[v],
-                    !attributes || tile.colors.empty() ? Rgba8{0, 0, 0, 0} : tile.colors[v]};
+      const WeldKey key = weldKey(tile, v, by);
       const uint32_t next = static_cast<uint32_t>(out.positions.size());
       auto [it, inserted] = first.try_emplace(key, Owner{next, t});
       if (!inserted && it->second.tile != t) {

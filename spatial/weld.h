@@ -17,6 +17,21 @@ namespace scanpress {
 
 enum class WeldBy { kPositionAndAttributes, kPosition };
 
+// A vertex's identity for welding: position and attributes (zero attributes when welding by position).
+struct WeldKey {
+  Vec3u p;
+  OctNormal n;
+  Rgba8 c;
+  bool operator==(const WeldKey& o) const { return p == o.p && n == o.n && c == o.c; }
+};
+
+struct WeldKeyHash {
+  size_t operator()(const WeldKey& k) const;
+};
+
+// The key of vertex `v` of `mesh`.
+WeldKey weldKey(const QuantizedMesh& mesh, size_t v, WeldBy by);
+
 QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by = WeldBy::kPositionAndAttributes);
 
 }  // namespace scanpress

@@ -216,6 +216,11 @@ options:
                       mesh; at most 16 grid bits, positions are the grid's cells with KHR_mesh_quantization)
   --gltf-nodes one|tiles
                       glTF output: one mesh welded from the tiles (default), or one node per tile, named "tile ID"
+  --memory-budget S   bound the decode's memory (default 256M; 0: no limit): a scan whose in-memory decode would
+                      need more is decoded a batch of tiles at a time and written through scratch files (same
+                      output, byte for byte); glTF output is refused instead. A single tile that needs more than
+                      half the budget is an error naming the budget it needs
+  --scratch-dir DIR   where the streaming decode keeps its scratch files (default: the system temp directory)
   --quiet             print nothing on success
 )";
 
@@ -492,7 +497,8 @@ int runDecode(int argc, char** argv) {
   Args args;
   std::string error;
   if (!parseArgs(argc, argv, 2,
-                 {"--tiles", "--level", "--bytes", "--box", "--format", "--gltf-compression", "--gltf-nodes"},
+                 {"--tiles", "--level", "--bytes", "--box", "--format", "--gltf-compression", "--gltf-nodes",
+                  "--memory-budget", "--scratch-dir"},
                  {"--quiet", "--crop", "--help"}, args, error))
     return usage(error, "decode");
   if (args.has("--help")) return std::fputs(kDecodeHelp, stdout), 0;
@@ -522,8 +528,13 @@ int runDecode(int argc, char** argv) {
     s.gltf_tile_nodes = *n == "tiles";
   }
   if (!unsignedOption(args, "--level", UINT32_MAX, s.level, error) ||
-      !unsignedOption(args, "--bytes", UINT64_MAX, s.bytes, error))
+      !unsignedOption(args, "--bytes", UINT64_MAX, s.bytes, error) ||
+      !option(args, "--memory-budget", s.memory_budget, error,
+              [](const std::string& v) { return parseSize(v, "--memory-budget"); }))
     return usage(error, "decode");
+  if (s.memory_budget != 0 && s.memory_budget < (16u << 20))
+    return usage("--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'", "decode");
+  if (const auto* d = args.get("--scratch-dir")) s.scratch_dir = *d;
   // `-`: stdin and stdout (jobs/stdio.h); messages then go to stderr.
   const bool in_stdin = isStdio(s.input), out_stdout = isStdio(s.output);
   const std::string in_name = in_stdin ? "<stdin>" : s.input, out_name = out_stdout ? "<stdout>" : s.output;
@@ -559,9 +570,10 @@ int runDecode(int argc, char** argv) {
                  in_name.c_str(), unsigned(result->subset_index), unsigned(result->subset_count),
                  unsigned(result->subset_count), unsigned(result->subset_index));
   if (!args.has("--quiet"))
-    std::fprintf(say, "%s -> %s: %llu vertices, %llu faces from %u tile(s)%s\n", in_name.c_str(), out_name.c_str(),
+    std::fprintf(say, "%s -> %s: %llu vertices, %llu faces from %u tile(s)%s%s\n", in_name.c_str(), out_name.c_str(),
                  static_cast<unsigned long long>(result->vertices), static_cast<unsigned long long>(result->faces),
-                 result->tiles, result->double_positions ? " (double positions)" : "");
+                 result->tiles, result->double_positions ? " (double positions)" : "",
+                 result->streamed ? ", streamed under the memory budget" : "");
   if (!args.has("--quiet") && result->level)
     std::fprintf(say, "level %u: %llu payload bytes\n", *result->level,
                  static_cast<unsigned long long>(result->level_bytes));

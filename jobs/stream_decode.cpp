@@ -1,0 +1,390 @@
+#include "jobs/stream_decode.h"
+
+#include <oneapi/tbb/parallel_for.h>
+
+#include <algorithm>
+#include <unordered_map>
+
+#include "engine/codecs/codec.h"
+#include "engine/octahedral.h"
+#include "jobs/commands.h"
+#include "jobs/mesh_io/mesh_writer.h"
+#include "jobs/scan_store.h"
+#include "spatial/weld.h"
+
+namespace scanpress {
+namespace {
+
+// Decode memory per vertex and per face of a tile, over every codec's decoder at its peak (bench/RESULTS.md,
+// "Streaming decode": measured peaks per codec, rounded up).
+constexpr uint64_t kDecodeBytesPerVertex = 160;
+constexpr uint64_t kDecodeBytesPerFace = 96;
+// The in-memory decode: decoded tiles (20 B/vertex, 12 B/face), the welded copy (same), the weld table (about 64
+// B/vertex), the float mesh (40 B/vertex with attributes, 12 B/face).
+constexpr uint64_t kInMemoryBytesPerVertex = 20 + 20 + 64 + 40;
+constexpr uint64_t kInMemoryBytesPerFace = 12 + 12 + 12;
+
+constexpr uint32_t kUnassigned = UINT32_MAX;
+constexpr size_t kBufferBytes = size_t(1) << 20;
+
+// One scratch vertex: what the output writes for it, on the grid.
+struct ScratchVertex {
+  Vec3u p;
+  OctNormal n;
+  Rgba8 c;
+};
+static_assert(sizeof(ScratchVertex) == 20);
+
+struct Bounds {
+  Vec3u lo{1, 1, 1}, hi{0, 0, 0};  // empty
+  bool empty() const { return lo[0] > hi[0]; }
+  bool contains(const Vec3u& p) const {
+    return p[0] >= lo[0] && p[1] >= lo[1] && p[2] >= lo[2] && p[0] <= hi[0] && p[1] <= hi[1] && p[2] <= hi[2];
+  }
+  bool meets(const Bounds& o) const {
+    if (empty() || o.empty()) return false;
+    for (int a = 0; a < 3; ++a)
+      if (o.hi[a] < lo[a] || hi[a] < o.lo[a]) return false;
+    return true;
+  }
+  void add(const Vec3u& p) {
+    if (empty()) lo = hi = p;
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+  }
+};
+
+// A welded vertex while it can still be used: its output number (once it has one), what its record holds, and the
+// sum of its triangles' normals when the attributes are derived.
+struct Welded {
+  uint32_t owner = 0;  // the tile (decode order) that created it
+  uint32_t out = kUnassigned;
+  ScratchVertex record{};
+  Vec3d normal_sum{0, 0, 0};
+};
+
+// The scratch vertex records, appended through a buffer; a record already flushed is patched in place.
+class RecordFile {
+ public:
+  Status open(const std::string& path) { return file_.open(path); }
+  uint64_t size() const { return flushed_ + buffer_.size(); }
+  Status append(const ScratchVertex& r) {
+    buffer_.push_back(r);
+    return buffer_.size() * sizeof(ScratchVertex) >= kBufferBytes ? flush() : Status::ok();
+  }
+  Status setNormal(uint64_t i, const OctNormal& n) {
+    if (i >= flushed_) {
+      buffer_[i - flushed_].n = n;
+      return Status::ok();
+    }
+    return file_.writeAt(i * sizeof(ScratchVertex) + offsetof(ScratchVertex, n), &n, sizeof n);
+  }
+  Status flush() {
+    SP_RETURN_IF_ERROR(file_.writeAt(flushed_ * sizeof(ScratchVertex), buffer_.data(),
+                                     buffer_.size() * sizeof(ScratchVertex)));
+    flushed_ += buffer_.size();
+    buffer_.clear();
+    return Status::ok();
+  }
+  Status read(uint64_t first, size_t count, std::vector<ScratchVertex>& out) const {
+    out.resize(count);
+    return file_.readAt(first * sizeof(ScratchVertex), out.data(), count * sizeof(ScratchVertex));
+  }
+
+ private:
+  ScratchFile file_;
+  std::vector<ScratchVertex> buffer_;
+  uint64_t flushed_ = 0;
+};
+
+// Welds decoded tiles one after the other, as weldTiles then cropToBox and deriveAttributes would on the whole
+// mesh, writing vertex records and face bytes as it goes.
+class Welder {
+ public:
+  Welder(const ContainerHeader& header, const std::vector<Bounds>& bounds, bool all_complete, bool point_cloud,
+         const std::optional<std::array<double, 6>>& crop, MeshFileFormat format, RecordFile& records,
+         ScratchFile& faces)
+      : grid_(header.grid),
+        layout_(header.layout),
+        bounds_(bounds),
+        by_(all_complete ? WeldBy::kPositionAndAttributes : WeldBy::kPosition),
+        derive_(!all_complete),
+        point_cloud_(point_cloud),
+        crop_(crop),
+        format_(format),
+        records_(records),
+        faces_(faces),
+        near_(bounds.size()),
+        evict_(bounds.size()) {
+    file_layout_.normals = layout_.hasNormals();
+    file_layout_.color_channels = layout_.color_channels;
+    findNeighbours();
+  }
+
+  Status add(uint32_t t, const QuantizedMesh& m) {
+    const size_t n = m.positions.size();
+    local_.assign(n, Welded{});
+    ref_.assign(n, nullptr);
+    for (size_t v = 0; v < n; ++v) {
+      const Vec3u& p = m.positions[v];
+      bool before = false;
+      uint32_t last = t;
+      for (uint32_t j : near_[t])
+        if (bounds_[j].contains(p)) {
+          if (j < t) before = true;
+          else last = std::max(last, j);
+        }
+      Welded* w = &local_[v];
+      if (before || last > t) {
+        const WeldKey key = weldKey(m, v, by_);
+        auto it = shared_.find(key);
+        if (it != shared_.end() && it->second.owner != t) {
+          ref_[v] = &it->second;
+          continue;  // welded to an earlier tile's vertex
+        }
+        // Found with this tile as owner: a second vertex of one tile at one key stays apart, as in weldTiles.
+        if (it == shared_.end() && last > t) {
+          w = &shared_.emplace(key, Welded{}).first->second;
+          evict_[last].push_back(key);
+        }
+      }
+      w->owner = t;
+      w->record = ScratchVertex{p, derive_ || m.normals.empty() ? OctNormal{0, 0} : m.normals[v],
+                                m.colors.empty() ? Rgba8{0, 0, 0, 0} : m.colors[v]};
+      if (derive_ && layout_.hasColors()) w->record.c = Rgba8{128, 128, 128, 255};
+      ref_[v] = w;
+      if (!crop_ || (point_cloud_ && inside(p))) SP_RETURN_IF_ERROR(emit(*w));
+    }
+    if (derive_ && layout_.hasNormals()) sumNormals(m);
+    for (const Triangle& tri : m.triangles) {
+      Welded* c[3] = {ref_[tri[0]], ref_[tri[1]], ref_[tri[2]]};
+      if (crop_ && !(inside(c[0]->record.p) && inside(c[1]->record.p) && inside(c[2]->record.p))) continue;
+      for (Welded* w : c)
+        if (w->out == kUnassigned) SP_RETURN_IF_ERROR(emit(*w));
+      format_.face(file_layout_, {c[0]->out, c[1]->out, c[2]->out},
+                   {grid_.dequantize(c[0]->record.p), grid_.dequantize(c[1]->record.p),
+                    grid_.dequantize(c[2]->record.p)},
+                   face_bytes_);
+      ++file_layout_.faces;
+      if (face_bytes_.size() >= kBufferBytes) SP_RETURN_IF_ERROR(flushFaces());
+    }
+    for (Welded& w : local_)
+      if (w.owner == t) SP_RETURN_IF_ERROR(finish(w));  // a local vertex is done with its tile
+    for (const WeldKey& key : evict_[t]) {
+      auto it = shared_.find(key);
+      SP_RETURN_IF_ERROR(finish(it->second));
+      shared_.erase(it);
+    }
+    evict_[t] = {};
+    return Status::ok();
+  }
+
+  Status flushFaces() {
+    SP_RETURN_IF_ERROR(faces_.writeAt(face_file_bytes_, face_bytes_.data(), face_bytes_.size()));
+    face_file_bytes_ += face_bytes_.size();
+    face_bytes_.clear();
+    return Status::ok();
+  }
+  MeshFileLayout layout() const { return file_layout_; }
+  uint64_t faceFileBytes() const { return face_file_bytes_; }
+  size_t open() const { return shared_.size(); }
+
+ private:
+  // Tiles whose bounds meet each tile's (sweep along x).
+  void findNeighbours() {
+    std::vector<uint32_t> order;
+    for (uint32_t i = 0; i < bounds_.size(); ++i)
+      if (!bounds_[i].empty()) order.push_back(i);
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return bounds_[a].lo[0] < bounds_[b].lo[0]; });
+    for (size_t i = 0; i < order.size(); ++i)
+      for (size_t j = i + 1; j < order.size() && bounds_[order[j]].lo[0] <= bounds_[order[i]].hi[0]; ++j)
+        if (bounds_[order[i]].meets(bounds_[order[j]])) {
+          near_[order[i]].push_back(order[j]);
+          near_[order[j]].push_back(order[i]);
+        }
+  }
+  bool inside(const Vec3u& p) const { return insideBox(grid_.dequantize(p), *crop_); }
+
+  Status emit(Welded& w) {
+    if (file_layout_.vertices >= 0x7FFFFFFF)
+      return makeError(ErrorCode::kLimitExceeded, "more than 2^31-1 vertices: too many for PLY, OBJ or OFF");
+    w.out = static_cast<uint32_t>(file_layout_.vertices++);
+    file_layout_.double_positions |= !floatPositionSuffices(w.record.p, grid_);
+    return records_.append(w.record);
+  }
+  // The vertex's last triangle is in: its derived normal is final.
+  Status finish(const Welded& w) {
+    if (!derive_ || !layout_.hasNormals() || w.out == kUnassigned) return Status::ok();
+    const Vec3d& a = w.normal_sum;
+    return records_.setNormal(w.out,
+                              encodeOctahedral(Vec3f{float(a[0]), float(a[1]), float(a[2])}, layout_.normal_bits));
+  }
+  // As deriveAttributes: each triangle's cross product added to its corners, in triangle order.
+  void sumNormals(const QuantizedMesh& m) {
+    for (const Triangle& t : m.triangles) {
+      Vec3d e1, e2;
+      for (int a = 0; a < 3; ++a) {
+        e1[a] = double(m.positions[t[1]][a]) - m.positions[t[0]][a];
+        e2[a] = double(m.positions[t[2]][a]) - m.positions[t[0]][a];
+      }
+      const Vec3d nrm{e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+      for (uint32_t v : t)
+        for (int a = 0; a < 3; ++a) ref_[v]->normal_sum[a] += nrm[a];
+    }
+  }
+
+  const Grid& grid_;
+  const AttributeLayout& layout_;
+  const std::vector<Bounds>& bounds_;
+  const WeldBy by_;
+  const bool derive_, point_cloud_;
+  const std::optional<std::array<double, 6>>& crop_;
+  const MeshFileFormat format_;
+  RecordFile& records_;
+  ScratchFile& faces_;
+  std::vector<std::vector<uint32_t>> near_;
+  std::vector<std::vector<WeldKey>> evict_;  // keys whose last tile is this one
+  std::unordered_map<WeldKey, Welded, WeldKeyHash> shared_;
+  std::vector<Welded> local_;
+  std::vector<Welded*> ref_;
+  MeshFileLayout file_layout_;
+  std::string face_bytes_;
+  uint64_t face_file_bytes_ = 0;
+};
+
+std::string mib(uint64_t bytes) { return std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB"; }
+
+}  // namespace
+
+uint64_t tileDecodeBytes(const TileEntry& e) {
+  return e.vertices * kDecodeBytesPerVertex + e.faces * kDecodeBytesPerFace;
+}
+
+uint64_t inMemoryDecodeBytes(const std::vector<const TileEntry*>& chosen) {
+  uint64_t total = 0, largest = 0;
+  for (const TileEntry* e : chosen) {
+    total += e->vertices * kInMemoryBytesPerVertex + e->faces * kInMemoryBytesPerFace;
+    largest = std::max(largest, tileDecodeBytes(*e));
+  }
+  return total + largest;
+}
+
+Result<std::vector<DecodedTile>> decodeTiles(const ContainerFile& file, std::span<const TileEntry* const> tiles,
+                                             std::optional<uint32_t> level) {
+  std::vector<DecodedTile> decoded(tiles.size());
+  std::vector<Status> errors(tiles.size());
+  tbb::parallel_for(size_t(0), tiles.size(), [&](size_t i) {
+    try {
+      bool done = true;
+      auto m = file.decodeTile(*tiles[i], level, &done);
+      decoded[i].complete = done;
+      if (m.isOk()) decoded[i].mesh = std::move(m).value();
+      else errors[i] = m.status();
+    } catch (const std::exception& e) {
+      errors[i] = makeError(ErrorCode::kInternal,
+                            file.path() + ": tile " + std::to_string(tiles[i]->tile_id) + ": " + e.what());
+    }
+  });
+  for (const Status& e : errors) SP_RETURN_IF_ERROR(e);
+  return decoded;
+}
+
+Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::vector<const TileEntry*>& chosen,
+                                        const std::string& output, const StreamDecodeSettings& settings) {
+  SP_ASSIGN_OR_RETURN(MeshFileFormat format, MeshFileFormat::forPath(output));
+  const ContainerHeader& header = file.header();
+  const size_t n = chosen.size();
+  // Half the budget for the tiles in flight; the rest for welding, buffers and the writer.
+  const uint64_t tile_budget = settings.memory_budget / 2;
+  std::vector<std::pair<size_t, size_t>> batches;
+  for (size_t i = 0; i < n;) {
+    if (tileDecodeBytes(*chosen[i]) > tile_budget)
+      return makeError(ErrorCode::kLimitExceeded,
+                       file.path() + ": tile " + std::to_string(chosen[i]->tile_id) + " (" +
+                           std::to_string(chosen[i]->vertices) + " vertices, " + std::to_string(chosen[i]->faces) +
+                           " faces) needs about " + mib(tileDecodeBytes(*chosen[i])) +
+                           " to decode, more than half the memory budget of " + mib(settings.memory_budget) +
+                           ": give --memory-budget " + mib(2 * tileDecodeBytes(*chosen[i])) + " or more");
+    size_t j = i;
+    uint64_t sum = 0;
+    while (j < n && sum + tileDecodeBytes(*chosen[j]) <= tile_budget) sum += tileDecodeBytes(*chosen[j++]);
+    batches.push_back({i, j});
+    i = j;
+  }
+
+  // Where each tile's vertices lie, whether every tile is complete, whether the decode is a point cloud. From the
+  // index for a complete decode; a coarse level is decoded once to measure them.
+  std::vector<Bounds> bounds(n);
+  bool all_complete = true;
+  uint64_t total_faces = 0;
+  if (settings.level) {
+    for (auto [a, b] : batches) {
+      SP_ASSIGN_OR_RETURN(auto tiles, decodeTiles(file, std::span(chosen).subspan(a, b - a), settings.level));
+      for (size_t i = a; i < b; ++i) {
+        for (const Vec3u& p : tiles[i - a].mesh.positions) bounds[i].add(p);
+        all_complete &= tiles[i - a].complete;
+        total_faces += tiles[i - a].mesh.triangles.size();
+      }
+    }
+  } else {
+    for (size_t i = 0; i < n; ++i) {
+      const TileEntry& e = *chosen[i];
+      if (e.vertices > 0) bounds[i] = Bounds{e.lo, e.hi};
+      const CodecInfo* codec = findCodec(e.codec);
+      all_complete &= !codec || codec->keeps_attributes;
+      total_faces += e.faces;
+    }
+  }
+
+  SP_ASSIGN_OR_RETURN(ScratchDir scratch, ScratchDir::create(settings.scratch_parent));
+  RecordFile records;
+  ScratchFile faces;
+  SP_RETURN_IF_ERROR(records.open(scratch.file("vertices")));
+  SP_RETURN_IF_ERROR(faces.open(scratch.file("faces")));
+  Welder welder(header, bounds, all_complete, total_faces == 0, settings.crop, format, records, faces);
+  for (auto [a, b] : batches) {
+    SP_ASSIGN_OR_RETURN(auto tiles, decodeTiles(file, std::span(chosen).subspan(a, b - a), settings.level));
+    for (size_t i = a; i < b; ++i) {
+      const QuantizedMesh& m = tiles[i - a].mesh;
+      if (!settings.level)  // the index's bounds are what welding relies on
+        for (const Vec3u& p : m.positions)
+          if (!bounds[i].contains(p))
+            return makeError(ErrorCode::kMalformed, file.path() + ": tile " + std::to_string(chosen[i]->tile_id) +
+                                                        ": a decoded vertex lies outside the index's bounds");
+      SP_RETURN_IF_ERROR(welder.add(static_cast<uint32_t>(i), m));
+      tiles[i - a].mesh = QuantizedMesh();
+    }
+  }
+  SP_RETURN_IF_ERROR(records.flush());
+  SP_RETURN_IF_ERROR(welder.flushFaces());
+
+  const MeshFileLayout layout = welder.layout();
+  SP_ASSIGN_OR_RETURN(auto writer, MeshFileWriter::create(output, layout, format));
+  if (format.indexed()) {
+    std::vector<ScratchVertex> chunk;
+    const size_t per_chunk = kBufferBytes / sizeof(ScratchVertex);
+    for (uint64_t first = 0; first < layout.vertices; first += per_chunk) {
+      SP_RETURN_IF_ERROR(records.read(first, size_t(std::min<uint64_t>(per_chunk, layout.vertices - first)), chunk));
+      for (const ScratchVertex& r : chunk) {
+        const Vec3f normal = layout.normals ? decodeOctahedral(r.n, header.layout.normal_bits) : Vec3f{};
+        SP_RETURN_IF_ERROR(writer->vertex(header.grid.dequantize(r.p), layout.normals ? &normal : nullptr,
+                                          layout.color_channels ? &r.c : nullptr));
+      }
+    }
+  }
+  std::vector<uint8_t> bytes;
+  for (uint64_t at = 0; at < welder.faceFileBytes(); at += kBufferBytes) {
+    const size_t len = size_t(std::min<uint64_t>(kBufferBytes, welder.faceFileBytes() - at));
+    bytes.resize(len);
+    SP_RETURN_IF_ERROR(faces.readAt(at, bytes.data(), len));
+    SP_RETURN_IF_ERROR(writer->faceBytes(bytes, at + len == welder.faceFileBytes() ? layout.faces : 0));
+  }
+  SP_RETURN_IF_ERROR(writer->commit());
+  StreamDecodeResult result;
+  result.vertices = layout.vertices;
+  result.faces = layout.faces;
+  result.double_positions = layout.double_positions;
+  result.batches = static_cast<uint32_t>(batches.size());
+  return result;
+}
+
+}  // namespace scanpress

@@ -1,0 +1,63 @@
+// Decoding a container into a mesh file under a memory budget (`decode --memory-budget`).
+//
+// The in-memory decode (jobs/commands.cpp) holds every decoded tile, the welded mesh and its float copy at once,
+// about 150 bytes per vertex. The streaming decode holds a batch of tiles at a time and writes the output as it
+// goes, and its file is byte for byte the in-memory decode's:
+//  - Tiles are decoded in batches (in parallel inside a batch) whose estimated decode memory fits the budget, and
+//    welded in the order the in-memory decode welds them. A tile that alone needs more than the budget is an error
+//    that names it and the budget it needs.
+//  - Only vertices that can meet another tile are looked up or kept for welding: those inside another chosen
+//    tile's bounds (the index's bounds for complete decodes; a first pass measures them for --level, whose coarse
+//    vertices may lie outside). A kept vertex is dropped once the last tile whose bounds hold it is done. Memory
+//    for welding is therefore proportional to the vertices near tile borders that are still open.
+//  - The vertices (quantized, 20 bytes each) and the faces (already in the output format's bytes) go to scratch
+//    files; the output is written last, when the counts its header needs are known (jobs/mesh_io/mesh_writer.h).
+//    Normals a coarse level derives from the welded triangles (engine/codecs/codec.h, deriveAttributes) are summed
+//    in the same order and patched into the scratch file when the vertex's last tile is done.
+//  - `crop` numbers vertices by their first use in a kept triangle, as the in-memory crop does.
+// glTF is not written this way (its binary buffer precedes nothing, but its JSON needs bounds and it is one
+// buffer): the caller refuses glTF output over the budget.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "jobs/container_file.h"
+
+namespace scanpress {
+
+// Decode memory a tile needs, estimated from its index counts (the largest codec's peak while decoding a tile,
+// plus the decoded tile itself).
+uint64_t tileDecodeBytes(const TileEntry& e);
+// What the in-memory decode of `chosen` peaks at (decoded tiles, welded mesh, float copy, weld table).
+uint64_t inMemoryDecodeBytes(const std::vector<const TileEntry*>& chosen);
+
+struct DecodedTile {
+  QuantizedMesh mesh;
+  bool complete = true;  // as decodeTilePayload says (false: a coarse level, or attributes the codec derives)
+};
+// Decodes `tiles` in parallel (at `level` when given), in their order; fails with the first failing tile's error.
+Result<std::vector<DecodedTile>> decodeTiles(const ContainerFile& file, std::span<const TileEntry* const> tiles,
+                                             std::optional<uint32_t> level);
+
+struct StreamDecodeSettings {
+  std::optional<uint32_t> level;
+  std::optional<std::array<double, 6>> crop;  // world box; triangles wholly inside are kept
+  uint64_t memory_budget = 0;                 // bytes (at least 16 MiB)
+  std::string scratch_parent;                 // empty: the system temp directory
+};
+
+struct StreamDecodeResult {
+  uint64_t vertices = 0, faces = 0;
+  bool double_positions = false;
+  uint32_t batches = 0;  // decode batches (1: everything fit at once)
+};
+
+Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::vector<const TileEntry*>& chosen,
+                                        const std::string& output, const StreamDecodeSettings& settings);
+
+}  // namespace scanpress
