@@ -14,9 +14,11 @@
 #include "engine/quantize.h"
 #include "jobs/base64.h"
 #include "jobs/commands.h"
+#include "jobs/container_file.h"
 #include "jobs/file_io.h"
 #include "jobs/numbers.h"
 #include "jobs/render.h"
+#include "jobs/stream_decode.h"
 #include "spatial/surface_index.h"
 
 namespace scanpress {
@@ -57,6 +59,15 @@ std::string locate(const std::string& path, const fs::path& summary_dir) {
 // The decoded container rendered as a PNG data URI, or a note saying why not.
 std::string thumbnail(const std::string& container, const HtmlReportOptions& o,
                       const std::shared_ptr<EmbreeDevice>& device, std::string& note) {
+  auto file = ContainerFile::open(container);
+  if (!file.isOk()) return note = "not decodable: " + file.status().message(), "";
+  std::vector<const TileEntry*> tiles;
+  for (const TileEntry& e : file->tiles()) tiles.push_back(&e);
+  if (o.memory_budget != 0 && inMemoryDecodeBytes(tiles) > o.memory_budget)
+    return note = "too large for a thumbnail: about " + humanBytes(inMemoryDecodeBytes(tiles)) +
+                  " to decode, over the memory budget of " + humanBytes(o.memory_budget) +
+                  " (report --memory-budget raises it)",
+           "";
   ContainerHeader header;
   auto q = decodeContainer(container, std::nullopt, &header);
   if (!q.isOk()) return note = "not decodable: " + q.status().message(), "";

@@ -4,6 +4,8 @@
 // error heat map the job rendered (/measure/render), linked relative to the page.
 #pragma once
 
+#include "jobs/commands.h"
+
 #include <memory>
 #include <string>
 
@@ -16,6 +18,8 @@ class EmbreeDevice;
 struct HtmlReportOptions {
   bool thumbnails = true;  // decode and render each container (the slow part: a decode per scan)
   int thumbnail_width = 240, thumbnail_height = 180;
+  // A container whose in-memory decode would need more gets a note instead of a thumbnail (0: no limit).
+  uint64_t memory_budget = kDefaultDecodeBudget;
 };
 
 // Reads the summary at `summary_path` and writes `html_path` all-or-nothing. Containers and pictures are found

@@ -9,6 +9,7 @@
 #include "engine/octahedral.h"
 #include "jobs/commands.h"
 #include "jobs/mesh_io/mesh_writer.h"
+#include "jobs/numbers.h"
 #include "jobs/scan_store.h"
 #include "spatial/weld.h"
 
@@ -251,8 +252,6 @@ class Welder {
   uint64_t face_file_bytes_ = 0;
 };
 
-std::string mib(uint64_t bytes) { return std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB"; }
-
 }  // namespace
 
 uint64_t tileDecodeBytes(const TileEntry& e) {
@@ -301,9 +300,10 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
       return makeError(ErrorCode::kLimitExceeded,
                        file.path() + ": tile " + std::to_string(chosen[i]->tile_id) + " (" +
                            std::to_string(chosen[i]->vertices) + " vertices, " + std::to_string(chosen[i]->faces) +
-                           " faces) needs about " + mib(tileDecodeBytes(*chosen[i])) +
-                           " to decode, more than half the memory budget of " + mib(settings.memory_budget) +
-                           ": give --memory-budget " + mib(2 * tileDecodeBytes(*chosen[i])) + " or more");
+                           " faces) needs about " + humanBytes(tileDecodeBytes(*chosen[i])) +
+                           " to decode, more than half the memory budget of " + humanBytes(settings.memory_budget) +
+                           ": give --memory-budget " + std::to_string((2 * tileDecodeBytes(*chosen[i]) >> 20) + 1) +
+                           "M or more");
     size_t j = i;
     uint64_t sum = 0;
     while (j < n && sum + tileDecodeBytes(*chosen[j]) <= tile_budget) sum += tileDecodeBytes(*chosen[j++]);
@@ -357,7 +357,8 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
   SP_RETURN_IF_ERROR(records.flush());
   SP_RETURN_IF_ERROR(welder.flushFaces());
 
-  const MeshFileLayout layout = welder.layout();
+  MeshFileLayout layout = welder.layout();
+  if (layout.vertices == 0) layout.normals = false, layout.color_channels = 0;  // as the in-memory writers do
   SP_ASSIGN_OR_RETURN(auto writer, MeshFileWriter::create(output, layout, format));
   if (format.indexed()) {
     std::vector<ScratchVertex> chunk;

@@ -15,6 +15,7 @@
 
 #include "engine/shapes.h"
 #include "jobs/config.h"
+#include "jobs/html_report.h"
 #include "jobs/mesh_io/mesh_writer.h"
 #include "jobs_util.h"
 #include "png_util.h"
@@ -106,6 +107,19 @@ TEST(HtmlReport, AJobWritesAPageWithEveryScan) {
     EXPECT_NE(html.find(std::string(">") + bpv + "<"), std::string::npos) << bpv;
     EXPECT_TRUE(f.contains("picture"));
   }
+}
+
+TEST(HtmlReport, AScanOverTheMemoryBudgetGetsANoteNotAThumbnail) {
+  Batch b;
+  HtmlReportOptions options;
+  options.memory_budget = 64 << 10;  // the smaller sphere's decode needs about 100 KiB
+  ASSERT_TRUE(writeHtmlReport(b.out + "/summary.json", b.out + "/small.html", options).isOk());
+  const std::string html = readText(b.out + "/small.html");
+  EXPECT_EQ(count(html, "class=\"thumb\""), 0u);
+  EXPECT_EQ(count(html, "too large for a thumbnail"), 2u) << html;
+  std::string log;
+  EXPECT_EQ(testing::runScanpress("report '" + b.out + "' --memory-budget 1M", &log), 1) << log;
+  EXPECT_NE(log.find("--memory-budget: must be 0 or at least 16M"), std::string::npos) << log;
 }
 
 TEST(HtmlReport, RendersAndSortsInHeadlessChromium) {

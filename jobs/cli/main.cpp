@@ -32,6 +32,7 @@
 #include "jobs/report.h"
 #include "jobs/shard.h"
 #include "jobs/stdio.h"
+#include "jobs/stream_decode.h"
 #include "jobs/synth.h"
 #include "spatial/surface_index.h"
 
@@ -170,6 +171,8 @@ maps are linked relative to it). A job writes it itself with /output/html.
 options:
   --out FILE.html    where to write it (default: report.html beside the summary)
   --no-thumbnails    no decode and render per scan (fast for large batches)
+  --memory-budget S  a scan whose decode would need more gets a note instead of a thumbnail (default 256M; 0: no
+                     limit)
 )";
 
 constexpr const char* kMergeHelp = R"(usage: scanpress merge PART.spz... OUT.spz
@@ -231,6 +234,8 @@ Describes a container: grid, counts, size, attributes and tiles.
 options:
   --json      print JSON: {"grid": {"origin", "cell", "bits"}, "vertices", "faces", "bytes", "tiles": [...]}
   --verify    also read every tile and check its checksums and decoding
+  --memory-budget S
+              with --verify: refuse a tile whose decode would need more (default 256M; 0: no limit)
 )";
 
 int fail(const Status& s) {
@@ -583,13 +588,26 @@ int runDecode(int argc, char** argv) {
 int runInfo(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {}, {"--json", "--verify", "--help"}, args, error)) return usage(error, "info");
+  if (!parseArgs(argc, argv, 2, {"--memory-budget"}, {"--json", "--verify", "--help"}, args, error))
+    return usage(error, "info");
   if (args.has("--help")) return std::fputs(kInfoHelp, stdout), 0;
   if (args.positional.size() != 1) return usage("info needs IN.spz", "info");
+  uint64_t budget = kDefaultDecodeBudget;
+  if (!option(args, "--memory-budget", budget, error,
+              [](const std::string& v) { return parseSize(v, "--memory-budget"); }))
+    return usage(error, "info");
+  if (budget != 0 && budget < (16u << 20))
+    return usage("--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'", "info");
   auto file = ContainerFile::open(args.positional[0]);
   if (!file.isOk()) return fail(file.status());
   if (args.has("--verify"))
-    for (const auto& t : file->tiles()) {
+    for (const auto& t : file->tiles()) {  // one tile at a time
+      if (budget != 0 && tileDecodeBytes(t) > budget)
+        return fail(makeError(ErrorCode::kLimitExceeded,
+                              file->path() + ": tile " + std::to_string(t.tile_id) + " needs about " +
+                                  humanBytes(tileDecodeBytes(t)) + " to decode, over the memory budget of " +
+                                  humanBytes(budget) + ": give --memory-budget " +
+                                  std::to_string((tileDecodeBytes(t) >> 20) + 1) + "M or more"));
       auto m = file->decodeTile(t);
       if (!m.isOk()) return fail(m.status());
     }
@@ -751,7 +769,8 @@ int runMerge(int argc, char** argv) {
 int runReport(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {"--out"}, {"--help", "--no-thumbnails"}, args, error)) return usage(error, "report");
+  if (!parseArgs(argc, argv, 2, {"--out", "--memory-budget"}, {"--help", "--no-thumbnails"}, args, error))
+    return usage(error, "report");
   if (args.has("--help")) return std::fputs(kReportHelp, stdout), 0;
   if (args.positional.size() != 1) return usage("report needs DIR or SUMMARY.json", "report");
   const std::string summary = summaryPathOf(args.positional[0]);
@@ -763,6 +782,11 @@ int runReport(int argc, char** argv) {
   if (Status ok = checkOutputPath(out, {summary}); !ok.isOk()) return fail(ok);
   HtmlReportOptions options;
   options.thumbnails = !args.has("--no-thumbnails");
+  if (!option(args, "--memory-budget", options.memory_budget, error,
+              [](const std::string& v) { return parseSize(v, "--memory-budget"); }))
+    return usage(error, "report");
+  if (options.memory_budget != 0 && options.memory_budget < (16u << 20))
+    return usage("--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'", "report");
   if (Status ok = writeHtmlReport(summary, out, options); !ok.isOk()) return fail(ok);
   std::fprintf(stderr, "%s -> %s\n", summary.c_str(), out.c_str());
   return 0;
