@@ -52,6 +52,12 @@ TEST(MalformationSweepCli, DecodeExitsWithZeroOrTwo) {
         if (sweep::mustBeRefused(family)) {
           EXPECT_EQ(code, 2) << c.name << ", " << sweep::familyName(family);
         }
+        // A refusal names the file and the place: a byte offset or a tile.
+        if (code == 2) {
+          EXPECT_NE(text.find(file), std::string::npos) << text;
+          EXPECT_TRUE(text.find("byte ") != std::string::npos || text.find("tile ") != std::string::npos)
+              << c.name << ", " << sweep::familyName(family) << ": " << text;
+        }
       });
     }
   }
