@@ -222,12 +222,7 @@ class Welder {
   // As deriveAttributes: each triangle's cross product added to its corners, in triangle order.
   void sumNormals(const QuantizedMesh& m) {
     for (const Triangle& t : m.triangles) {
-      Vec3d e1, e2;
-      for (int a = 0; a < 3; ++a) {
-        e1[a] = double(m.positions[t[1]][a]) - m.positions[t[0]][a];
-        e2[a] = double(m.positions[t[2]][a]) - m.positions[t[0]][a];
-      }
-      const Vec3d nrm{e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+      const Vec3d nrm = triangleCross(m.positions, t);
       for (uint32_t v : t)
         for (int a = 0; a < 3; ++a) ref_[v]->normal_sum[a] += nrm[a];
     }

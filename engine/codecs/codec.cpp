@@ -132,18 +132,22 @@ TileSummary summarize(const QuantizedMesh& mesh) {
   return s;
 }
 
+Vec3d triangleCross(const std::vector<Vec3u>& positions, const Triangle& t) {
+  Vec3d e1, e2;
+  for (int a = 0; a < 3; ++a) {
+    e1[a] = double(positions[t[1]][a]) - positions[t[0]][a];
+    e2[a] = double(positions[t[2]][a]) - positions[t[0]][a];
+  }
+  return {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+}
+
 void deriveAttributes(QuantizedMesh& m, const AttributeLayout& layout) {
   m.normals.clear();
   m.colors.clear();
   if (layout.hasNormals()) {
     std::vector<Vec3d> acc(m.positions.size(), Vec3d{0, 0, 0});
     for (const auto& t : m.triangles) {
-      Vec3d e1, e2;
-      for (int a = 0; a < 3; ++a) {
-        e1[a] = double(m.positions[t[1]][a]) - m.positions[t[0]][a];
-        e2[a] = double(m.positions[t[2]][a]) - m.positions[t[0]][a];
-      }
-      const Vec3d nrm{e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+      const Vec3d nrm = triangleCross(m.positions, t);
       for (uint32_t v : t)
         for (int a = 0; a < 3; ++a) acc[v][a] += nrm[a];
     }

@@ -176,6 +176,9 @@ TileSummary summarize(const QuantizedMesh& mesh);
 // Coarse-level attributes derived from geometry: area-weighted normals from the triangles, gray colors (as the
 // layout asks); replaces whatever normals and colors the mesh had.
 void deriveAttributes(QuantizedMesh& mesh, const AttributeLayout& layout);
+// A triangle's cross product on the grid (edges from its first corner, in double): the area-weighted normal that
+// deriveAttributes sums at each corner, in triangle order.
+Vec3d triangleCross(const std::vector<Vec3u>& positions, const Triangle& t);
 
 // `store`: the reference codec (store.cpp).
 Result<EncodedTile> storeEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options);
