@@ -3,9 +3,9 @@
 // The in-memory decode (jobs/commands.cpp) holds every decoded tile, the welded mesh and its float copy at once,
 // about 150 bytes per vertex. The streaming decode holds a batch of tiles at a time and writes the output as it
 // goes, and its file is byte for byte the in-memory decode's:
-//  - Tiles are decoded in batches (in parallel inside a batch) whose estimated decode memory fits the budget, and
-//    welded in the order the in-memory decode welds them. A tile that alone needs more than the budget is an error
-//    that names it and the budget it needs.
+//  - Tiles are decoded in batches (in parallel inside a batch) whose estimated decode memory fits half the budget,
+//    and welded in the order the in-memory decode welds them. A larger tile goes alone; one that needs more than
+//    three quarters of the budget is an error that names it and the budget it needs.
 //  - Only vertices that can meet another tile are looked up or kept for welding: those inside another chosen
 //    tile's bounds (the index's bounds for complete decodes; a first pass measures them for --level, whose coarse
 //    vertices may lie outside). A kept vertex is dropped once the last tile whose bounds hold it is done. Memory

@@ -222,7 +222,7 @@ options:
   --memory-budget S   bound the decode's memory (default 256M; 0: no limit): a scan whose in-memory decode would
                       need more is decoded a batch of tiles at a time and written through scratch files (same
                       output, byte for byte); glTF output is refused instead. A single tile that needs more than
-                      half the budget is an error naming the budget it needs
+                      three quarters of the budget is an error naming the budget it needs
   --scratch-dir DIR   where the streaming decode keeps its scratch files (default: the system temp directory)
   --quiet             print nothing on success
 )";
