@@ -56,6 +56,10 @@ std::string locate(const std::string& path, const fs::path& summary_dir) {
   return fs::exists(beside, ec) ? beside.string() : "";
 }
 
+// Cluster cells per axis for the thumbnail of a scan too large to decode whole (at most 127: decodeClustered's
+// triangle keys).
+constexpr uint32_t kThumbnailCells = 120;
+
 // The decoded container rendered as a PNG data URI, or a note saying why not.
 std::string thumbnail(const std::string& container, const HtmlReportOptions& o,
                       const std::shared_ptr<EmbreeDevice>& device, std::string& note) {
@@ -63,16 +67,19 @@ std::string thumbnail(const std::string& container, const HtmlReportOptions& o,
   if (!file.isOk()) return note = "not decodable: " + file.status().message(), "";
   std::vector<const TileEntry*> tiles;
   for (const TileEntry& e : file->tiles()) tiles.push_back(&e);
-  if (o.memory_budget != 0 && inMemoryDecodeBytes(tiles) > o.memory_budget)
-    return note = "too large for a thumbnail: about " + humanBytes(inMemoryDecodeBytes(tiles)) +
-                  " to decode, over the memory budget of " + humanBytes(o.memory_budget) +
-                  " (report --memory-budget raises it)",
-           "";
-  ContainerHeader header;
-  auto q = decodeContainer(container, std::nullopt, &header);
-  if (!q.isOk()) return note = "not decodable: " + q.status().message(), "";
-  if (q->triangles.empty()) return note = "no triangles", "";
-  const Mesh mesh = dequantizeMesh(*q, header.grid, header.layout);
+  Mesh mesh;
+  if (o.memory_budget != 0 && inMemoryDecodeBytes(tiles) > o.memory_budget) {
+    // Too large to decode whole within the budget: its shape at thumbnail resolution (a cell per 2 pixels).
+    auto clustered = decodeClustered(*file, kThumbnailCells, o.memory_budget);
+    if (!clustered.isOk()) return note = "not decodable: " + clustered.status().message(), "";
+    mesh = std::move(clustered).value();
+  } else {
+    ContainerHeader header;
+    auto q = decodeContainer(container, std::nullopt, &header);
+    if (!q.isOk()) return note = "not decodable: " + q.status().message(), "";
+    mesh = dequantizeMesh(*q, header.grid, header.layout);
+  }
+  if (mesh.triangles.empty()) return note = "no triangles", "";
   RenderSettings rs;
   rs.width = o.thumbnail_width;
   rs.height = o.thumbnail_height;

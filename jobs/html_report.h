@@ -18,7 +18,8 @@ class EmbreeDevice;
 struct HtmlReportOptions {
   bool thumbnails = true;  // decode and render each container (the slow part: a decode per scan)
   int thumbnail_width = 240, thumbnail_height = 180;
-  // A container whose in-memory decode would need more gets a note instead of a thumbnail (0: no limit).
+  // A container whose in-memory decode would need more is drawn from a vertex-clustered decode instead (its shape
+  // at thumbnail resolution, jobs/stream_decode.h), within the budget (0: no limit).
   uint64_t memory_budget = kDefaultDecodeBudget;
 };
 

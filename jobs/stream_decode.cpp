@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <unordered_map>
+#include <unordered_set>
 
 #include "engine/codecs/codec.h"
 #include "engine/octahedral.h"
@@ -247,6 +248,43 @@ class Welder {
   uint64_t face_file_bytes_ = 0;
 };
 
+// Consecutive runs of `chosen` to decode together: within half the budget, the rest for welding, buffers and the
+// writer; a tile larger than that goes alone, up to three quarters of the budget (the estimate is conservative:
+// measured peaks are 0.4-0.8 of it).
+Result<std::vector<std::pair<size_t, size_t>>> decodeBatches(const ContainerFile& file,
+                                                             const std::vector<const TileEntry*>& chosen,
+                                                             uint64_t memory_budget) {
+  const size_t n = chosen.size();
+  const uint64_t batch_budget = memory_budget / 2, tile_limit = memory_budget / 4 * 3;
+  std::vector<std::pair<size_t, size_t>> batches;
+  for (size_t i = 0; i < n;) {
+    const uint64_t need = tileDecodeBytes(*chosen[i]);
+    if (need > tile_limit)
+      return makeError(ErrorCode::kLimitExceeded,
+                       file.path() + ": tile " + std::to_string(chosen[i]->tile_id) + " (" +
+                           std::to_string(chosen[i]->vertices) + " vertices, " + std::to_string(chosen[i]->faces) +
+                           " faces) needs about " + humanBytes(need) +
+                           " to decode, more than three quarters of the memory budget of " + humanBytes(memory_budget) +
+                           ": give --memory-budget " + std::to_string((need / 3 * 4 >> 20) + 1) + "M or more");
+    size_t j = i + 1;
+    uint64_t sum = need;
+    while (j < n && sum + tileDecodeBytes(*chosen[j]) <= batch_budget) sum += tileDecodeBytes(*chosen[j++]);
+    batches.push_back({i, j});
+    i = j;
+  }
+  return batches;
+}
+
+// Every decoded vertex inside the tile's bounds in the index: what welding and clustering rely on.
+Status checkWithinIndexBounds(const ContainerFile& file, const TileEntry& e, const QuantizedMesh& m) {
+  const Bounds b{e.lo, e.hi};
+  for (const Vec3u& p : m.positions)
+    if (!b.contains(p))
+      return makeError(ErrorCode::kMalformed, file.path() + ": tile " + std::to_string(e.tile_id) +
+                                                  ": a decoded vertex lies outside the index's bounds");
+  return Status::ok();
+}
+
 }  // namespace
 
 uint64_t tileDecodeBytes(const TileEntry& e) {
@@ -282,32 +320,65 @@ Result<std::vector<DecodedTile>> decodeTiles(const ContainerFile& file, std::spa
   return decoded;
 }
 
+Result<Mesh> decodeClustered(const ContainerFile& file, uint32_t cells, uint64_t memory_budget) {
+  std::vector<const TileEntry*> chosen;
+  Bounds all;
+  for (const TileEntry& e : file.tiles())
+    if (e.vertices > 0) {
+      chosen.push_back(&e);
+      all.add(e.lo);
+      all.add(e.hi);
+    }
+  SP_ASSIGN_OR_RETURN(auto batches, decodeBatches(file, chosen, memory_budget));
+  const ContainerHeader& header = file.header();
+  Mesh out;
+  if (chosen.empty()) return out;
+  uint32_t extent = 1;
+  for (int a = 0; a < 3; ++a) extent = std::max(extent, all.hi[a] - all.lo[a] + 1);
+  cells = std::clamp(cells, 1u, 127u);  // cluster ids stay under 2^21: three make one triangle key
+  const double size = std::max(1.0, double(extent) / cells);  // grid cells per cluster cell
+  std::unordered_map<uint64_t, uint32_t> cluster;
+  std::unordered_set<uint64_t> seen;  // triangles by their sorted cluster ids (< 2^21 each)
+  std::vector<uint32_t> of;
+  std::vector<Vec3d> sum;  // per cluster: the sum of its vertices (each tile's copy of a border vertex too)
+  std::vector<uint32_t> count;
+  for (auto [a, b] : batches) {
+    SP_ASSIGN_OR_RETURN(auto tiles, decodeTiles(file, std::span(chosen).subspan(a, b - a), std::nullopt));
+    for (size_t i = 0; i < tiles.size(); ++i) {
+      const QuantizedMesh& m = tiles[i].mesh;
+      SP_RETURN_IF_ERROR(checkWithinIndexBounds(file, *chosen[a + i], m));
+      of.resize(m.positions.size());
+      for (size_t v = 0; v < m.positions.size(); ++v) {
+        uint64_t key = 0;
+        for (int k = 0; k < 3; ++k) key = key << 21 | uint64_t((m.positions[v][k] - all.lo[k]) / size);
+        auto [it, inserted] = cluster.try_emplace(key, uint32_t(sum.size()));
+        if (inserted) sum.push_back({0, 0, 0}), count.push_back(0);
+        const Vec3d p = header.grid.dequantize(m.positions[v]);
+        for (int k = 0; k < 3; ++k) sum[it->second][k] += p[k];
+        ++count[it->second];
+        of[v] = it->second;
+      }
+      for (const Triangle& tri : m.triangles) {
+        Triangle c{of[tri[0]], of[tri[1]], of[tri[2]]};
+        if (c[0] == c[1] || c[1] == c[2] || c[0] == c[2]) continue;
+        std::array<uint32_t, 3> s = c;
+        std::sort(s.begin(), s.end());
+        if (seen.insert(uint64_t(s[0]) << 42 | uint64_t(s[1]) << 21 | s[2]).second) out.triangles.push_back(c);
+      }
+    }
+  }
+  out.positions.resize(sum.size());
+  for (size_t c = 0; c < sum.size(); ++c)
+    for (int k = 0; k < 3; ++k) out.positions[c][k] = sum[c][k] / count[c];
+  return out;
+}
+
 Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::vector<const TileEntry*>& chosen,
                                         const std::string& output, const StreamDecodeSettings& settings) {
   SP_ASSIGN_OR_RETURN(MeshFileFormat format, MeshFileFormat::forPath(output));
   const ContainerHeader& header = file.header();
   const size_t n = chosen.size();
-  // Batches of tiles in flight within half the budget, the rest for welding, buffers and the writer; a tile larger
-  // than that goes alone, up to three quarters of the budget (the estimate is conservative: measured peaks are
-  // 0.4-0.8 of it).
-  const uint64_t batch_budget = settings.memory_budget / 2, tile_limit = settings.memory_budget / 4 * 3;
-  std::vector<std::pair<size_t, size_t>> batches;
-  for (size_t i = 0; i < n;) {
-    const uint64_t need = tileDecodeBytes(*chosen[i]);
-    if (need > tile_limit)
-      return makeError(ErrorCode::kLimitExceeded, file.path() + ": tile " + std::to_string(chosen[i]->tile_id) + " (" +
-                                                      std::to_string(chosen[i]->vertices) + " vertices, " +
-                                                      std::to_string(chosen[i]->faces) + " faces) needs about " +
-                                                      humanBytes(need) +
-                                                      " to decode, more than three quarters of the memory budget of " +
-                                                      humanBytes(settings.memory_budget) + ": give --memory-budget " +
-                                                      std::to_string((need / 3 * 4 >> 20) + 1) + "M or more");
-    size_t j = i + 1;
-    uint64_t sum = need;
-    while (j < n && sum + tileDecodeBytes(*chosen[j]) <= batch_budget) sum += tileDecodeBytes(*chosen[j++]);
-    batches.push_back({i, j});
-    i = j;
-  }
+  SP_ASSIGN_OR_RETURN(auto batches, decodeBatches(file, chosen, settings.memory_budget));
 
   // Where each tile's vertices lie, whether every tile is complete, whether the decode is a point cloud. From the
   // index for a complete decode; a coarse level is decoded once to measure them.
@@ -343,11 +414,7 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
     SP_ASSIGN_OR_RETURN(auto tiles, decodeTiles(file, std::span(chosen).subspan(a, b - a), settings.level));
     for (size_t i = a; i < b; ++i) {
       const QuantizedMesh& m = tiles[i - a].mesh;
-      if (!settings.level)  // the index's bounds are what welding relies on
-        for (const Vec3u& p : m.positions)
-          if (!bounds[i].contains(p))
-            return makeError(ErrorCode::kMalformed, file.path() + ": tile " + std::to_string(chosen[i]->tile_id) +
-                                                        ": a decoded vertex lies outside the index's bounds");
+      if (!settings.level) SP_RETURN_IF_ERROR(checkWithinIndexBounds(file, *chosen[i], m));
       SP_RETURN_IF_ERROR(welder.add(static_cast<uint32_t>(i), m));
       tiles[i - a].mesh = QuantizedMesh();
     }

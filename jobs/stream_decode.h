@@ -57,6 +57,13 @@ struct StreamDecodeResult {
   uint32_t batches = 0;  // decode batches (1: everything fit at once)
 };
 
+// A container's shape at low resolution within `memory_budget` (for thumbnails): tiles decoded a batch at a time,
+// the vertices clustered by their cell in a grid of `cells` per axis over the container's bounds (each cluster at
+// the mean of its vertices), and the triangles that span three clusters kept once each (vertex clustering;
+// Rossignac and Borrel 1993). Memory grows with
+// the clustered mesh, at most a few times cells^2 for a surface, not with the scan.
+Result<Mesh> decodeClustered(const ContainerFile& file, uint32_t cells, uint64_t memory_budget);
+
 Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::vector<const TileEntry*>& chosen,
                                         const std::string& output, const StreamDecodeSettings& settings);
 

@@ -15,7 +15,9 @@
 
 #include "engine/shapes.h"
 #include "jobs/config.h"
+#include "jobs/container_file.h"
 #include "jobs/html_report.h"
+#include "jobs/stream_decode.h"
 #include "jobs/mesh_io/mesh_writer.h"
 #include "jobs_util.h"
 #include "png_util.h"
@@ -109,14 +111,42 @@ TEST(HtmlReport, AJobWritesAPageWithEveryScan) {
   }
 }
 
-TEST(HtmlReport, AScanOverTheMemoryBudgetGetsANoteNotAThumbnail) {
+// Thumbnails of every scan's picture, in row order.
+std::vector<Image> thumbnails(const std::string& html) {
+  std::regex thumb("class=\"thumb\"[^>]*src=\"data:image/png;base64,([A-Za-z0-9+/=]+)\"");
+  std::vector<Image> out;
+  for (std::sregex_iterator it(html.begin(), html.end(), thumb), end; it != end; ++it)
+    out.push_back(testing::decodePng(unbase64((*it)[1])));
+  return out;
+}
+
+TEST(HtmlReport, AScanOverTheMemoryBudgetIsDrawnFromAClusteredDecode) {
   Batch b;
+  // 1.25 MiB: the egg's whole decode (about 1.45 MB estimated) is over it, the small sphere's is not.
   HtmlReportOptions options;
-  options.memory_budget = 64 << 10;  // the smaller sphere's decode needs about 100 KiB
+  options.memory_budget = 1280 << 10;
   ASSERT_TRUE(writeHtmlReport(b.out + "/summary.json", b.out + "/small.html", options).isOk());
-  const std::string html = readText(b.out + "/small.html");
-  EXPECT_EQ(count(html, "class=\"thumb\""), 0u);
-  EXPECT_EQ(count(html, "too large for a thumbnail"), 2u) << html;
+  const auto clustered = thumbnails(readText(b.out + "/small.html"));
+  const auto whole = thumbnails(readText(b.out + "/report.html"));
+  ASSERT_EQ(clustered.size(), 2u);
+  ASSERT_EQ(whole.size(), 2u);
+  for (size_t i = 0; i < 2; ++i) {
+    // The same shape: as much drawn, within 5%.
+    EXPECT_GT(inked(clustered[i]), 2000u);
+    EXPECT_NEAR(double(inked(clustered[i])), double(inked(whole[i])), 0.05 * inked(whole[i])) << i;
+  }
+  // The egg's picture comes from the clustered decode (its whole decode is over the budget), the sphere's from the
+  // whole one; at 120 cells per axis each of the egg's vertices is a cluster of its own, so the pictures agree.
+  auto estimate = [&](const std::string& name) {
+    auto file = ContainerFile::open(b.out + "/" + name);
+    EXPECT_TRUE(file.isOk());
+    std::vector<const TileEntry*> tiles;
+    for (const TileEntry& e : file->tiles()) tiles.push_back(&e);
+    return inMemoryDecodeBytes(tiles);
+  };
+  EXPECT_GT(estimate("egg.spz"), options.memory_budget);
+  EXPECT_LT(estimate(std::string(b.weird).replace(b.weird.size() - 4, 4, ".spz")), options.memory_budget);
+  EXPECT_EQ(readText(b.out + "/small.html").find("not decodable"), std::string::npos);
   std::string log;
   EXPECT_EQ(testing::runScanpress("report '" + b.out + "' --memory-budget 1M", &log), 1) << log;
   EXPECT_NE(log.find("--memory-budget: must be 0 or at least 16M"), std::string::npos) << log;

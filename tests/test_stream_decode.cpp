@@ -4,7 +4,9 @@
 // glTF over the budget), scratch files cleaned up, and the peak memory of a scan 8x the budget.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
+#include <set>
 #include <fstream>
 #include <string>
 #include <vector>
@@ -171,6 +173,28 @@ TEST_F(StreamDecode, AFailingTileLeavesNoOutputAndNoScratch) {
       << r.status().message();
   EXPECT_FALSE(fs::exists(s.output));
   EXPECT_TRUE(fs::is_empty(dir_->file("scratch")));
+}
+
+// The low-resolution decode thumbnails use: every vertex the mean of a cluster cell's vertices, so within the
+// sagitta of a cell's diagonal (0.006 here) of the unit sphere; triangles over three distinct clusters and each
+// once, far fewer than the scan's.
+TEST_F(StreamDecode, ClusteredDecodeIsTheShapeAtLowResolution) {
+  auto file = ContainerFile::open(container("edgebreaker"));
+  ASSERT_TRUE(file.isOk());
+  auto m = decodeClustered(*file, 16, kSmallBudget);
+  ASSERT_TRUE(m.isOk()) << m.status().toString();
+  EXPECT_GT(m->triangles.size(), 500u);
+  EXPECT_LT(m->triangles.size(), 20480u / 4);
+  for (const Vec3d& p : m->positions) EXPECT_NEAR(std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]), 1.0, 0.01);
+  std::set<std::array<uint32_t, 3>> keys;
+  for (Triangle t : m->triangles) {
+    EXPECT_TRUE(t[0] != t[1] && t[1] != t[2] && t[0] != t[2]);
+    std::sort(t.begin(), t.end());
+    EXPECT_TRUE(keys.insert(t).second) << "a triangle kept twice";
+  }
+  auto small = decodeClustered(*file, 16, 64 << 10);
+  ASSERT_FALSE(small.isOk());
+  EXPECT_EQ(small.status().code(), ErrorCode::kLimitExceeded);
 }
 
 // Tiles built by hand and stored as given: vertices shared across three tiles, one position carrying two

@@ -171,8 +171,8 @@ maps are linked relative to it). A job writes it itself with /output/html.
 options:
   --out FILE.html    where to write it (default: report.html beside the summary)
   --no-thumbnails    no decode and render per scan (fast for large batches)
-  --memory-budget S  a scan whose decode would need more gets a note instead of a thumbnail (default 256M; 0: no
-                     limit)
+  --memory-budget S  a scan whose decode would need more is drawn from a coarse vertex-clustered decode (its shape
+                     at thumbnail resolution) within the budget (default 256M; 0: no limit)
 )";
 
 constexpr const char* kMergeHelp = R"(usage: scanpress merge PART.spz... OUT.spz
