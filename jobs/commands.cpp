@@ -1,7 +1,5 @@
 #include "jobs/commands.h"
 
-#include <oneapi/tbb/parallel_for.h>
-
 #include <algorithm>
 #include <cmath>
 
@@ -307,11 +305,11 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
                                                       ": --gltf-compression and --gltf-nodes are for glTF output "
                                                       "(.glb, .gltf)");
   result.tiles = static_cast<uint32_t>(chosen.size());
-  if (settings.memory_budget > 0 && inMemoryDecodeBytes(chosen) > settings.memory_budget) {
+  const uint64_t in_memory = inMemoryDecodeBytes(chosen);
+  if (settings.memory_budget > 0 && in_memory > settings.memory_budget) {
     if (gltf)
       return makeError(ErrorCode::kLimitExceeded,
-                       settings.output + ": glTF output is built in memory, about " +
-                           std::to_string(inMemoryDecodeBytes(chosen) >> 20) +
+                       settings.output + ": glTF output is built in memory, about " + std::to_string(in_memory >> 20) +
                            " MiB here, over the memory budget of " + std::to_string(settings.memory_budget >> 20) +
                            " MiB: raise --memory-budget, or decode to .ply, .obj, .stl or .off (those stream)");
     StreamDecodeSettings stream;

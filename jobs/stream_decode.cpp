@@ -188,7 +188,6 @@ class Welder {
   }
   MeshFileLayout layout() const { return file_layout_; }
   uint64_t faceFileBytes() const { return face_file_bytes_; }
-  size_t open() const { return shared_.size(); }
 
  private:
   // Tiles whose bounds meet each tile's (sweep along x).
