@@ -24,7 +24,9 @@
 #include "jobs/file_io.h"
 #include "jobs/process.h"
 #include "jobs/scan_store.h"
+#include "jobs/remote_tiles.h"
 #include "jobs/targets.h"
+#include "jobs/tile_work.h"
 #include "spatial/surface_index.h"
 #include "spatial/tile_builder.h"
 #include "spatial/tiling.h"
@@ -42,12 +44,6 @@ constexpr uint64_t kKeepLimit = 256ull << 20;
 constexpr uint64_t kAutoStorageBudget = 2ull << 30;
 // Smallest tile target a memory budget can lower the configured one to.
 constexpr uint64_t kMinBudgetTileTarget = 4096;
-
-#ifdef NDEBUG
-constexpr bool kDebugBuild = false;
-#else
-constexpr bool kDebugBuild = true;
-#endif
 
 }  // namespace
 
@@ -254,34 +250,6 @@ struct TileJob {
   uint32_t tile = 0;
 };
 
-struct TileResult {
-  uint32_t tile = 0;
-  Status status;
-  EncodedTile encoded;
-  uint32_t border = 0;
-  uint32_t input_vertices = 0, input_faces = 0;  // of the tile as built (a failed tile reports what it lost)
-  ErrorAccumulator forward, backward;
-  double knob_cells = -1;
-  bool target_met = true;
-  uint32_t knob_trials = 0;
-};
-
-// Measures one tile: its original triangles against the decoded tile, both ways. Near tile borders the other
-// tile's surface is not considered, which can only make a distance larger (never hide an error).
-Status measureTile(const EncodeSettings& s, const CodecInfo& codec, const TileContext& ctx, const Grid& grid,
-                   double density, std::shared_ptr<EmbreeDevice> device, const TileMesh& tm,
-                   const std::vector<Vec3d>& originals, TileResult& r) {
-  SP_ASSIGN_OR_RETURN(QuantizedMesh decoded_q,
-                      codec.decode(ctx, codec.version, r.encoded.payload, limitsOf(r.encoded.decoded)));
-  std::vector<Vec3d> decoded(decoded_q.positions.size());
-  for (size_t i = 0; i < decoded.size(); ++i) {
-    decoded[i] = grid.dequantize(decoded_q.positions[i]);
-    for (int a = 0; a < 3; ++a) decoded[i][a] -= grid.origin[a];  // same frame as the originals
-  }
-  return measureSurfaces(originals, tm.mesh.triangles, decoded, decoded_q.triangles, s.measure, density,
-                         2 * uint64_t(tm.tile_id), device, r.forward, r.backward);
-}
-
 // One scan's encode: the steps of jobs/pipeline.h as methods, sharing the scan's state.
 class ScanEncoder {
  public:
@@ -419,9 +387,11 @@ class ScanEncoder {
     // A point cloud has no surface to sample (jobs/measure.h): it is not measured.
     result_.measured = s_.measure.enabled && !result_.point_cloud;
     density_ = samplingDensity(s_.measure, result_.faces, area_);
-    if (result_.measured && !device_) {
+    const TileScanFacts facts{result_.grid, result_.layout, result_.measured, result_.diagonal, density_};
+    if (result_.measured && !device_ && !remote_) {
       SP_ASSIGN_OR_RETURN(device_, EmbreeDevice::create());
     }
+    tile_encoder_.emplace(s_, codec_, facts, device_, hooks_);
     size_t in_flight = 2 * static_cast<size_t>(result_.threads);
     if (s_.memory_budget > 0)
       in_flight = std::clamp<size_t>(s_.memory_budget / 4 / (target_ * kTileBytesPerTriangle), 1, in_flight);
@@ -429,6 +399,19 @@ class ScanEncoder {
     for (uint32_t t = 0; t < tile_count_; ++t) result_.tiles[t].id = t;
     step_ = s_.subset_count ? s_.subset_count : 1;
     share_count_ = s_.subset_count ? (tile_count_ + step_ - 1 - s_.subset_index) / step_ : tile_count_;
+    if (remote_) {  // the tiles go to other processes (jobs/remote_tiles.h)
+      SP_RETURN_IF_ERROR(runRemoteTiles(
+          *remote_, s_, facts, s_.subset_count ? s_.subset_index : 0, step_, tile_count_,
+          [&](uint32_t tile, std::vector<uint8_t>& message) {
+        TileMesh tm;
+        std::vector<Vec3d> originals;
+        TileResult built = tileAsBuilt(tm, buildTile(tile, tm, originals));
+        if (built.status.isOk()) message = tileMessage(tm, originals);
+        return built;
+          },
+          [&](const TileResult& r) { writeTile(r); }));
+      return finishTiles();
+    }
 
     // More threads than cores: oneTBB's worker limit defaults to the cores, and an arena asking for more
     // printed "TBB Warning: The number of workers is currently limited to ..." on stderr (through --quiet
@@ -471,6 +454,10 @@ class ScanEncoder {
       source.activate();
       g.wait_for_all();
     });
+    return finishTiles();
+  }
+
+  Status finishTiles() {
     SP_RETURN_IF_ERROR(write_status_);
     if (s_.subset_count)  // the report lists the tiles this part holds
       std::erase_if(result_.tiles, [&](const TileReport& t) { return t.id % step_ != s_.subset_index; });
@@ -526,136 +513,28 @@ class ScanEncoder {
   }
   std::string scratchFile(const char* name) const { return scratch_ ? scratch_->file(name) : std::string(); }
 
-  // The stages in order, each checked against the border contract; then the codec; then the measurement.
-  Status encodeTile(const TileMesh& tm, const std::vector<Vec3d>& originals, TileResult& r) {
-    const TileContext ctx{result_.grid.bits, result_.layout};
-    if (hooks_ && hooks_->fail_tile) SP_RETURN_IF_ERROR(hooks_->fail_tile(tm.tile_id));
-    const bool thorough = kDebugBuild || hooks_ != nullptr;
-    // The tile as the next stage sees it: the built tile, then each stage's output.
-    std::optional<StagedTile> staged;
-    auto view = [&] { return staged ? staged->view() : TileView{tm.mesh, tm.border}; };
-    for (const StageSpec& spec : s_.stages) {
-      SP_ASSIGN_OR_RETURN(StagedTile next, runStage(ctx, view(), spec, thorough));
-      staged = std::move(next);
-    }
-    if (hooks_ && hooks_->extra_stage) {
-      SP_ASSIGN_OR_RETURN(StagedTile next, hooks_->extra_stage(ctx, view(), tm.tile_id));
-      SP_RETURN_IF_ERROR(checkBorderContract(ctx, view(), next.view(), true).withContext("test stage"));
-      staged = std::move(next);
-    }
-    const bool knob = (hooks_ && hooks_->knob_stage) || errorKnobOf(codec_.id);
-    if (knob && s_.tile_error > 0 && result_.measured) return searchKnob(ctx, view(), tm, originals, r);
-    SP_RETURN_IF_ERROR(encodeAt(ctx, view(), knob ? s_.knob_cells : -1, r));
-    if (result_.measured)  // decode in memory, measure against the original triangles, discard
-      SP_RETURN_IF_ERROR(measureTile(s_, codec_, ctx, result_.grid, density_, device_, tm, originals, r));
-    return Status::ok();
-  }
-
-  // The codec's encode with its error knob at `cells` grid cells (< 0: the knob as configured).
-  Status encodeAt(const TileContext& ctx, const TileView& tile, double cells, TileResult& r) const {
-    CodecOptions options = s_.codec_options;
-    r.knob_cells = cells;
-    if (cells < 0) {
-      SP_ASSIGN_OR_RETURN(r.encoded, codec_.encode(ctx, tile, options));
-      return Status::ok();
-    }
-    if (hooks_ && hooks_->knob_stage) {
-      SP_ASSIGN_OR_RETURN(StagedTile lossy, hooks_->knob_stage(ctx, tile, cells));
-      SP_RETURN_IF_ERROR(checkBorderContract(ctx, tile, lossy.view(), true).withContext("test knob stage"));
-      SP_ASSIGN_OR_RETURN(r.encoded, codec_.encode(ctx, lossy.view(), options));
-      return Status::ok();
-    }
-    errorKnobOf(codec_.id)(options, cells);
-    SP_ASSIGN_OR_RETURN(r.encoded, codec_.encode(ctx, tile, options));
-    return Status::ok();
-  }
-
-  // The measured error of the tile as encoded in `r`, in the per-tile target's metric (absolute units).
-  double tileError(const TileResult& r) const {
-    const ErrorStats sym = symmetricOf(statsOf(r.forward), statsOf(r.backward));
-    return s_.tile_metric == ErrorMetric::kMax ? sym.max : sym.rms;
-  }
-
-  // The per-tile knob search: the largest knob t (grid cells) whose decoded tile, measured against the tile's
-  // original triangles, stays within s_.tile_error. Each trial is a full encode, decode and measurement, so the
-  // error is the codec's real error, not its own estimate.
-  //
-  // t = 0 (no simplification) is the floor: its error is the quantization's, which the bits were chosen to keep
-  // well inside the target. The first trial is a prediction: the target in grid cells (for RMS twice that, as a
-  // simplification's RMS is well below its bound on the worst point). Then a bracket: while the trial meets the
-  // target, t doubles (the error grows with t, roughly in proportion, so doubling finds the failing side in a
-  // trial or two); once a trial misses, bisection between the largest t that met and the smallest that missed (in
-  // the log of t, since t spans orders of magnitude). kKnobTrials encodes in all; the tile keeps the encoding of
-  // the largest t that met. The error need not be monotone in t: only trials that were measured to meet are
-  // kept, so a non-monotone codec can cost bytes, never the target.
-  //
-  // Per-tile bounds imply the overall one: the overall RMS is the area-weighted mean of the tiles' squared
-  // errors (each side samples by area, and the tiles partition the original's triangles and the decoded ones),
-  // so RMS <= E in every tile gives RMS <= E overall. The overall max is the max over the tiles' samples; a tile's
-  // measurement ignores its neighbours' surfaces, which can only make a distance near a border larger, and the
-  // border vertices are locked (never moved), so max <= E in every tile gives max <= E overall.
-  Status searchKnob(const TileContext& ctx, const TileView& tile, const TileMesh& tm,
-                    const std::vector<Vec3d>& originals, TileResult& r) {
-    constexpr uint32_t kKnobTrials = 7;
-    const double target = s_.tile_error * result_.diagonal;
-    const double target_cells = target / result_.grid.cell;
-    auto trial = [&](double t, TileResult& out) -> Status {
-      out.forward = ErrorAccumulator();
-      out.backward = ErrorAccumulator();
-      SP_RETURN_IF_ERROR(encodeAt(ctx, tile, t, out));
-      ++r.knob_trials;
-      return measureTile(s_, codec_, ctx, result_.grid, density_, device_, tm, originals, out);
-    };
-    // The floor first: when even t = 0 misses, the bits are too coarse and the tile reports it (the target search
-    // adds a bit).
-    SP_RETURN_IF_ERROR(trial(0, r));
-    if (tileError(r) > target) {
-      r.target_met = false;
-      return Status::ok();
-    }
-    double met = 0, missed = -1;  // largest t that met; smallest t that missed (< 0: none yet)
-    double t = s_.tile_metric == ErrorMetric::kRms ? 2 * target_cells : target_cells;
-    for (uint32_t i = 1; i < kKnobTrials && t > 0; ++i) {
-      TileResult attempt;
-      attempt.tile = r.tile;
-      SP_RETURN_IF_ERROR(trial(t, attempt));
-      if (tileError(attempt) <= target) {
-        met = t;
-        r.encoded = std::move(attempt.encoded);
-        r.forward = attempt.forward;
-        r.backward = attempt.backward;
-        r.knob_cells = t;
-      } else {
-        missed = t;
-      }
-      t = missed < 0 ? 2 * met : met > 0 ? std::sqrt(met * missed) : missed / 4;
-      // Within 5% of each other the bracket has converged: another trial would not change the bytes much.
-      if (missed > 0 && met > 0 && missed < 1.05 * met) break;
-    }
-    return Status::ok();
-  }
-
-  TileResult runTile(uint32_t tile) {
-    TileResult r;
-    r.tile = tile;
+  // Builds tile `tile` (its triangles from the bins, its vertices from the store, its border flags) with the
+  // original positions when measuring. A failed build is a failed tile, not a failed encode.
+  Status buildTile(uint32_t tile, TileMesh& tm, std::vector<Vec3d>& originals) const {
+    tm.tile_id = tile;
     try {
-      TileMesh tm;
-      std::vector<Vec3d> originals;
       std::vector<Triangle> triangles;
-      r.status = bins_->read(tile, triangles);
-      if (r.status.isOk())
-        r.status = buildTileMesh(tile, triangles, *store_, result_.layout, tm, result_.measured ? &originals : nullptr);
+      SP_RETURN_IF_ERROR(bins_->read(tile, triangles));
+      SP_RETURN_IF_ERROR(buildTileMesh(tile, triangles, *store_, result_.layout, tm,
+                                       result_.measured ? &originals : nullptr));
       // A point cloud's bins hold (v, v, v) per point: its vertices, in input order, without triangles.
       if (result_.point_cloud) tm.mesh.triangles.clear();
-      r.input_vertices = static_cast<uint32_t>(tm.mesh.positions.size());
-      r.input_faces = static_cast<uint32_t>(tm.mesh.triangles.size());
-      r.border = static_cast<uint32_t>(std::count(tm.border.begin(), tm.border.end(), 1));
-      if (r.status.isOk()) r.status = encodeTile(tm, originals, r);
+      return Status::ok();
     } catch (...) {
-      r.status = statusFromException();
+      return statusFromException();
     }
-    if (!r.status.isOk()) r.encoded = EncodedTile{};
-    return r;
+  }
+
+  TileResult runTile(uint32_t tile) const {
+    TileMesh tm;
+    std::vector<Vec3d> originals;
+    if (Status built = buildTile(tile, tm, originals); !built.isOk()) return tileAsBuilt(tm, std::move(built));
+    return tile_encoder_->run(tm, originals);
   }
 
   void writeTile(const TileResult& r) {
@@ -707,6 +586,8 @@ class ScanEncoder {
   uint32_t step_ = 1;         // a subset's count N, else 1
   // Encoding and writing.
   double density_ = 0;
+  TileTransport* remote_ = tileTransport();  // tiles go to other processes; nullptr: encoded here
+  std::optional<TileEncoder> tile_encoder_;
   std::unique_ptr<AtomicFile> file_;
   std::optional<ContainerWriter> writer_;
   Status write_status_;
