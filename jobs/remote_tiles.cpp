@@ -328,7 +328,7 @@ Result<TileResult> readResult(std::span<const uint8_t> message) {
   return t;
 }
 
-std::vector<uint8_t> TileServer::scan(std::span<const uint8_t> message) {
+Status TileServer::scan(std::span<const uint8_t> message) {
   encoder_.reset();
   settings_ = EncodeSettings();
   TileScanFacts facts;
@@ -346,7 +346,7 @@ std::vector<uint8_t> TileServer::scan(std::span<const uint8_t> message) {
   }
   if (status.isOk()) encoder_ = std::make_unique<TileEncoder>(settings_, *codec, facts, std::move(device), nullptr);
   scan_status_ = status.isOk() ? Status::ok() : status;
-  return readyMessage(2 * std::max<uint32_t>(1, threads_), status);
+  return status;
 }
 
 std::vector<uint8_t> TileServer::tile(std::span<const uint8_t> message) const {
@@ -356,22 +356,23 @@ std::vector<uint8_t> TileServer::tile(std::span<const uint8_t> message) const {
   Status status = scan_status_;
   if (status.isOk()) status = expectKind(r, TileMessage::kTile);
   if (status.isOk()) status = r.u32(tm.tile_id);
-  for (auto read : {+[](ByteReader&r, TileMesh&tm) { return getArray(r, tm.mesh.positions); },
-                    +[](ByteReader&r, TileMesh&tm) { return getArray(r, tm.mesh.normals); },
-                    +[](ByteReader&r, TileMesh&tm) { return getArray(r, tm.mesh.colors); },
-                    +[](ByteReader&r, TileMesh&tm) { return getArray(r, tm.mesh.triangles); },
-                    +[](ByteReader&r, TileMesh&tm) { return getArray(r, tm.local_to_global); },
-                    +[](ByteReader&r, TileMesh&tm) { return getArray(r, tm.border); }})
-    if (status.isOk()) status = read(r, tm);
+  if (status.isOk()) status = getArray(r, tm.mesh.positions);
+  if (status.isOk()) status = getArray(r, tm.mesh.normals);
+  if (status.isOk()) status = getArray(r, tm.mesh.colors);
+  if (status.isOk()) status = getArray(r, tm.mesh.triangles);
+  if (status.isOk()) status = getArray(r, tm.local_to_global);
+  if (status.isOk()) status = getArray(r, tm.border);
   if (status.isOk()) status = getArray(r, originals);
   if (status.isOk()) status = expectEnd(r);
-  if (!status.isOk()) {
-    TileResult failed;
-    failed.tile = tm.tile_id;
-    failed.status = status.withContext("worker");
-    return resultMessage(failed);
+  try {
+    if (status.isOk()) return resultMessage(encoder_->run(tm, originals));
+  } catch (...) {  // run() catches the tile's own failures; this is the result's bytes (out of memory)
+    status = statusFromException();
   }
-  return resultMessage(encoder_->run(tm, originals));
+  TileResult failed;
+  failed.tile = tm.tile_id;
+  failed.status = status.withContext("worker");
+  return resultMessage(failed);
 }
 
 Status runRemoteTiles(TileTransport& transport, const EncodeSettings& settings, const TileScanFacts& scan,

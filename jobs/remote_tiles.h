@@ -71,22 +71,20 @@ struct Ready {
 Result<Ready> readReady(std::span<const uint8_t> message);
 Result<TileResult> readResult(std::span<const uint8_t> message);
 
-// A worker's side: what it makes of rank 0's messages. Not thread-safe for kScan, which replaces the scan (call it
-// once no tile of the previous scan runs); tile() may run for many tiles at once.
+// A worker's side: what it makes of rank 0's messages. scan() replaces the scan (call it once no tile of the
+// previous scan runs); tile() may run for many tiles at once.
 class TileServer {
  public:
-  // `threads`: of the worker, announced in kReady as the tiles it takes at once (twice as many: one waiting while
-  // one runs).
-  explicit TileServer(uint32_t threads) : threads_(threads) {}
-  // A kScan message: the settings and facts of the tiles that follow. Returns the kReady reply.
-  std::vector<uint8_t> scan(std::span<const uint8_t> message);
-  // A kTile message: runs the tile; returns the kResult reply (a failure is in the result's status).
+  // A kScan message: the settings and facts of the tiles that follow. The worker replies with readyMessage(the
+  // tiles it takes at once, this status).
+  Status scan(std::span<const uint8_t> message);
+  // A kTile message: runs the tile; returns the kResult reply (a failure, even one to read the message, is in the
+  // result's status).
   std::vector<uint8_t> tile(std::span<const uint8_t> message) const;
   // The threads per worker the last scan asked for (0: the worker's choice).
   int requestedThreads() const { return settings_.threads; }
 
  private:
-  uint32_t threads_;
   EncodeSettings settings_;
   std::unique_ptr<TileEncoder> encoder_;
   Status scan_status_ = makeError(ErrorCode::kInternal, "a tile arrived before its scan");

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Optional tools some tests use to check outputs against independent truth: node with the Khronos glTF validator
-# (npm package gltf-validator), headless Chromium (Debian `chromium`) that loads report.html, and Slurm with munge
-# for a throw-away one-node cluster (tests/cluster/). Best effort: when they cannot be installed (no network),
-# those tests skip and say why.
+# (npm package gltf-validator), headless Chromium (Debian `chromium`) that loads report.html, Slurm with munge for a
+# throw-away one-node cluster, and OpenMPI for scanpress-mpi (tests/cluster/). Best effort: when they cannot be
+# installed (no network), those tests skip and say why.
 set -uo pipefail
 source "$(dirname "$0")/lib.sh"
 if ! command -v node >/dev/null; then
@@ -18,5 +18,8 @@ if ! command -v chromium >/dev/null; then
 fi
 if ! command -v slurmctld >/dev/null || ! command -v munged >/dev/null; then
   (install_missing_packages slurm-wlm munge) || echo "note: slurm-wlm or munge could not be installed; the Slurm test will skip"
+fi
+if ! command -v mpirun >/dev/null || ! command -v mpicxx >/dev/null; then
+  (install_missing_packages openmpi-bin libopenmpi-dev) || echo "note: OpenMPI could not be installed; scanpress-mpi is not built and its test will skip"
 fi
 exit 0

@@ -4,7 +4,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
 bash scripts/install-test-tools.sh
-bash scripts/build.sh
+# scanpress-mpi (mpi/) in the Release build when OpenMPI is there (install-test-tools.sh installs it).
+mpi=()
+if [ "${SANITIZE:-0}" != "1" ] && command -v mpicxx >/dev/null; then mpi=(-DSCANPRESS_MPI=ON); fi
+bash scripts/build.sh "${mpi[@]}"
 dir=build
 if [ "${SANITIZE:-0}" = "1" ]; then dir=build-asan; fi
 ctest --test-dir "$dir" --output-on-failure -j "$(nproc)"

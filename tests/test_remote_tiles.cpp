@@ -54,7 +54,7 @@ class ThreadTransport : public TileTransport {
 
  private:
   void serve(uint32_t w) {
-    TileServer server(1);
+    TileServer server;
     while (true) {
       std::vector<uint8_t> message;
       {
@@ -70,7 +70,7 @@ class ThreadTransport : public TileTransport {
       std::vector<uint8_t> reply;
       switch (message.empty() ? TileMessage::kTile : TileMessage(message[0])) {
         case TileMessage::kQuit: return;
-        case TileMessage::kScan: reply = server.scan(message); break;
+        case TileMessage::kScan: reply = readyMessage(2, server.scan(message)); break;
         default: reply = server.tile(message); ++tiles_served_;
       }
       std::lock_guard lock(mutex_);
@@ -193,11 +193,13 @@ TEST_F(RemoteTiles, SubsetsAndTargets) {
   s.subset_index = 1;
   s.subset_count = 3;
   expectSame(s, 2);
+#if !defined(__SANITIZE_ADDRESS__)  // several measured encodes: Release only (tests/cluster/mpi_test.sh has one too)
   EncodeSettings t = settings("pm", "target.spz");
   t.target.kind = TargetKind::kMaxError;
   t.target.max_error = 2e-4;
   t.target.metric = ErrorMetric::kRms;
   expectSame(t, 2);
+#endif
 }
 
 TEST_F(RemoteTiles, ATileTheWorkerCannotReadFailsThatTileOnly) {
@@ -278,8 +280,8 @@ TEST(RemoteTileMessages, RoundTripAndEveryTruncationIsRefused) {
   EXPECT_EQ(ready->status.code(), ErrorCode::kIo);
 
   // A worker given garbage answers with a failed result (or a refusal), never crashes.
-  TileServer server(1);
-  EXPECT_FALSE(readReady(server.scan(std::vector<uint8_t>{1, 2, 3}))->status.isOk());
+  TileServer server;
+  EXPECT_FALSE(server.scan(std::vector<uint8_t>{1, 2, 3}).isOk());
   auto answer = readResult(server.tile(std::vector<uint8_t>{2, 0, 0, 0}));
   ASSERT_TRUE(answer.isOk());
   EXPECT_FALSE(answer->status.isOk());
