@@ -22,6 +22,7 @@
 #include "engine/tile.h"
 #include "jobs/errors.h"
 #include "jobs/file_io.h"
+#include "jobs/mesh_io/async_sink.h"
 #include "jobs/process.h"
 #include "jobs/scan_store.h"
 #include "jobs/remote_tiles.h"
@@ -37,7 +38,8 @@ namespace scanpress {
 namespace {
 
 // The survey keeps the mesh for the ingest pass only while it is this small: a large mesh held in doubles costs
-// more in memory traffic and page faults than parsing the file again.
+// more in memory traffic and page faults than parsing the file again. A binary PLY is never kept: reading it again
+// costs less than keeping it at any size (bench/RESULTS.md, "Encode on two threads").
 constexpr uint64_t kKeepLimit = 256ull << 20;
 // Without a budget, tile data up to half of this stays in memory; beyond that, scratch files are faster as well as
 // smaller. Only where the data lives changes: the tiles, hence the bytes, depend on an explicit budget only.
@@ -260,7 +262,9 @@ class ScanEncoder {
         progress_(progress),
         device_(std::move(device)),
         hooks_(hooks),
-        survey_(std::min(kKeepLimit, s.memory_budget == 0 ? UINT64_MAX : s.memory_budget / 3)) {
+        survey_(cheapToReadAgain(s.input)
+                    ? 0
+                    : std::min(kKeepLimit, s.memory_budget == 0 ? UINT64_MAX : s.memory_budget / 3)) {
     result_.codec = codec.name;
     for (const StageSpec& st : s.stages) result_.stages.emplace_back(findStage(st.kind)->name);
     result_.threads = s.threads > 0 ? s.threads : tbb::info::default_concurrency();
@@ -269,7 +273,7 @@ class ScanEncoder {
   // Pass 1 over the input: bounds, counts, attributes; the grid.
   Status survey() {
     stage("reading");
-    SP_ASSIGN_OR_RETURN(result_.read, readMesh(s_.input, survey_));
+    SP_ASSIGN_OR_RETURN(result_.read, readInput(survey_));
     if (s_.keep_normals && survey_.has_normals) result_.layout.normal_bits = static_cast<uint8_t>(s_.normal_bits);
     if (s_.keep_colors && survey_.colorChannels()) result_.layout.color_channels = survey_.colorChannels();
     result_.point_cloud = survey_.triangle_count == 0 && survey_.vertex_count > 0;
@@ -325,7 +329,7 @@ class ScanEncoder {
       SP_RETURN_IF_ERROR(replay(survey_.keptMesh(), ingest, ReadOptions().chunk));
       survey_.releaseMesh();
     } else {
-      auto again = readMesh(s_.input, ingest);
+      auto again = readInput(ingest);
       if (!again.isOk()) return again.status();
       if (again->vertices != n_vertices || again->triangles != n_triangles)
         return makeError(ErrorCode::kIo, s_.input + ": file changed between the two passes");
@@ -506,6 +510,18 @@ class ScanEncoder {
                          std::to_string(dropped) + " of " + std::to_string(triangles) + " triangles degenerate (" +
                          share + ", more than the 0.1% allowed): raise --bits (job key /codec/bits), or drop them " +
                          "with --allow-degenerate (/codec/allow_degenerate)");
+  }
+
+  // Reads the input into `sink`; with more than one thread, the sink runs on a thread of its own while the reader
+  // parses the next chunk (the sink sees the same calls in the same order).
+  Result<ReadStats> readInput(MeshSink& sink) const {
+    if (result_.threads < 2) return readMesh(s_.input, sink);
+    AsyncSink async(sink);
+    auto read = readMesh(s_.input, async);
+    const Status delivered = async.finish();
+    if (!read.isOk()) return read;
+    if (!delivered.isOk()) return delivered;
+    return read;
   }
 
   void stage(const char* name) {

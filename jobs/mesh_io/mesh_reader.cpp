@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <limits>
+#include <string_view>
 
 #include "jobs/mesh_io/input.h"
 
@@ -41,6 +43,21 @@ MeshFormat formatFromName(const std::string& path) {
   if (name.ends_with(".stl")) return MeshFormat::kStl;
   if (name.ends_with(".off")) return MeshFormat::kOff;
   return MeshFormat::kUnknown;
+}
+
+bool cheapToReadAgain(const std::string& path) {
+  if (formatFromName(path) != MeshFormat::kPly) return false;
+  std::string lower = path;
+  for (auto& ch : lower) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  if (lower.ends_with(".zst")) return false;
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return false;
+  char head[1024];
+  const size_t n = std::fread(head, 1, sizeof head, f);
+  std::fclose(f);
+  const std::string_view h(head, n);
+  const size_t end = h.find("end_header");
+  return h.starts_with("ply") && end != std::string_view::npos && h.substr(0, end).find("\nformat binary_") != h.npos;
 }
 
 namespace {

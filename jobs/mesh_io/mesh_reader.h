@@ -84,6 +84,11 @@ MeshFormat formatFromName(const std::string& path);
 
 Result<ReadStats> readMesh(const std::string& path, MeshSink& sink, const ReadOptions& options = {});
 
+// Whether reading `path` again costs less than keeping what a first read delivered: an uncompressed binary PLY,
+// whose records parse at memory speed (bench/RESULTS.md, "Encode on two threads"). False when unsure (a file that
+// cannot be opened, stdin, text, compressed).
+bool cheapToReadAgain(const std::string& path);
+
 // Convenience: the whole mesh in memory.
 Result<Mesh> readMeshFile(const std::string& path, ReadStats* stats = nullptr);
 
