@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <stdlib.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -12,6 +13,21 @@
 #include "jobs/errors.h"
 
 namespace scanpress {
+
+namespace {
+
+// Asks for transparent huge pages on the 2 MiB pages inside [p, p + bytes), before they are touched: a large array
+// of tile data then costs one page fault per 2 MiB instead of per 4 KiB (10^7 triangles: quantization 2.4 -> 1.1 s,
+// binning 0.65 -> 0.15 s; bench/RESULTS.md, "Encode on two threads"). Where the kernel's setting is "never", or the
+// range holds no whole huge page, nothing changes.
+void adviseHugePages(const void* p, size_t bytes) {
+  constexpr uintptr_t kHuge = uintptr_t(2) << 20;
+  const uintptr_t lo = (reinterpret_cast<uintptr_t>(p) + kHuge - 1) & ~(kHuge - 1);
+  const uintptr_t hi = (reinterpret_cast<uintptr_t>(p) + bytes) & ~(kHuge - 1);
+  if (hi > lo) (void)::madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
+}
+
+}  // namespace
 
 Result<ScratchDir> ScratchDir::create(const std::string& parent) {
   std::error_code ec;
@@ -215,6 +231,11 @@ namespace {
 constexpr size_t kSpillBuffer = 1u << 16;  // records per write
 }
 
+void TriangleSpill::reserve(uint64_t expected) {
+  memory_.reserve(expected);
+  adviseHugePages(memory_.data(), expected * sizeof(SpilledTriangle));
+}
+
 Status TriangleSpill::append(const SpilledTriangle& t) {
   ++size_;
   if (in_memory_) {
@@ -258,6 +279,8 @@ TileBins::TileBins(std::string path, bool in_memory, std::span<const uint64_t> c
   for (size_t t = 0; t < counts.size(); ++t) begin_[t + 1] = begin_[t] + counts[t];
   cursor_.assign(begin_.begin(), begin_.end() - 1);
   if (in_memory_) {
+    memory_.reserve(begin_.back());
+    adviseHugePages(memory_.data(), begin_.back() * sizeof(Triangle));
     memory_.resize(begin_.back());
   } else {
     buffers_.resize(counts.size());

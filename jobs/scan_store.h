@@ -106,7 +106,7 @@ class TriangleSpill {
   // `expected` (the count from the first pass) sizes the in-memory array once instead of growing it.
   TriangleSpill(std::string path, bool in_memory, uint64_t expected = 0)
       : path_(std::move(path)), in_memory_(in_memory) {
-    if (in_memory_) memory_.reserve(expected);
+    if (in_memory_) reserve(expected);
   }
   Status append(const SpilledTriangle& t);
   Status finish();
@@ -116,6 +116,7 @@ class TriangleSpill {
   void release();
 
  private:
+  void reserve(uint64_t expected);  // the in-memory array, on huge pages
   std::string path_;
   bool in_memory_;
   std::vector<SpilledTriangle> memory_;
