@@ -1,5 +1,6 @@
 #include "jobs/process.h"
 
+#include <malloc.h>
 #include <sys/resource.h>
 
 #include <cinttypes>
@@ -19,6 +20,11 @@ uint64_t peakRss() {
   struct rusage ru {};
   ::getrusage(RUSAGE_SELF, &ru);
   return static_cast<uint64_t>(ru.ru_maxrss) * 1024;
+}
+
+void tuneAllocator() {
+  ::mallopt(M_MMAP_THRESHOLD, 32 << 20);
+  ::mallopt(M_TRIM_THRESHOLD, 64 << 20);
 }
 
 }  // namespace scanpress

@@ -33,6 +33,7 @@
 #include <thread>
 
 #include "jobs/cli/cli.h"
+#include "jobs/process.h"
 #include "jobs/remote_tiles.h"
 
 namespace scanpress {
@@ -243,6 +244,7 @@ int serve(int local_ranks) {
 }  // namespace scanpress
 
 int main(int argc, char** argv) {
+  scanpress::tuneAllocator();  // every rank: rank 0's cliMain sets it too, the workers only here
   int provided = 0;
   MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
   if (provided < MPI_THREAD_FUNNELED) {

@@ -2,7 +2,6 @@
 // disk full), 4 internal error; 128 + the signal when SIGINT, SIGTERM or SIGHUP ended it (jobs/cleanup.h).
 #include "jobs/cli/cli.h"
 
-#include <malloc.h>
 #include <signal.h>
 
 #include <algorithm>
@@ -865,14 +864,7 @@ static int finish(int code) {
 }
 
 int scanpress::cliMain(int argc, char** argv) {
-  // glibc's malloc serves allocations from 128 KiB up with mmap, and raises that threshold only after the process
-  // frees such a block: the tile tasks' large temporary arrays were mapped, faulted in and unmapped tile after tile
-  // unless an earlier step happened to free a large block (encoding 10^7 triangles from a binary PLY, which the
-  // survey no longer keeps: 1.47x the time on one thread). A fixed 32 MiB (glibc's own upper bound for the dynamic
-  // threshold) and a 64 MiB trim threshold make the speed independent of that history (bench/RESULTS.md, "Encode
-  // on two threads").
-  ::mallopt(M_MMAP_THRESHOLD, 32 << 20);
-  ::mallopt(M_TRIM_THRESHOLD, 64 << 20);
+  scanpress::tuneAllocator();  // before the first large allocation (jobs/process.h)
   // A file-size limit (ulimit -f) must fail the write with EFBIG (exit 3, temporaries removed), not kill the
   // process with SIGXFSZ; and SIGINT/SIGTERM/SIGHUP remove the temporaries before exiting (jobs/cleanup.h).
   // Both before any thread starts, so that every thread inherits them.
