@@ -22,7 +22,9 @@ constexpr uint32_t kWireVersion = 1;
 // fails to compile until its size is updated here).
 static_assert(sizeof(CodecOptions) == 32, "CodecOptions changed: update scanMessage and TileServer::scan");
 static_assert(sizeof(StageSpec) == 32, "StageSpec changed: update scanMessage and TileServer::scan");
-static_assert(sizeof(CodecLevel) == 48, "CodecLevel changed: update resultMessage and readResult");
+static_assert(sizeof(CodecLevel) == 48, "CodecLevel changed: update resultMessage, readResult and kLevelBytes");
+// A level's bytes in a kResult message (resultMessage).
+constexpr size_t kLevelBytes = 4 + 8 + 1 + 1 + 4 + 8 + 8 + 8;
 
 TileTransport* g_transport = nullptr;
 
@@ -149,6 +151,12 @@ Status readScan(std::span<const uint8_t> message, EncodeSettings& s, TileScanFac
   SP_RETURN_IF_ERROR(toBool(r, f.measured));
   SP_RETURN_IF_ERROR(r.f64(f.diagonal));
   SP_RETURN_IF_ERROR(r.f64(f.density));
+  if (f.grid.bits < kMinGridBits || f.grid.bits > kMaxGridBits)
+    return r.error(ErrorCode::kMalformed, "grid bits out of range");
+  if (f.layout.normal_bits != 0 && (f.layout.normal_bits < 4 || f.layout.normal_bits > 16))
+    return r.error(ErrorCode::kMalformed, "normal bits out of range");
+  if (f.layout.color_channels != 0 && f.layout.color_channels != 3 && f.layout.color_channels != 4)
+    return r.error(ErrorCode::kMalformed, "color channels out of range");
   return expectEnd(r);
 }
 
@@ -302,7 +310,7 @@ Result<TileResult> readResult(std::span<const uint8_t> message) {
   for (int a = 0; a < 3; ++a) SP_RETURN_IF_ERROR(r.u32(d.hi[a]));
   uint64_t levels = 0;
   SP_RETURN_IF_ERROR(r.varint(levels));
-  if (levels > r.remaining() / 46) return r.error(ErrorCode::kMalformed, "too many levels for the message");
+  if (levels > r.remaining() / kLevelBytes) return r.error(ErrorCode::kMalformed, "too many levels for the message");
   t.encoded.levels.resize(levels);
   for (CodecLevel& l : t.encoded.levels) {
     uint8_t kind = 0;
@@ -344,34 +352,43 @@ Status TileServer::scan(std::span<const uint8_t> message) {
     if (created.isOk()) device = *created;
     else status = created.status().withContext("worker");
   }
+  facts_ = facts;
   if (status.isOk()) encoder_ = std::make_unique<TileEncoder>(settings_, *codec, facts, std::move(device), nullptr);
   scan_status_ = status.isOk() ? Status::ok() : status;
   return status;
 }
 
 std::vector<uint8_t> TileServer::tile(std::span<const uint8_t> message) const {
-  TileMesh tm;
-  std::vector<Vec3d> originals;
-  ByteReader r(message, "tile message");
-  Status status = scan_status_;
-  if (status.isOk()) status = expectKind(r, TileMessage::kTile);
-  if (status.isOk()) status = r.u32(tm.tile_id);
-  if (status.isOk()) status = getArray(r, tm.mesh.positions);
-  if (status.isOk()) status = getArray(r, tm.mesh.normals);
-  if (status.isOk()) status = getArray(r, tm.mesh.colors);
-  if (status.isOk()) status = getArray(r, tm.mesh.triangles);
-  if (status.isOk()) status = getArray(r, tm.local_to_global);
-  if (status.isOk()) status = getArray(r, tm.border);
-  if (status.isOk()) status = getArray(r, originals);
-  if (status.isOk()) status = expectEnd(r);
-  try {
-    if (status.isOk()) return resultMessage(encoder_->run(tm, originals));
-  } catch (...) {  // run() catches the tile's own failures; this is the result's bytes (out of memory)
-    status = statusFromException();
-  }
   TileResult failed;
-  failed.tile = tm.tile_id;
-  failed.status = status.withContext("worker");
+  failed.tile = kUnreadTile;  // until the message's tile id is read: matches no tile rank 0 sent
+  try {
+    TileMesh tm;
+    std::vector<Vec3d> originals;
+    ByteReader r(message, "tile message");
+    Status status = scan_status_;
+    if (status.isOk()) status = expectKind(r, TileMessage::kTile);
+    if (status.isOk()) status = r.u32(tm.tile_id);
+    if (status.isOk()) failed.tile = tm.tile_id;
+    if (status.isOk()) status = getArray(r, tm.mesh.positions);
+    if (status.isOk()) status = getArray(r, tm.mesh.normals);
+    if (status.isOk()) status = getArray(r, tm.mesh.colors);
+    if (status.isOk()) status = getArray(r, tm.mesh.triangles);
+    if (status.isOk()) status = getArray(r, tm.local_to_global);
+    if (status.isOk()) status = getArray(r, tm.border);
+    if (status.isOk()) status = getArray(r, originals);
+    if (status.isOk()) status = expectEnd(r);
+    // The tile as the codecs may assume it: attributes per vertex, indices in range, on the grid.
+    const size_t n = tm.mesh.positions.size();
+    if (status.isOk()) status = validateTile(TileContext{facts_.grid.bits, facts_.layout}, tm.mesh);
+    if (status.isOk() && (tm.local_to_global.size() != n || tm.border.size() != n ||
+                          (facts_.measured ? originals.size() != n : !originals.empty())))
+      status = makeError(ErrorCode::kMalformed, "ids, border flags or originals do not match the vertex count");
+    if (status.isOk()) return resultMessage(encoder_->run(tm, originals));
+    failed.status = status.withContext("worker");
+  } catch (...) {  // run() catches the tile's own failures; this is reading the message or the result's bytes
+    failed.status = statusFromException().withContext("worker");
+  }
+  failed.encoded = EncodedTile{};
   return resultMessage(failed);
 }
 
@@ -409,10 +426,14 @@ Status runRemoteTiles(TileTransport& transport, const EncodeSettings& settings, 
   uint64_t written = 0;
   uint32_t next = first, outstanding = 0;
   auto flush = [&] {
-    for (auto it = waiting.find(written); it != waiting.end(); it = waiting.find(written)) {
-      write(it->second);
-      waiting.erase(it);
-      ++written;
+    try {
+      for (auto it = waiting.find(written); it != waiting.end(); it = waiting.find(written)) {
+        write(it->second);
+        waiting.erase(it);
+        ++written;
+      }
+    } catch (...) {
+      if (status.isOk()) status = statusFromException();
     }
   };
   while (true) {
@@ -422,7 +443,13 @@ Status runRemoteTiles(TileTransport& transport, const EncodeSettings& settings, 
         if (slots[i] - busy[i] > slots[w] - busy[w]) w = i;
       if (busy[w] >= slots[w]) break;
       std::vector<uint8_t> message;
-      TileResult built = build(next, message);
+      TileResult built;
+      try {
+        built = build(next, message);
+      } catch (...) {  // out of memory building the message: stop sending, answer what is out
+        status = statusFromException();
+        break;
+      }
       if (!built.status.isOk()) {
         waiting.emplace(seqOf(next), std::move(built));
       } else if (Status sent_ok = transport.send(w, std::move(message)); !sent_ok.isOk()) {
@@ -439,8 +466,10 @@ Status runRemoteTiles(TileTransport& transport, const EncodeSettings& settings, 
     if (outstanding == 0) break;  // everything sent is answered; nothing more to send (or an error stopped it)
     SP_ASSIGN_OR_RETURN(TileTransport::Received got, transport.receive());
     auto result = readResult(got.message);
-    if (got.worker >= workers || busy[got.worker] == 0)
-      return makeError(ErrorCode::kInternal, "remote tiles: a result nobody asked for");
+    if (got.worker >= workers || busy[got.worker] == 0) {  // a protocol error: nothing sensible is left to do
+      return makeError(ErrorCode::kInternal,
+                       "remote tiles: a message from worker " + std::to_string(got.worker) + ", which had no tile");
+    }
     --busy[got.worker];
     --outstanding;
     if (!result.isOk()) {

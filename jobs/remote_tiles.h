@@ -34,6 +34,9 @@ namespace scanpress {
 
 enum class TileMessage : uint8_t { kScan = 1, kTile = 2, kQuit = 3, kReady = 4, kResult = 5 };
 
+// The tile id of a result whose tile message could not be read up to its id (no tile has it).
+inline constexpr uint32_t kUnreadTile = UINT32_MAX;
+
 // Rank 0's side of the wire. Implementations: MpiTransport (mpi/), and an in-process one in the tests.
 class TileTransport {
  public:
@@ -75,6 +78,10 @@ Result<TileResult> readResult(std::span<const uint8_t> message);
 // previous scan runs); tile() may run for many tiles at once.
 class TileServer {
  public:
+  TileServer() = default;
+  TileServer(const TileServer&) = delete;  // the encoder refers to settings_
+  TileServer& operator=(const TileServer&) = delete;
+
   // A kScan message: the settings and facts of the tiles that follow. The worker replies with readyMessage(the
   // tiles it takes at once, this status).
   Status scan(std::span<const uint8_t> message);
@@ -86,6 +93,7 @@ class TileServer {
 
  private:
   EncodeSettings settings_;
+  TileScanFacts facts_;
   std::unique_ptr<TileEncoder> encoder_;
   Status scan_status_ = makeError(ErrorCode::kInternal, "a tile arrived before its scan");
 };

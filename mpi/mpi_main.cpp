@@ -26,6 +26,7 @@
 #include <condition_variable>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <deque>
 #include <memory>
 #include <mutex>
@@ -163,7 +164,17 @@ int serve(int local_ranks) {
       std::lock_guard lock(mutex);
       ready.swap(done);
     }
-    for (auto& m : ready) (void)outbox.send(0, std::move(m));
+    for (auto& m : ready) {
+      // A result MPI cannot carry (over 2 GiB) is answered as a failed tile, so rank 0 is not left waiting.
+      uint32_t tile = kUnreadTile;
+      if (m.size() >= 5) std::memcpy(&tile, m.data() + 1, 4);
+      if (Status sent = outbox.send(0, std::move(m)); !sent.isOk()) {
+        TileResult failed;
+        failed.tile = tile;
+        failed.status = sent.withContext("worker");
+        (void)outbox.send(0, resultMessage(failed));
+      }
+    }
   };
   // Every tile running now answered: before a new scan replaces the settings, and before quitting.
   auto drain = [&] {

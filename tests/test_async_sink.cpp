@@ -3,6 +3,7 @@
 // exception stops the read with that error and nothing is delivered after it; destruction without finish() does
 // not hang.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <stdexcept>
 #include <string>
@@ -160,6 +161,9 @@ TEST_F(AsyncSinkTest, OnlyAnUncompressedBinaryPlyIsCheapToReadAgain) {
   EXPECT_FALSE(cheapToReadAgain(dir_.file("late.ply")));  // ascii; "format binary" only in a comment
   EXPECT_FALSE(cheapToReadAgain(dir_.file("a.obj")));
   EXPECT_FALSE(cheapToReadAgain(dir_.file("missing.ply")));
+  // A FIFO is neither opened nor read (that would block, or take the header from the reader).
+  ASSERT_EQ(::mkfifo(dir_.file("pipe.ply").c_str(), 0600), 0);
+  EXPECT_FALSE(cheapToReadAgain(dir_.file("pipe.ply")));
 }
 
 }  // namespace

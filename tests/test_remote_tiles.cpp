@@ -250,7 +250,7 @@ TEST(RemoteTileMessages, RoundTripAndEveryTruncationIsRefused) {
   level.complete = true;
   level.vertices = 17;
   level.max_error = 0.25;
-  t.encoded.levels = {level, level};
+  t.encoded.levels.assign(30, level);  // as many levels as kdtree makes at 24 bits, and more
   t.border = 5;
   t.input_vertices = 20;
   t.input_faces = 30;
@@ -264,7 +264,7 @@ TEST(RemoteTileMessages, RoundTripAndEveryTruncationIsRefused) {
   ASSERT_TRUE(back.isOk()) << back.status().toString();
   EXPECT_EQ(resultMessage(*back), m);
   EXPECT_EQ(back->status.message(), "something");
-  EXPECT_EQ(back->encoded.levels.size(), 2u);
+  EXPECT_EQ(back->encoded.levels.size(), 30u);
   EXPECT_EQ(back->encoded.levels[1].max_error, 0.25);
   for (size_t n = 0; n < m.size(); ++n) {
     auto cut = readResult(std::span(m).first(n));
@@ -280,11 +280,48 @@ TEST(RemoteTileMessages, RoundTripAndEveryTruncationIsRefused) {
   EXPECT_EQ(ready->status.code(), ErrorCode::kIo);
 
   // A worker given garbage answers with a failed result (or a refusal), never crashes.
+  {
+    TileServer worker;
+    EncodeSettings settings;
+    TileScanFacts facts;
+    facts.grid.bits = 12;
+    ASSERT_TRUE(worker.scan(scanMessage(settings, facts)).isOk());
+    TileMesh tm;
+    tm.tile_id = 3;
+    tm.mesh.positions = {{1, 2, 3}, {4, 5, 6}, {7, 8, 9}};
+    tm.mesh.triangles = {{0, 1, 2}};
+    tm.local_to_global = {0, 1, 2};
+    tm.border = {0, 0, 0};
+    auto good = readResult(worker.tile(tileMessage(tm, {})));
+    ASSERT_TRUE(good.isOk());
+    EXPECT_TRUE(good->status.isOk()) << good->status.toString();
+    EXPECT_EQ(good->tile, 3u);
+    // An index past the vertices, a coordinate off the 12-bit grid, a border flag missing: refused before any
+    // codec sees the tile.
+    for (int damage = 0; damage < 3; ++damage) {
+      TileMesh bad = tm;
+      if (damage == 0) bad.mesh.triangles[0][2] = 7;
+      if (damage == 1) bad.mesh.positions[1][0] = 4096;
+      if (damage == 2) bad.border.pop_back();
+      auto refused = readResult(worker.tile(tileMessage(bad, {})));
+      ASSERT_TRUE(refused.isOk());
+      EXPECT_FALSE(refused->status.isOk()) << damage;
+      EXPECT_EQ(refused->tile, 3u);
+      EXPECT_TRUE(refused->encoded.payload.empty());
+    }
+    // Scan facts out of range.
+    facts.grid.bits = 40;
+    EXPECT_FALSE(worker.scan(scanMessage(settings, facts)).isOk());
+    facts.grid.bits = 12;
+    facts.layout.color_channels = 7;
+    EXPECT_FALSE(worker.scan(scanMessage(settings, facts)).isOk());
+  }
   TileServer server;
   EXPECT_FALSE(server.scan(std::vector<uint8_t>{1, 2, 3}).isOk());
   auto answer = readResult(server.tile(std::vector<uint8_t>{2, 0, 0, 0}));
   ASSERT_TRUE(answer.isOk());
   EXPECT_FALSE(answer->status.isOk());
+  EXPECT_EQ(answer->tile, kUnreadTile);  // its id could not be read: it matches no tile sent
   EXPECT_FALSE(messageKind({}).isOk());
   EXPECT_FALSE(messageKind(std::vector<uint8_t>{9}).isOk());
 }

@@ -1,5 +1,7 @@
 #include "jobs/mesh_io/mesh_reader.h"
 
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -50,6 +52,9 @@ bool cheapToReadAgain(const std::string& path) {
   std::string lower = path;
   for (auto& ch : lower) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
   if (lower.ends_with(".zst")) return false;
+  // A FIFO or a device cannot be read twice (and peeking would take its header from the reader).
+  struct stat st;
+  if (::stat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) return false;
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) return false;
   char head[1024];

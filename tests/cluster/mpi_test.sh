@@ -52,6 +52,7 @@ same() {  # same NAME RANKS ENCODE-OPTIONS...: scanpress and scanpress-mpi at RA
 same edgebreaker 3 --tile-triangles 8192
 same edgebreaker 4 --tile-triangles 8192
 same kdtree 3 --codec kdtree --tile-triangles 8192 --threads 1
+same kdtree-24-bits 3 --codec kdtree --bits 24 --tile-triangles 8192  # 25 levels a tile
 same pm 4 --codec pm --tile-triangles 16384
 # Measured on the workers: the report's error and per-tile figures equal the single process's.
 "$bin" encode "$work/a.ply" "$work/m.local.spz" --quiet --codec pm --tile-triangles 16384 --measure \
