@@ -165,12 +165,16 @@ class UsedBoxSink : public MeshSink {
   uint64_t next_ = 0;
 };
 
+// A triangle that quantization made degenerate (two corners in one cell): dropped.
+bool collapses(const VertexRecord (&r)[3]) { return r[0].q == r[1].q || r[1].q == r[2].q || r[0].q == r[2].q; }
+
 // Pass 2: quantize into the store, drop degenerate triangles, valences, histogram, spill.
 class IngestSink : public MeshSink {
  public:
   // `points`: a point cloud, whose every vertex is tiled by its position, as a triangle (v, v, v) would be.
+  // `spill`: nullptr out of core, where the tile pass reads the input again instead (KeptTriangles).
   IngestSink(const Grid& grid, const AttributeLayout& layout, VertexStore& store, TileHistogram& hist,
-             TriangleSpill& spill, bool points)
+             TriangleSpill* spill, bool points)
       : grid_(grid), layout_(layout), store_(store), hist_(hist), spill_(spill), points_(points) {}
   static Vec3d originalOf(const VertexRecord& r) { return {r.original[0], r.original[1], r.original[2]}; }
   Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c, uint8_t) override {
@@ -184,7 +188,7 @@ class IngestSink : public MeshSink {
       if (points_) {
         const uint32_t v = static_cast<uint32_t>(store_.size());
         hist_.add(r.q);
-        SP_RETURN_IF_ERROR(spill_.append({{v, v, v}, r.q}));
+        if (spill_) SP_RETURN_IF_ERROR(spill_->append({{v, v, v}, r.q}));
         ++referenced;
       }
       SP_RETURN_IF_ERROR(store_.append(r));
@@ -195,7 +199,7 @@ class IngestSink : public MeshSink {
     VertexRecord r[3];
     for (const Triangle& t : tris) {
       for (int k = 0; k < 3; ++k) SP_RETURN_IF_ERROR(store_.get(t[k], r[k]));
-      if (r[0].q == r[1].q || r[1].q == r[2].q || r[0].q == r[2].q) {
+      if (collapses(r)) {
         ++stats.degenerate_triangles;
         input_degenerate += t[0] == t[1] || t[1] == t[2] || t[0] == t[2];
         continue;
@@ -208,7 +212,8 @@ class IngestSink : public MeshSink {
       area += triangleArea(originalOf(r[0]), originalOf(r[1]), originalOf(r[2]));
       const Vec3u c = triangleCentroid(r[0].q, r[1].q, r[2].q);
       hist_.add(c);
-      SP_RETURN_IF_ERROR(spill_.append({t, c}));
+      ++kept;
+      if (spill_) SP_RETURN_IF_ERROR(spill_->append({t, c}));
     }
     return Status::ok();
   }
@@ -223,6 +228,7 @@ class IngestSink : public MeshSink {
   QuantizeStats stats;
   uint64_t input_degenerate = 0;  // of the degenerate triangles, those with a repeated index (no grid keeps them)
   uint64_t referenced = 0;        // vertices encoded: used by a kept triangle, or points
+  uint64_t kept = 0;              // triangles kept
   double area = 0;                // of the kept triangles, original positions
 
  private:
@@ -230,8 +236,48 @@ class IngestSink : public MeshSink {
   const AttributeLayout& layout_;
   VertexStore& store_;
   TileHistogram& hist_;
-  TriangleSpill& spill_;
+  TriangleSpill* spill_;
   bool points_;
+};
+
+// Out of core, the tile pass's source of the kept triangles (or a point cloud's points, as (v, v, v)), in input
+// order with their centroids, from another read of the input and the vertex store: what the ingest pass kept,
+// exactly. Instead of a spill file of 24 bytes per triangle (the largest part of the scratch disk; bench/RESULTS.md,
+// "Scale"), the input is read once per round, which costs less than writing and reading the spill.
+class KeptTriangles : public MeshSink {
+ public:
+  KeptTriangles(VertexStore& store, bool points, std::function<Status(const SpilledTriangle&)> fn)
+      : store_(store), points_(points), fn_(std::move(fn)) {}
+  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f>, std::span<const Rgba8>, uint8_t) override {
+    if (!points_) return Status::ok();
+    VertexRecord r;
+    for (size_t i = 0; i < p.size(); ++i, ++next_vertex_) {
+      const uint32_t v = static_cast<uint32_t>(next_vertex_);
+      SP_RETURN_IF_ERROR(store_.get(v, r));
+      SP_RETURN_IF_ERROR(fn_({{v, v, v}, r.q}));
+      ++delivered;
+    }
+    return Status::ok();
+  }
+  Status triangles(std::span<const Triangle> tris) override {
+    VertexRecord r[3];
+    for (const Triangle& t : tris) {
+      for (int k = 0; k < 3; ++k) SP_RETURN_IF_ERROR(store_.get(t[k], r[k]));
+      if (collapses(r)) continue;
+      SP_RETURN_IF_ERROR(fn_({t, triangleCentroid(r[0].q, r[1].q, r[2].q)}));
+      ++delivered;
+    }
+    return Status::ok();
+  }
+  Status vertexNormals(uint64_t, std::span<const Vec3f>) override { return Status::ok(); }
+
+  uint64_t delivered = 0;
+
+ private:
+  VertexStore& store_;
+  bool points_;
+  std::function<Status(const SpilledTriangle&)> fn_;
+  uint64_t next_vertex_ = 0;
 };
 
 // Feeds a buffered mesh to a sink in chunks, as a reader would.
@@ -323,8 +369,9 @@ class ScanEncoder {
     stage("quantizing");
     store_.emplace(scratchFile("vertices.bin"), in_memory_ ? UINT64_MAX / 2 : storage_budget_ / 4);
     histogram_.emplace(result_.grid.bits, n_items, target_);
-    spill_.emplace(scratchFile("triangles.bin"), in_memory_, n_items);
-    IngestSink ingest(result_.grid, result_.layout, *store_, *histogram_, *spill_, result_.point_cloud);
+    if (in_memory_) spill_.emplace(std::string(), true, n_items);
+    IngestSink ingest(result_.grid, result_.layout, *store_, *histogram_, spill_ ? &*spill_ : nullptr,
+                      result_.point_cloud);
     if (survey_.kept()) {
       SP_RETURN_IF_ERROR(replay(survey_.keptMesh(), ingest, ReadOptions().chunk));
       survey_.releaseMesh();
@@ -334,11 +381,12 @@ class ScanEncoder {
       if (again->vertices != n_vertices || again->triangles != n_triangles)
         return makeError(ErrorCode::kIo, s_.input + ": file changed between the two passes");
     }
-    SP_RETURN_IF_ERROR(spill_->finish());
+    if (spill_) SP_RETURN_IF_ERROR(spill_->finish());
     result_.quantize = ingest.stats;
     result_.quantize.unreferenced_vertices = n_vertices - ingest.referenced;
     result_.vertices = ingest.referenced;
-    result_.faces = result_.point_cloud ? 0 : spill_->size();
+    result_.faces = result_.point_cloud ? 0 : ingest.kept;
+    kept_items_ = result_.point_cloud ? n_vertices : ingest.kept;
     SP_RETURN_IF_ERROR(checkDegenerate(n_triangles, ingest.stats.degenerate_triangles - ingest.input_degenerate));
     area_ = ingest.area;
     result_.seconds.quantize = clock_.lap();
@@ -349,7 +397,17 @@ class ScanEncoder {
   Status tile() {
     stage("tiling");
     std::vector<SpilledTriangle> chunk(1u << 16);
+    // The kept triangles in input order: from the spill in memory, or out of core from the input read again.
     auto forEachSpilled = [&](auto&& fn) -> Status {
+      if (!spill_) {
+        KeptTriangles again(*store_, result_.point_cloud, fn);
+        auto read = readInput(again);
+        if (!read.isOk()) return read.status();
+        if (read->vertices != survey_.vertex_count || read->triangles != survey_.triangle_count ||
+            again.delivered != kept_items_)
+          return makeError(ErrorCode::kIo, s_.input + ": file changed between the passes");
+        return Status::ok();
+      }
       for (uint64_t first = 0; first < spill_->size(); first += chunk.size()) {
         const size_t n = static_cast<size_t>(std::min<uint64_t>(chunk.size(), spill_->size() - first));
         SP_RETURN_IF_ERROR(spill_->read(first, std::span(chunk).first(n)));
@@ -374,7 +432,7 @@ class ScanEncoder {
       return bins_->add(tile, t.t);
     }));
     SP_RETURN_IF_ERROR(bins_->finish());
-    spill_->release();
+    if (spill_) spill_->release();
     SP_RETURN_IF_ERROR(store_->finalize());
     tile_count_ = static_cast<uint32_t>(tiles.size());
     result_.seconds.tile = clock_.lap();
@@ -594,7 +652,8 @@ class ScanEncoder {
   std::optional<ScratchDir> scratch_;
   std::optional<VertexStore> store_;
   std::optional<TileHistogram> histogram_;
-  std::optional<TriangleSpill> spill_;
+  std::optional<TriangleSpill> spill_;  // in memory only; out of core the tile pass reads the input again
+  uint64_t kept_items_ = 0;             // triangles kept (a point cloud: points)
   std::optional<TileBins> bins_;
   double area_ = 0;  // of the kept triangles, original positions
   uint32_t tile_count_ = 0;
