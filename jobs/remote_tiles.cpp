@@ -42,6 +42,22 @@ Status getString(ByteReader& r, std::string& s) {
   return Status::ok();
 }
 
+// A status as its code and message.
+void putStatus(ByteWriter& w, const Status& status) {
+  w.u8(static_cast<uint8_t>(status.code()));
+  putString(w, status.message());
+}
+
+Status getStatus(ByteReader& r, Status& status) {
+  uint8_t code = 0;
+  std::string text;
+  SP_RETURN_IF_ERROR(r.u8(code));
+  SP_RETURN_IF_ERROR(getString(r, text));
+  if (code > static_cast<uint8_t>(ErrorCode::kInternal)) return r.error(ErrorCode::kMalformed, "unknown error code");
+  status = Status(static_cast<ErrorCode>(code), std::move(text));
+  return Status::ok();
+}
+
 // An array of plain values, as its count and its bytes (both sides are the same little-endian build).
 template <typename T>
 void putArray(ByteWriter& w, const std::vector<T>& v) {
@@ -227,8 +243,7 @@ std::vector<uint8_t> readyMessage(uint32_t slots, const Status& status) {
   ByteWriter w(out);
   w.u8(static_cast<uint8_t>(TileMessage::kReady));
   w.u32(slots);
-  w.u8(static_cast<uint8_t>(status.code()));
-  putString(w, status.message());
+  putStatus(w, status);
   return out;
 }
 
@@ -238,8 +253,7 @@ std::vector<uint8_t> resultMessage(const TileResult& t) {
   ByteWriter w(out);
   w.u8(static_cast<uint8_t>(TileMessage::kResult));
   w.u32(t.tile);
-  w.u8(static_cast<uint8_t>(t.status.code()));
-  putString(w, t.status.message());
+  putStatus(w, t.status);
   putArray(w, t.encoded.payload);
   const TileSummary& d = t.encoded.decoded;
   w.u32(d.vertices);
@@ -280,13 +294,8 @@ Result<Ready> readReady(std::span<const uint8_t> message) {
   ByteReader r(message, "ready message");
   SP_RETURN_IF_ERROR(expectKind(r, TileMessage::kReady));
   Ready ready;
-  uint8_t code = 0;
-  std::string text;
   SP_RETURN_IF_ERROR(r.u32(ready.slots));
-  SP_RETURN_IF_ERROR(r.u8(code));
-  SP_RETURN_IF_ERROR(getString(r, text));
-  if (code > static_cast<uint8_t>(ErrorCode::kInternal)) return r.error(ErrorCode::kMalformed, "unknown error code");
-  ready.status = Status(static_cast<ErrorCode>(code), std::move(text));
+  SP_RETURN_IF_ERROR(getStatus(r, ready.status));
   SP_RETURN_IF_ERROR(expectEnd(r));
   return ready;
 }
@@ -295,13 +304,8 @@ Result<TileResult> readResult(std::span<const uint8_t> message) {
   ByteReader r(message, "result message");
   SP_RETURN_IF_ERROR(expectKind(r, TileMessage::kResult));
   TileResult t;
-  uint8_t code = 0;
-  std::string text;
   SP_RETURN_IF_ERROR(r.u32(t.tile));
-  SP_RETURN_IF_ERROR(r.u8(code));
-  SP_RETURN_IF_ERROR(getString(r, text));
-  if (code > static_cast<uint8_t>(ErrorCode::kInternal)) return r.error(ErrorCode::kMalformed, "unknown error code");
-  t.status = Status(static_cast<ErrorCode>(code), std::move(text));
+  SP_RETURN_IF_ERROR(getStatus(r, t.status));
   SP_RETURN_IF_ERROR(getArray(r, t.encoded.payload));
   TileSummary& d = t.encoded.decoded;
   SP_RETURN_IF_ERROR(r.u32(d.vertices));
