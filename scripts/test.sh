@@ -9,5 +9,13 @@ mpi=()
 if [ "${SANITIZE:-0}" != "1" ] && command -v mpicxx >/dev/null; then mpi=(-DSCANPRESS_MPI=ON); fi
 bash scripts/build.sh "${mpi[@]}"
 dir=build
-if [ "${SANITIZE:-0}" = "1" ]; then dir=build-asan; fi
-ctest --test-dir "$dir" --output-on-failure -j "$(nproc)"
+exclude=()
+if [ "${SANITIZE:-0}" = "1" ]; then
+  dir=build-asan
+  # Under the sanitizers, two measurement-heavy families run in the Release build only, to keep CI within its
+  # time: the error and size target searches (Targets.*: many pm encodes, decodes and measurements of the same
+  # code the codec tests cover) and all 15 scans simplified to 10% (Data/SimplifyScans.*; test_simplify's ugly and
+  # damaged meshes run here). Together about 950 s of the sanitizer suite's 3200.
+  exclude=(-E '^(Targets\.|Data/SimplifyScans\.)')
+fi
+ctest --test-dir "$dir" --output-on-failure -j "$(nproc)" "${exclude[@]}"
