@@ -34,25 +34,26 @@ double surfaceArea(std::span<const Vec3d> p, std::span<const Triangle> t) {
   return area;
 }
 
-void sampleSurface(std::span<const Vec3d> p, std::span<const Triangle> tris, const SampleOptions& opt,
-                   std::vector<Vec3d>& out) {
-  const uint64_t base = mix(opt.seed * 0x9E3779B97F4A7C15ull ^ mix(opt.stream + 0x51ED27));
-  double carry = 0;
+SurfaceSampler::SurfaceSampler(const SampleOptions& opt)
+    : opt_(opt), base_(mix(opt.seed * 0x9E3779B97F4A7C15ull ^ mix(opt.stream + 0x51ED27))) {}
+
+void SurfaceSampler::sample(std::span<const Vec3d> p, std::span<const Triangle> tris, std::vector<Vec3d>& out) {
   // Rank-1 lattice generator for n points: the R2 sequence (plastic number), good 2D stratification for any n.
   constexpr double kA1 = 0.7548776662466927, kA2 = 0.5698402909980532;
-  for (size_t t = 0; t < tris.size(); ++t) {
-    const Vec3d& a = p[tris[t][0]];
-    const Vec3d& b = p[tris[t][1]];
-    const Vec3d& c = p[tris[t][2]];
-    const double want = opt.density * triangleArea(a, b, c) + carry;
+  for (size_t i = 0; i < tris.size(); ++i) {
+    const uint64_t t = next_triangle_++;
+    const Vec3d& a = p[tris[i][0]];
+    const Vec3d& b = p[tris[i][1]];
+    const Vec3d& c = p[tris[i][2]];
+    const double want = opt_.density * triangleArea(a, b, c) + carry_;
     const uint64_t n = want > 0 ? static_cast<uint64_t>(want) : 0;
-    carry = want - double(n);
+    carry_ = want - double(n);
     if (n == 0) continue;
-    uint64_t h = mix(base ^ (uint64_t(t) * 0xD1B54A32D192ED03ull));
+    uint64_t h = mix(base_ ^ (t * 0xD1B54A32D192ED03ull));
     const double off_u = unit(h), off_v = unit(mix(h + 1));
     for (uint64_t k = 0; k < n; ++k) {
       double u, v;
-      if (opt.stratified) {
+      if (opt_.stratified) {
         u = std::fmod(off_u + kA1 * double(k), 1.0);
         v = std::fmod(off_v + kA2 * double(k), 1.0);
       } else {
@@ -63,6 +64,11 @@ void sampleSurface(std::span<const Vec3d> p, std::span<const Triangle> tris, con
       out.push_back(onTriangle(a, b, c, u, v));
     }
   }
+}
+
+void sampleSurface(std::span<const Vec3d> p, std::span<const Triangle> tris, const SampleOptions& opt,
+                   std::vector<Vec3d>& out) {
+  SurfaceSampler(opt).sample(p, tris, out);
   if (opt.vertices) sampleVertices(p, tris, out);
 }
 

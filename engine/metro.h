@@ -32,6 +32,21 @@ struct SampleOptions {
   uint64_t stream = 0;   // distinguishes pieces (e.g. the tile id) so their random offsets differ
 };
 
+// sampleSurface in pieces: consecutive calls with consecutive runs of one mesh's triangles (each run indexed into
+// its own positions) append exactly the samples one sampleSurface call over the whole mesh would (the carry and
+// the triangle numbering continue from call to call). Vertex samples are not appended (opt.vertices is ignored).
+class SurfaceSampler {
+ public:
+  explicit SurfaceSampler(const SampleOptions& opt);
+  void sample(std::span<const Vec3d> positions, std::span<const Triangle> triangles, std::vector<Vec3d>& out);
+
+ private:
+  SampleOptions opt_;
+  uint64_t base_;
+  uint64_t next_triangle_ = 0;
+  double carry_ = 0;
+};
+
 // Appends samples of the triangles to `out`.
 void sampleSurface(std::span<const Vec3d> positions, std::span<const Triangle> triangles, const SampleOptions& opt,
                    std::vector<Vec3d>& out);

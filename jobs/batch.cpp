@@ -41,12 +41,9 @@ uint64_t fnv1a(const std::string& s) {
   return h;
 }
 
-// The decoded scan (whole, from the container just written) colored by its distance to the original.
+// The decoded scan (from the container just written) colored by its distance to the original: whole meshes in
+// memory, or a chunk at a time when they would need more than the job's memory budget.
 Status renderErrorPicture(const EncodeSettings& s, const std::string& png, std::shared_ptr<EmbreeDevice> device) {
-  SP_ASSIGN_OR_RETURN(Mesh original, readMeshFile(s.input));
-  ContainerHeader header;
-  SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeContainer(s.output, std::nullopt, &header));
-  const Mesh decoded = dequantizeMesh(q, header.grid, header.layout);
   RenderSettings rs;
   rs.width = s.measure.render_width;
   rs.height = s.measure.render_height;
@@ -54,6 +51,15 @@ Status renderErrorPicture(const EncodeSettings& s, const std::string& png, std::
   rs.elevation = s.measure.view_elevation;
   rs.scale_max_relative = s.measure.scale_max;
   rs.title = std::filesystem::path(s.input).filename().string();
+  const uint64_t budget = s.memory_budget;
+  if (budget > 0 && inMemorySurfaceBytes(s.input) + inMemorySurfaceBytes(s.output) > budget) {
+    SP_ASSIGN_OR_RETURN(ChunkedSurface original, openSurface(s.input, budget, s.scratch_dir));
+    SP_ASSIGN_OR_RETURN(ChunkedSurface decoded, openSurface(s.output, budget, s.scratch_dir));
+    SP_ASSIGN_OR_RETURN(RenderResult picture, renderSurface(decoded, rs, device, &original, surfaceCacheBytes(budget)));
+    return writePng(png, picture.image);
+  }
+  SP_ASSIGN_OR_RETURN(Mesh original, readMeshFile(s.input));
+  SP_ASSIGN_OR_RETURN(Mesh decoded, readSurfaceFile(s.output));
   SP_ASSIGN_OR_RETURN(RenderResult picture, renderMesh(decoded, rs, device, &original));
   return writePng(png, picture.image);
 }

@@ -7,10 +7,12 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "engine/mesh.h"
 #include "engine/metro.h"
 #include "engine/status.h"
+#include "jobs/chunked_surface.h"
 
 namespace scanpress {
 
@@ -52,6 +54,39 @@ Status measureSurfaces(std::span<const Vec3d> original_positions, std::span<cons
                        std::span<const Vec3d> decoded_positions, std::span<const Triangle> decoded_triangles,
                        const MeasureSettings& settings, double density, uint64_t stream,
                        std::shared_ptr<EmbreeDevice> device, ErrorAccumulator& forward, ErrorAccumulator& backward);
+
+// The indexes of a ChunkedSurface's chunks, built when first asked for and kept while they fit `bytes` (the least
+// recently used is dropped first; the one asked for is always kept). Not thread-safe; the indexes are.
+class ChunkIndexCache {
+ public:
+  ChunkIndexCache(const ChunkedSurface& surface, std::shared_ptr<EmbreeDevice> device, uint64_t bytes);
+  ~ChunkIndexCache();
+  Result<const SurfaceIndex*> get(size_t chunk);
+  uint64_t builds() const { return builds_; }
+
+ private:
+  struct Entry;
+  const ChunkedSurface& surface_;
+  std::shared_ptr<EmbreeDevice> device_;
+  uint64_t limit_, held_ = 0, clock_ = 0, builds_ = 0;
+  std::vector<std::unique_ptr<Entry>> entries_;  // per chunk; null when not built
+};
+
+// Memory an index of a chunk takes (its mesh and the search structures), for the cache's accounting.
+uint64_t chunkIndexBytes(const SurfaceChunkInfo& chunk);
+
+// The squared distance from each point to the nearest triangle of `surface` (infinity when it has none), exact:
+// chunks are searched in order of their boxes' distance to the points' box, each point only where the chunk's box
+// is nearer than its best so far, until no chunk left can be nearer for any point.
+Status nearestSquared(const ChunkedSurface& surface, ChunkIndexCache& cache, std::span<const Vec3d> points,
+                      std::vector<double>& best);
+
+// measureMeshes a chunk at a time: the same samples in the same order and the same exact distances, so the same
+// numbers, bit for bit, as measureMeshes on the whole meshes; memory is the cache's `cache_bytes`, a chunk and its
+// samples.
+Result<MeasureResult> measureChunked(const ChunkedSurface& original, const ChunkedSurface& decoded,
+                                     const MeasureSettings& settings, uint64_t cache_bytes,
+                                     std::shared_ptr<EmbreeDevice> device);
 
 // Measures `decoded` against `original` (whole meshes in memory).
 Result<MeasureResult> measureMeshes(const Mesh& original, const Mesh& decoded, const MeasureSettings& settings,

@@ -16,6 +16,7 @@
 #include "engine/geometry.h"
 #include "engine/quantize.h"
 #include "jobs/file_io.h"
+#include "jobs/measure.h"
 #include "spatial/surface_index.h"
 
 namespace scanpress {
@@ -127,19 +128,22 @@ std::array<double, 3> vertexColor(const Mesh& mesh, uint32_t t, const Vec3d& p) 
 
 Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& s, std::shared_ptr<EmbreeDevice> device,
                                 const Mesh* against) {
+  const ChunkedSurface whole = ChunkedSurface::whole(mesh);
+  std::optional<ChunkedSurface> reference;
+  if (against) reference.emplace(ChunkedSurface::whole(*against));
+  return renderSurface(whole, s, std::move(device), against ? &*reference : nullptr, UINT64_MAX);
+}
+
+Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSettings& s,
+                                   std::shared_ptr<EmbreeDevice> device, const ChunkedSurface* against,
+                                   uint64_t cache_bytes) {
   if (s.width < 16 || s.height < 16 || s.width > 8192 || s.height > 8192)
     return makeError(ErrorCode::kInvalidArgument, "picture size must be within 16..8192 pixels per side");
-  if (mesh.triangles.empty())
+  if (mesh.triangles() == 0)
     return makeError(ErrorCode::kInvalidArgument, "nothing to render: the mesh has no triangles");
-  SP_ASSIGN_OR_RETURN(SurfaceIndex scene, SurfaceIndex::build(device, mesh.positions, mesh.triangles));
-  std::optional<SurfaceIndex> reference;
+  const bool reference = against != nullptr;
   RenderResult out;
-  const BoundingBox box = usedBoundingBox(against ? *against : mesh);  // the encoder's and measure's diagonal
-  out.diagonal = box.diagonal();
-  if (against) {
-    SP_ASSIGN_OR_RETURN(SurfaceIndex r, SurfaceIndex::build(device, against->positions, against->triangles));
-    reference.emplace(std::move(r));
-  }
+  out.diagonal = (against ? *against : mesh).usedBox().diagonal();  // the encoder's and measure's diagonal
   // Layout: a title band on top, the scale bar on the right, the model in the rest.
   const int text_scale = std::max(1, s.height / 300);
   const int title_h = s.title.empty() ? 0 : 11 * text_scale;
@@ -149,7 +153,7 @@ Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& s, std::
   // Camera: from (azimuth, elevation), framing the model's vertices to kFill of the view's smaller extent. The
   // look-at point centers their projection along the view plane; the distance is the smallest at which every vertex
   // projects inside the filled frame (exact under perspective, per vertex), so elongated scans fill the view too
-  // rather than their bounding sphere.
+  // rather than their bounding sphere. Minima and maxima over the chunks: the same as over the whole mesh.
   constexpr double kFill = 0.9;
   const double az = s.azimuth * kPi / 180, el = s.elevation * kPi / 180;
   const Vec3d to_eye{std::cos(el) * std::sin(az), std::sin(el), std::cos(el) * std::cos(az)};
@@ -162,51 +166,82 @@ Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& s, std::
   const double fov = 35 * kPi / 180;
   const double aspect = double(view_w) / view_h;
   const double half_h = std::tan(fov / 2), half_w = half_h * aspect;
-  const BoundingBox mbox = boundingBox(mesh);
+  const BoundingBox& mbox = mesh.box();
   Vec3d center = vmul(vadd(mbox.lo, mbox.hi), 0.5);
-  std::vector<uint8_t> used(mesh.positions.size(), 0);
-  for (const auto& t : mesh.triangles)
-    for (uint32_t v : t)
-      if (v < used.size()) used[v] = 1;
+  // Each used vertex of chunk i, given to `f`.
+  std::vector<uint8_t> used;
+  auto forUsed = [&](auto&& f) -> Status {
+    for (size_t i = 0; i < mesh.chunks(); ++i) {
+      if (mesh.info(i).triangles == 0) continue;
+      SP_ASSIGN_OR_RETURN(auto m, mesh.load(i));
+      used.assign(m->positions.size(), 0);
+      for (const auto& t : m->triangles)
+        for (uint32_t v : t)
+          if (v < used.size()) used[v] = 1;
+      for (size_t v = 0; v < used.size(); ++v)
+        if (used[v]) f(m->positions[v]);
+    }
+    return Status::ok();
+  };
   double a_lo = HUGE_VAL, a_hi = -HUGE_VAL, b_lo = HUGE_VAL, b_hi = -HUGE_VAL;
-  for (size_t v = 0; v < used.size(); ++v) {
-    if (!used[v]) continue;
-    const Vec3d d = vsub(mesh.positions[v], center);
+  SP_RETURN_IF_ERROR(forUsed([&](const Vec3d& p) {
+    const Vec3d d = vsub(p, center);
     a_lo = std::min(a_lo, vdot(d, right)), a_hi = std::max(a_hi, vdot(d, right));
     b_lo = std::min(b_lo, vdot(d, up)), b_hi = std::max(b_hi, vdot(d, up));
-  }
+  }));
   center = vadd(center, vadd(vmul(right, (a_lo + a_hi) / 2), vmul(up, (b_lo + b_hi) / 2)));
   double dist = 0;
-  for (size_t v = 0; v < used.size(); ++v) {
-    if (!used[v]) continue;
-    const Vec3d d = vsub(mesh.positions[v], center);
+  SP_RETURN_IF_ERROR(forUsed([&](const Vec3d& p) {
+    const Vec3d d = vsub(p, center);
     dist = std::max(dist, vdot(d, to_eye) + std::max(std::fabs(vdot(d, right)) / (kFill * half_w),
                                                      std::fabs(vdot(d, up)) / (kFill * half_h)));
-  }
+  }));
+  used = {};
   dist = std::max(dist, std::max(mbox.diagonal(), 1e-30) * 1e-3);  // a point-like or degenerate model
   const Vec3d eye = vadd(center, vmul(to_eye, dist));
-  const bool vertex_colors = !against && !mesh.colors.empty() && mesh.colors.size() == mesh.positions.size();
-
-  std::vector<double> shade(size_t(s.width) * s.height, -1), error(size_t(s.width) * s.height, -1);
-  std::vector<std::array<double, 3>> albedo(vertex_colors ? shade.size() : 0);
-  tbb::parallel_for(title_h, s.height, [&](int y) {
-    uint32_t hint = UINT32_MAX;  // neighbouring pixels see nearby surface points
-    for (int x = 0; x < view_w; ++x) {
-      const double px = ((x + 0.5) / view_w * 2 - 1) * half_w, py = (1 - (y - title_h + 0.5) / view_h * 2) * half_h;
-      Vec3d dir = vadd(forward, vadd(vmul(right, px), vmul(up, py)));
-      dir = vmul(dir, 1.0 / vlen(dir));
-      const auto hit = scene.intersect(eye, dir);
-      if (!hit.hit) continue;
-      const size_t i = size_t(y) * s.width + x;
-      shade[i] = 0.25 + 0.75 * std::fabs(vdot(hit.normal, dir));
-      if (vertex_colors) albedo[i] = vertexColor(mesh, hit.triangle, vadd(eye, vmul(dir, hit.t)));
-      if (reference) {
-        const auto c = reference->closest(vadd(eye, vmul(dir, hit.t)), hint);
-        error[i] = c.distance;
-        hint = c.triangle;
+  // Rays, chunk by chunk: a pixel keeps the nearest hit (the earlier chunk on a tie), its shade, the vertex color
+  // there (when no reference colors it and the chunk has colors) and the point.
+  const size_t pixels = size_t(s.width) * s.height;
+  std::vector<double> shade(pixels, -1), error(pixels, -1), depth(pixels, HUGE_VAL);
+  std::vector<std::array<double, 3>> albedo;
+  std::vector<Vec3d> hit_point(reference ? pixels : 0);
+  bool vertex_colors = false;
+  for (size_t i = 0; i < mesh.chunks(); ++i) {
+    if (mesh.info(i).triangles == 0) continue;
+    SP_ASSIGN_OR_RETURN(auto m, mesh.load(i));
+    SP_ASSIGN_OR_RETURN(SurfaceIndex scene, SurfaceIndex::build(device, m->positions, m->triangles));
+    const bool colors = !reference && !m->colors.empty() && m->colors.size() == m->positions.size();
+    if (colors && albedo.empty()) albedo.assign(pixels, {0.85, 0.85, 0.85});
+    vertex_colors |= colors;
+    tbb::parallel_for(title_h, s.height, [&](int y) {
+      for (int x = 0; x < view_w; ++x) {
+        const double px = ((x + 0.5) / view_w * 2 - 1) * half_w, py = (1 - (y - title_h + 0.5) / view_h * 2) * half_h;
+        Vec3d dir = vadd(forward, vadd(vmul(right, px), vmul(up, py)));
+        dir = vmul(dir, 1.0 / vlen(dir));
+        const auto hit = scene.intersect(eye, dir);
+        const size_t k = size_t(y) * s.width + x;
+        if (!hit.hit || !(hit.t < depth[k])) continue;
+        depth[k] = hit.t;
+        shade[k] = 0.25 + 0.75 * std::fabs(vdot(hit.normal, dir));
+        const Vec3d point = vadd(eye, vmul(dir, hit.t));
+        if (colors) albedo[k] = vertexColor(*m, hit.triangle, point);
+        else if (!albedo.empty()) albedo[k] = {0.85, 0.85, 0.85};
+        if (reference) hit_point[k] = point;
       }
-    }
-  });
+    });
+  }
+  depth = {};
+  if (reference) {  // each visible point's distance to the reference
+    std::vector<size_t> where;
+    std::vector<Vec3d> points;
+    for (size_t k = 0; k < pixels; ++k)
+      if (shade[k] >= 0) where.push_back(k), points.push_back(hit_point[k]);
+    hit_point = {};
+    std::vector<double> d2;
+    ChunkIndexCache cache(*against, device, cache_bytes);
+    SP_RETURN_IF_ERROR(nearestSquared(*against, cache, points, d2));
+    for (size_t n = 0; n < where.size(); ++n) error[where[n]] = std::sqrt(d2[n]);
+  }
   if (reference && s.scale_max_relative > 0) {
     out.scale_max = s.scale_max_relative * out.diagonal;
   } else if (reference) {  // the bar tops at the 99.5th percentile of visible distances, so one outlier cannot

@@ -10,6 +10,7 @@
 
 #include "engine/mesh.h"
 #include "engine/status.h"
+#include "jobs/chunked_surface.h"
 
 namespace scanpress {
 
@@ -38,6 +39,14 @@ struct RenderResult {
 // Renders `mesh`; with `against`, colors each visible point by its distance to `against`.
 Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& settings, std::shared_ptr<EmbreeDevice> device,
                                 const Mesh* against = nullptr);
+
+// renderMesh a chunk at a time: the mesh's chunks are ray cast one after the other (a pixel keeps the nearest hit)
+// and the visible points' distances found over the reference's chunks through a cache of `cache_bytes`. Hits
+// and distances are computed in double from each triangle's corners, so the picture is the whole mesh's, up to a
+// pixel whose ray meets two triangles at the same distance (an edge).
+Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSettings& settings,
+                                   std::shared_ptr<EmbreeDevice> device, const ChunkedSurface* against,
+                                   uint64_t cache_bytes);
 
 Result<std::vector<uint8_t>> encodePng(const Image& image);
 Status writePng(const std::string& path, const Image& image);

@@ -188,10 +188,10 @@ bool closestCallback(RTCPointQueryFunctionArguments* args) {
 
 }  // namespace
 
-SurfaceIndex::Closest SurfaceIndex::closest(const Vec3d& p, uint32_t hint) const {
+SurfaceIndex::Closest SurfaceIndex::closest(const Vec3d& p, uint32_t hint, double within_squared) const {
   Closest out;
   if (impl_->triangles.empty()) {
-    out.distance = std::numeric_limits<double>::infinity();
+    out.distance = out.distance_squared = std::numeric_limits<double>::infinity();
     return out;
   }
   ClosestQuery q{impl_.get(), p, std::numeric_limits<double>::infinity(), p, UINT32_MAX, 0,
@@ -202,12 +202,19 @@ SurfaceIndex::Closest SurfaceIndex::closest(const Vec3d& p, uint32_t hint) const
   query.z = q.pz = static_cast<float>(p[2] - impl_->origin[2]);
   query.time = 0.f;
   query.radius = std::numeric_limits<float>::infinity();
+  if (within_squared < std::numeric_limits<double>::infinity()) {  // only strictly closer triangles are taken
+    q.best_d2 = within_squared;
+    query.radius = q.best_f = static_cast<float>(std::sqrt(within_squared)) *
+                                  (1.0f + 4 * std::numeric_limits<float>::epsilon()) +
+                              impl_->slack;
+  }
   if (hint < impl_->triangles.size()) {
     const Triangle& t = impl_->triangles[hint];
     const Vec3d c = closestPointOnTriangle(p, impl_->positions[t[0]], impl_->positions[t[1]], impl_->positions[t[2]]);
     const Vec3d d = vsub(c, p);
     const double d2 = vdot(d, d);
-    if (!std::isnan(d2)) {  // NaN when p is not finite: then ignored, the answer is the same as without a hint
+    // NaN when p is not finite: then ignored, the answer is the same as without a hint
+    if (!std::isnan(d2) && d2 < q.best_d2) {
       q.best_d2 = d2;
       q.best = c;
       q.triangle = hint;
@@ -218,7 +225,12 @@ SurfaceIndex::Closest SurfaceIndex::closest(const Vec3d& p, uint32_t hint) const
   RTCPointQueryContext context;
   rtcInitPointQueryContext(&context);
   rtcPointQuery(static_cast<RTCScene>(impl_->scene.handle()), &query, &context, closestCallback, &q);
+  if (q.triangle == UINT32_MAX) {  // nothing closer than within_squared
+    out.distance = out.distance_squared = std::numeric_limits<double>::infinity();
+    return out;
+  }
   out.distance = std::sqrt(q.best_d2);
+  out.distance_squared = q.best_d2;
   out.point = q.best;
   out.triangle = q.triangle;
   return out;
@@ -250,8 +262,19 @@ SurfaceIndex::Hit SurfaceIndex::intersect(const Vec3d& origin, const Vec3d& dir)
   out.hit = true;
   out.t = rh.ray.tfar;
   out.triangle = rh.hit.primID;
-  Vec3d n{rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z};
-  const double len = vlen(n);
+  // The hit's distance and normal again in double from the triangle's own corners: the same for a triangle
+  // whatever index holds it (Embree's float values depend on the index's origin), so pictures drawn a piece at a
+  // time agree with whole ones.
+  const Triangle& tri = impl_->triangles[out.triangle];
+  const Vec3d& a = impl_->positions[tri[0]];
+  Vec3d n = vcross(vsub(impl_->positions[tri[1]], a), vsub(impl_->positions[tri[2]], a));
+  const double nd = vdot(n, dir);
+  if (nd != 0) {
+    const double t = vdot(n, vsub(a, origin)) / nd;
+    if (std::isfinite(t) && t >= 0) out.t = t;
+  }
+  double len = vlen(n);
+  if (!(len > 0) || !std::isfinite(len)) n = {rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z}, len = vlen(n);
   n = len > 0 ? vmul(n, 1.0 / len) : Vec3d{0, 0, 1};
   if (vdot(n, dir) > 0) n = vmul(n, -1.0);
   out.normal = n;

@@ -210,8 +210,10 @@ void SurfaceIndex::closestMany(std::span<const Vec3d> points, std::span<Closest>
             for (unsigned bits = lanesAtMost(bound, Lanes{} + below); bits; bits &= bits - 1)
               test(b * kLanes + __builtin_ctz(bits));
           }
+        o.distance_squared = o.distance;
         o.distance = std::sqrt(o.distance);
       } else {
+        o.distance_squared = o.distance;
         o.distance = best;
       }
       if (o.triangle == UINT32_MAX) o = closest(p, hint);

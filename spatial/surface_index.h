@@ -18,6 +18,7 @@
 // Thread safety: closest(), closestMany() and intersect() may be called from many threads at once.
 #pragma once
 
+#include <limits>
 #include <memory>
 #include <span>
 #include <string>
@@ -52,12 +53,17 @@ class SurfaceIndex {
 
   struct Closest {
     double distance = 0;
+    double distance_squared = 0;  // what distance is the square root of
     Vec3d point{0, 0, 0};
     uint32_t triangle = UINT32_MAX;  // UINT32_MAX when the mesh has no triangle
   };
   // With a hint (a triangle likely near p, e.g. the previous answer for a nearby query), the search starts from
   // the distance to that triangle instead of an unbounded radius: the same exact result, far fewer nodes.
-  Closest closest(const Vec3d& p, uint32_t hint = UINT32_MAX) const;
+  // With `within_squared` finite, only triangles closer than its square root are looked for: when none is, the
+  // answer has distance infinity and triangle UINT32_MAX (for the nearest over several indexes, pass the best
+  // squared distance so far: squares, so that the minimum is taken on the same values one index would compare).
+  Closest closest(const Vec3d& p, uint32_t hint = UINT32_MAX,
+                  double within_squared = std::numeric_limits<double>::infinity()) const;
   // closest() for many points, out[i] for points[i], the same exact distances. Meant for points that come in
   // runs of neighbours (surface samples in triangle order): points are ordered along a Morton curve and cut into
   // runs; a run shares one Embree query on the cluster scene that gathers every cluster that can hold the nearest

@@ -146,6 +146,11 @@ options:
   --seed S                  sampling seed (default 1)
   --monte-carlo             random samples instead of stratified ones
   --json                    print JSON
+  --memory-budget S         bound the memory (default 256M; 0: no limit): meshes whose measurement would need
+                            more (about 200 bytes per triangle) are read into scratch files and measured a run of
+                            triangles at a time; the numbers are the same, bit for bit
+  --scratch-dir DIR         where those scratch files go (default: the system temp directory)
+A or B may be a container (.spz): it is measured as `decode` would write it, a tile at a time.
 )";
 
 constexpr const char* kRenderHelp = R"(usage: scanpress render MESH OUT.png [options]
@@ -160,6 +165,11 @@ options:
   --view AZ,EL         camera azimuth and elevation in degrees (default 30,20; y is up)
   --size W,H           picture size in pixels (default 800,600)
   --scale-max E        top of the color bar at E diagonals (E > 0), so every picture of a batch shares one scale
+  --memory-budget S    bound the memory (default 256M; 0: no limit): meshes whose rendering would need more are
+                       read into scratch files and drawn a run of triangles at a time (the same picture, up to
+                       pixels on an edge between two triangles)
+  --scratch-dir DIR    where those scratch files go (default: the system temp directory)
+MESH or ORIGINAL may be a container (.spz): it is drawn as `decode` would write it, a tile at a time.
 )";
 
 constexpr const char* kReportHelp = R"(usage: scanpress report DIR|SUMMARY.json [options]
@@ -667,10 +677,22 @@ int runJobCommand(int argc, char** argv) {
   return batch->exitCode();
 }
 
+// --memory-budget: 0 or at least 16M.
+bool budgetOption(const Args& args, uint64_t& budget, std::string& error) {
+  if (!option(args, "--memory-budget", budget, error,
+              [](const std::string& v) { return parseSize(v, "--memory-budget"); }))
+    return false;
+  if (budget != 0 && budget < (16u << 20)) {
+    error = "--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'";
+    return false;
+  }
+  return true;
+}
+
 int runMeasure(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {"--samples", "--samples-per-triangle", "--seed"},
+  if (!parseArgs(argc, argv, 2, {"--samples", "--samples-per-triangle", "--seed", "--memory-budget", "--scratch-dir"},
                  {"--json", "--monte-carlo", "--help"}, args, error))
     return usage(error, "measure");
   if (args.has("--help")) return std::fputs(kMeasureHelp, stdout), 0;
@@ -681,13 +703,25 @@ int runMeasure(int argc, char** argv) {
       !unsignedOption(args, "--seed", UINT64_MAX, s.seed, error))
     return usage(error, "measure");
   s.stratified = !args.has("--monte-carlo");
-  auto a = readMeshFile(args.positional[0]);
-  if (!a.isOk()) return fail(a.status());
-  auto b = readMeshFile(args.positional[1]);
-  if (!b.isOk()) return fail(b.status());
+  uint64_t budget = kDefaultDecodeBudget;
+  if (!budgetOption(args, budget, error)) return usage(error, "measure");
+  const std::string scratch = args.get("--scratch-dir") ? *args.get("--scratch-dir") : std::string();
   auto device = EmbreeDevice::create();
   if (!device.isOk()) return fail(device.status());
-  auto r = measureMeshes(*a, *b, s, *device);
+  Result<MeasureResult> r = makeError(ErrorCode::kInternal, "not measured");
+  if (needsChunks(args.positional, budget)) {
+    auto a = openSurface(args.positional[0], budget, scratch);
+    if (!a.isOk()) return fail(a.status());
+    auto b = openSurface(args.positional[1], budget, scratch);
+    if (!b.isOk()) return fail(b.status());
+    r = measureChunked(*a, *b, s, surfaceCacheBytes(budget), *device);
+  } else {
+    auto a = readSurfaceFile(args.positional[0]);
+    if (!a.isOk()) return fail(a.status());
+    auto b = readSurfaceFile(args.positional[1]);
+    if (!b.isOk()) return fail(b.status());
+    r = measureMeshes(*a, *b, s, *device);
+  }
   if (!r.isOk()) return fail(r.status());
   if (args.has("--json")) {
     std::fputs(measureJson(*r).c_str(), stdout);
@@ -706,7 +740,8 @@ int runMeasure(int argc, char** argv) {
 int runRender(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {"--against", "--view", "--size", "--scale-max"}, {"--help"}, args, error))
+  if (!parseArgs(argc, argv, 2, {"--against", "--view", "--size", "--scale-max", "--memory-budget", "--scratch-dir"},
+                 {"--help"}, args, error))
     return usage(error, "render");
   if (args.has("--help")) return std::fputs(kRenderHelp, stdout), 0;
   if (args.positional.size() != 2) return usage("render needs MESH and OUT.png", "render");
@@ -735,18 +770,34 @@ int runRender(int argc, char** argv) {
   s.title = std::filesystem::path(args.positional[0]).filename().string();
   std::vector<std::string> inputs = {args.positional[0]};
   if (const auto* a = args.get("--against")) inputs.push_back(*a);
+  uint64_t budget = kDefaultDecodeBudget;
+  if (!budgetOption(args, budget, error)) return usage(error, "render");
+  const std::string scratch = args.get("--scratch-dir") ? *args.get("--scratch-dir") : std::string();
   if (Status ok = checkOutputPath(args.positional[1], inputs); !ok.isOk()) return fail(ok);
-  auto mesh = readMeshFile(args.positional[0]);
-  if (!mesh.isOk()) return fail(mesh.status());
-  std::optional<Mesh> original;
-  if (const auto* a = args.get("--against")) {
-    auto m = readMeshFile(*a);
-    if (!m.isOk()) return fail(m.status());
-    original = std::move(m).value();
-  }
   auto device = EmbreeDevice::create();
   if (!device.isOk()) return fail(device.status());
-  auto r = renderMesh(*mesh, s, *device, original ? &*original : nullptr);
+  Result<RenderResult> r = makeError(ErrorCode::kInternal, "not rendered");
+  if (needsChunks(inputs, budget)) {
+    auto mesh = openSurface(inputs[0], budget, scratch);
+    if (!mesh.isOk()) return fail(mesh.status());
+    std::optional<ChunkedSurface> original;
+    if (inputs.size() > 1) {
+      auto m = openSurface(inputs[1], budget, scratch);
+      if (!m.isOk()) return fail(m.status());
+      original.emplace(std::move(m).value());
+    }
+    r = renderSurface(*mesh, s, *device, original ? &*original : nullptr, surfaceCacheBytes(budget));
+  } else {
+    auto mesh = readSurfaceFile(inputs[0]);
+    if (!mesh.isOk()) return fail(mesh.status());
+    std::optional<Mesh> original;
+    if (inputs.size() > 1) {
+      auto m = readSurfaceFile(inputs[1]);
+      if (!m.isOk()) return fail(m.status());
+      original = std::move(m).value();
+    }
+    r = renderMesh(*mesh, s, *device, original ? &*original : nullptr);
+  }
   if (!r.isOk()) return fail(r.status());
   Status w = writePng(args.positional[1], r->image);
   if (!w.isOk()) return fail(w);
