@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <filesystem>
 #include <unordered_map>
 
 #include "engine/geometry.h"
@@ -61,6 +62,7 @@ class FileSource : public ChunkedSurface::Source {
   struct Chunk {
     uint64_t offset = 0;
     uint32_t vertices = 0, triangles = 0;
+    bool colors = false;  // written with colors (a chunk read before the first colored vertex has none)
   };
   explicit FileSource(ScratchDir d) : dir(std::move(d)) {}
   ScratchDir dir;
@@ -77,9 +79,11 @@ class FileSource : public ChunkedSurface::Source {
     uint64_t at = c.offset;
     SP_RETURN_IF_ERROR(chunks_file.readAt(at, m->positions.data(), c.vertices * sizeof(Vec3d)));
     at += c.vertices * sizeof(Vec3d);
-    if (colors) {
-      m->colors.resize(c.vertices);
+    if (colors) {  // white where the file had none yet, as the in-memory reader pads them
+      m->colors.assign(c.vertices, Rgba8{255, 255, 255, 255});
       m->color_channels = color_channels;
+    }
+    if (c.colors) {
       SP_RETURN_IF_ERROR(chunks_file.readAt(at, m->colors.data(), c.vertices * sizeof(Rgba8)));
       at += c.vertices * sizeof(Rgba8);
     }
@@ -175,7 +179,7 @@ class VertexTable {
     SP_RETURN_IF_ERROR(file_.open(path_));
     SP_RETURN_IF_ERROR(file_.writeAt(0, memory_.data(), memory_.size() * sizeof(Record)));
     written_ = memory_.size();
-    memory_ = {};
+    std::vector<Record>().swap(memory_);  // frees (`= {}` would keep the capacity)
     spilled_ = true;
     return Status::ok();
   }
@@ -246,14 +250,10 @@ class ChunkWriter : public MeshSink {
   Status finishChunk() {
     if (chunk_.triangles.empty()) return Status::ok();
     if (!out_.colors) chunk_.colors.clear();
-    FileSource::Chunk c{bytes_, uint32_t(chunk_.positions.size()), uint32_t(chunk_.triangles.size())};
+    FileSource::Chunk c{bytes_, uint32_t(chunk_.positions.size()), uint32_t(chunk_.triangles.size()), out_.colors};
     SP_RETURN_IF_ERROR(write(chunk_.positions.data(), chunk_.positions.size() * sizeof(Vec3d)));
-    // Colors are written for every chunk once the file has colors; a chunk read before the first colored
-    // vertex arrived (OBJ) has white ones, as the in-memory reader pads them.
-    if (out_.colors) {
-      chunk_.colors.resize(chunk_.positions.size(), Rgba8{255, 255, 255, 255});
-      SP_RETURN_IF_ERROR(write(chunk_.colors.data(), chunk_.colors.size() * sizeof(Rgba8)));
-    }
+    // Colors once the file has them (the table holds white for vertices read before the first colored one).
+    if (c.colors) SP_RETURN_IF_ERROR(write(chunk_.colors.data(), chunk_.colors.size() * sizeof(Rgba8)));
     SP_RETURN_IF_ERROR(write(chunk_.triangles.data(), chunk_.triangles.size() * sizeof(Triangle)));
     out_.chunks.push_back(c);
     survey_(chunk_);
@@ -290,9 +290,11 @@ void ChunkedSurface::addChunk(const Mesh& m) {
   info.triangles = m.triangles.size();
   info.vertices = m.positions.size();
   for (const Vec3d& p : m.positions) info.box.extend(p);
-  for (const Triangle& t : m.triangles) {
+  for (size_t i = 0; i < m.triangles.size(); ++i) {
+    const Triangle& t = m.triangles[i];
     area_ += triangleArea(m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]);
-    for (uint32_t v : t) used_box_.extend(m.positions[v]);
+    if (i % kSurfacePartTriangles == 0) info.parts.emplace_back();
+    for (uint32_t v : t) used_box_.extend(m.positions[v]), info.parts.back().extend(m.positions[v]);
   }
   triangles_ += m.triangles.size();
   info_.push_back(info);
@@ -328,11 +330,15 @@ Result<ChunkedSurface> ChunkedSurface::fromMeshFile(const std::string& path, uin
   SP_ASSIGN_OR_RETURN(ScratchDir dir, ScratchDir::create(scratch_parent));
   auto source = std::make_unique<FileSource>(std::move(dir));
   SP_RETURN_IF_ERROR(source->chunks_file.open(source->dir.file("chunks")));
-  VertexTable table(source->dir.file("vertices"), cache_bytes);
-  ChunkWriter writer(*source, table, std::max<uint64_t>(run, 1), [&](const Mesh& m) { s.addChunk(m); });
-  SP_RETURN_IF_ERROR(readMesh(path, writer).status());
-  SP_RETURN_IF_ERROR(writer.finishChunk());
-  s.box_ = writer.box();
+  {
+    VertexTable table(source->dir.file("vertices"), cache_bytes);
+    ChunkWriter writer(*source, table, std::max<uint64_t>(run, 1), [&](const Mesh& m) { s.addChunk(m); });
+    SP_RETURN_IF_ERROR(readMesh(path, writer).status());
+    SP_RETURN_IF_ERROR(writer.finishChunk());
+    s.box_ = writer.box();
+  }
+  std::error_code ec;
+  std::filesystem::remove(source->dir.file("vertices"), ec);  // read; only the chunks are needed from here
   if (s.triangles_ == 0) s.used_box_ = s.box_;
   s.source_ = std::move(source);
   return s;
@@ -393,8 +399,10 @@ uint64_t inMemorySurfaceBytes(const std::string& path) {
 
 Result<ChunkedSurface> openSurface(const std::string& path, uint64_t memory_budget, const std::string& scratch_parent) {
   if (isContainerPath(path)) return ChunkedSurface::fromContainer(path);
+  // Runs whose indexes take a sixteenth of the budget: the cache (half of it) holds eight, enough for the pieces
+  // of surface around a point; the vertex cache takes an eighth while the file is read.
   const uint64_t share = memory_budget == 0 ? uint64_t(1) << 30 : memory_budget / 8;
-  const uint64_t run = std::clamp<uint64_t>(share / 160, 4096, uint64_t(1) << 22);
+  const uint64_t run = std::clamp<uint64_t>(share / 2 / 160, 4096, uint64_t(1) << 22);
   return ChunkedSurface::fromMeshFile(path, run, share, scratch_parent);
 }
 

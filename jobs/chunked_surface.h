@@ -29,7 +29,11 @@ namespace scanpress {
 struct SurfaceChunkInfo {
   uint64_t triangles = 0, vertices = 0;
   BoundingBox box;  // of the chunk's vertices
+  // Boxes of runs of kSurfacePartTriangles of its triangles: a curved piece of surface fills little of its box,
+  // and the boxes of its parts tell a point far from the piece from one inside its box.
+  std::vector<BoundingBox> parts;
 };
+constexpr uint64_t kSurfacePartTriangles = 1024;
 
 class ChunkedSurface {
  public:

@@ -11,6 +11,7 @@
 #include "engine/geometry.h"
 #include "engine/quantize.h"
 #include "spatial/surface_index.h"
+#include "spatial/surface_morton.h"
 
 namespace scanpress {
 
@@ -100,6 +101,13 @@ double boxesDistanceSquared(const BoundingBox& x, const BoundingBox& y) {
   return d2 * (1 - 1e-12);
 }
 
+// Whether a box at squared distance `lower` may hold a point nearer than `best` (squared): with a margin for the
+// rounding of computed distances, `slack` (absolute), so that a triangle whose computed distance is below `best`
+// is never skipped.
+bool mayBeNearer(double lower, double best, double slack) {
+  return lower < best || std::sqrt(lower) < std::sqrt(best) + slack;
+}
+
 // Area samples per batch: what one batch of samples and their distances may hold.
 constexpr double kBatchSamples = 1 << 20;
 
@@ -166,7 +174,9 @@ Result<const SurfaceIndex*> ChunkIndexCache::get(size_t chunk) {
       entries_[oldest].reset();
     }
     SP_ASSIGN_OR_RETURN(auto mesh, surface_.load(chunk));
-    SP_ASSIGN_OR_RETURN(SurfaceIndex index, SurfaceIndex::build(device_, mesh->positions, mesh->triangles));
+    const BoundingBox& box = surface_.box();
+    const Vec3d center = vmul(vadd(box.lo, box.hi), 0.5);  // one origin for every chunk (as render needs)
+    SP_ASSIGN_OR_RETURN(SurfaceIndex index, SurfaceIndex::build(device_, mesh->positions, mesh->triangles, &center));
     entries_[chunk] = std::make_unique<Entry>(Entry{std::move(mesh), std::move(index), bytes, 0});
     held_ += bytes;
     ++builds_;
@@ -177,41 +187,98 @@ Result<const SurfaceIndex*> ChunkIndexCache::get(size_t chunk) {
 
 Status nearestSquared(const ChunkedSurface& surface, ChunkIndexCache& cache, std::span<const Vec3d> points,
                       std::vector<double>& best) {
-  best.assign(points.size(), kInfinity);
-  if (points.empty()) return Status::ok();
-  BoundingBox box;
-  for (const Vec3d& p : points) box.extend(p);
-  // Chunks nearest to the points' box first (a heap: usually the first few settle every point).
-  std::vector<std::pair<double, size_t>> order;
+  const size_t n = points.size();
+  best.assign(n, kInfinity);
+  std::vector<uint32_t> chunks;  // those with triangles
   for (size_t j = 0; j < surface.chunks(); ++j)
-    if (surface.info(j).triangles > 0) order.push_back({boxesDistanceSquared(box, surface.info(j).box), j});
-  const auto later = [](const auto& a, const auto& b) { return a > b; };
-  std::make_heap(order.begin(), order.end(), later);
-  double worst = kInfinity;  // the largest best so far
-  while (!order.empty()) {
-    std::pop_heap(order.begin(), order.end(), later);
-    const auto [lower, j] = order.back();
-    order.pop_back();
-    if (lower >= worst) break;  // no point can find anything nearer in this chunk or any later one
-    SP_ASSIGN_OR_RETURN(const SurfaceIndex* index, cache.get(j));
-    const BoundingBox& chunk_box = surface.info(j).box;
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
-      uint32_t hint = UINT32_MAX;  // points come in runs of neighbours
-      for (size_t k = r.begin(); k != r.end(); ++k) {
-        if (!(boxDistanceSquared(points[k], chunk_box) < best[k])) continue;
-        const auto c = index->closest(points[k], hint, best[k]);
-        if (c.triangle == UINT32_MAX) continue;
-        best[k] = c.distance_squared;
-        hint = c.triangle;
+    if (surface.info(j).triangles > 0) chunks.push_back(static_cast<uint32_t>(j));
+  if (n == 0 || chunks.empty()) return Status::ok();
+  // Rounding of distances computed from coordinates this large (a few ulps of the largest, generously).
+  double magnitude = 0;
+  for (const BoundingBox* b : {&surface.box()})
+    for (int a = 0; a < 3; ++a) magnitude = std::max({magnitude, std::fabs(b->lo[a]), std::fabs(b->hi[a])});
+  for (const Vec3d& p : points)
+    for (int a = 0; a < 3; ++a)
+      if (std::isfinite(p[a])) magnitude = std::max(magnitude, std::fabs(p[a]));
+  const double slack = magnitude * 64 * std::numeric_limits<double>::epsilon();
+  // Groups of neighbouring points (consecutive along a Morton curve), each with its box: a group looks only at
+  // chunks near its own box, so a batch spread over a scan does not pull in every chunk its box meets.
+  BoundingBox all;
+  for (const Vec3d& p : points) all.extend(p);
+  const double extent = all.empty() ? 0.0 : all.maxExtent();
+  int index_bits = 1;
+  while ((uint64_t(1) << index_bits) < n) ++index_bits;
+  std::vector<uint64_t> order, scratch;
+  surface::mortonOrder(points, extent > 0 ? 1024 / extent : 1.0, index_bits, order, scratch);
+  const uint64_t mask = (uint64_t(1) << index_bits) - 1;
+  std::vector<uint32_t> member(n);
+  for (size_t k = 0; k < n; ++k) member[k] = static_cast<uint32_t>(order[k] & mask);
+  std::vector<uint64_t>().swap(order);
+  std::vector<uint64_t>().swap(scratch);
+  constexpr size_t kGroup = 512;
+  struct Group {
+    size_t begin, end;
+    BoundingBox box;
+    std::vector<uint32_t> visited;  // chunks searched
+    uint32_t next = UINT32_MAX;     // the chunk to search next
+  };
+  std::vector<Group> groups;
+  for (size_t b = 0; b < n; b += kGroup) {
+    Group g{b, std::min(n, b + kGroup), {}, {}, UINT32_MAX};
+    for (size_t k = g.begin; k < g.end; ++k) g.box.extend(points[member[k]]);
+    groups.push_back(std::move(g));
+  }
+  // Rounds: each group picks the nearest chunk it has not searched whose box is nearer than its farthest point's
+  // best so far; each picked chunk is searched once for every group that picked it. A group is done when no chunk
+  // is left nearer than its farthest best: then every point's best is exact (no triangle of an unsearched chunk is
+  // nearer to a point than the chunk's box is to the group's box).
+  std::vector<std::vector<uint32_t>> wanted_by(surface.chunks());
+  for (;;) {
+    tbb::parallel_for(size_t(0), groups.size(), [&](size_t gi) {
+      Group& g = groups[gi];
+      double worst = 0;
+      for (size_t k = g.begin; k < g.end; ++k) worst = std::max(worst, best[member[k]]);
+      double nearest = worst;
+      g.next = UINT32_MAX;
+      for (uint32_t j : chunks) {
+        const SurfaceChunkInfo& c = surface.info(j);
+        if (!mayBeNearer(boxesDistanceSquared(g.box, c.box), nearest, slack)) continue;
+        double lower = kInfinity;
+        for (const BoundingBox& part : c.parts) lower = std::min(lower, boxesDistanceSquared(g.box, part));
+        if ((g.next == UINT32_MAX ? mayBeNearer(lower, nearest, slack) : lower < nearest) &&
+            std::find(g.visited.begin(), g.visited.end(), j) == g.visited.end())
+          nearest = lower, g.next = j;
       }
     });
-    worst = tbb::parallel_reduce(
-        tbb::blocked_range<size_t>(0, best.size(), 1 << 16), 0.0,
-        [&](const tbb::blocked_range<size_t>& r, double m) {
-      for (size_t k = r.begin(); k != r.end(); ++k) m = std::max(m, best[k]);
-      return m;
-        },
-        [](double a, double b) { return std::max(a, b); });
+    std::vector<uint32_t> picked;
+    for (uint32_t gi = 0; gi < groups.size(); ++gi) {
+      Group& g = groups[gi];
+      if (g.next == UINT32_MAX) continue;
+      if (wanted_by[g.next].empty()) picked.push_back(g.next);
+      wanted_by[g.next].push_back(gi);
+      g.visited.push_back(g.next);
+    }
+    if (picked.empty()) break;
+    // Chunks whose index is built already first, so that the round does not drop one it needs later.
+    std::stable_partition(picked.begin(), picked.end(), [&](uint32_t j) { return cache.holds(j); });
+    for (uint32_t j : picked) {
+      SP_ASSIGN_OR_RETURN(const SurfaceIndex* index, cache.get(j));
+      const BoundingBox& chunk_box = surface.info(j).box;
+      const std::vector<uint32_t>& wanting = wanted_by[j];
+      tbb::parallel_for(size_t(0), wanting.size(), [&](size_t w) {
+        const Group& g = groups[wanting[w]];
+        uint32_t hint = UINT32_MAX;  // neighbours along the curve
+        for (size_t m = g.begin; m < g.end; ++m) {
+          const uint32_t k = member[m];
+          if (!mayBeNearer(boxDistanceSquared(points[k], chunk_box), best[k], slack)) continue;
+          const auto c = index->closest(points[k], hint, best[k]);
+          if (c.triangle == UINT32_MAX) continue;
+          best[k] = c.distance_squared;
+          hint = c.triangle;
+        }
+      });
+      wanted_by[j].clear();
+    }
   }
   return Status::ok();
 }

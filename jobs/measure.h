@@ -62,6 +62,7 @@ class ChunkIndexCache {
   ChunkIndexCache(const ChunkedSurface& surface, std::shared_ptr<EmbreeDevice> device, uint64_t bytes);
   ~ChunkIndexCache();
   Result<const SurfaceIndex*> get(size_t chunk);
+  bool holds(size_t chunk) const { return entries_[chunk] != nullptr; }
   uint64_t builds() const { return builds_; }
 
  private:
@@ -76,8 +77,8 @@ class ChunkIndexCache {
 uint64_t chunkIndexBytes(const SurfaceChunkInfo& chunk);
 
 // The squared distance from each point to the nearest triangle of `surface` (infinity when it has none), exact:
-// chunks are searched in order of their boxes' distance to the points' box, each point only where the chunk's box
-// is nearer than its best so far, until no chunk left can be nearer for any point.
+// groups of neighbouring points search the chunks nearest to their box first, each point only where the chunk's
+// box is nearer than its best so far, until no chunk left can be nearer for any point of the group.
 Status nearestSquared(const ChunkedSurface& surface, ChunkIndexCache& cache, std::span<const Vec3d> points,
                       std::vector<double>& best);
 

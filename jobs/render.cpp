@@ -167,7 +167,8 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
   const double aspect = double(view_w) / view_h;
   const double half_h = std::tan(fov / 2), half_w = half_h * aspect;
   const BoundingBox& mbox = mesh.box();
-  Vec3d center = vmul(vadd(mbox.lo, mbox.hi), 0.5);
+  const Vec3d mesh_center = vmul(vadd(mbox.lo, mbox.hi), 0.5);
+  Vec3d center = mesh_center;
   // Each used vertex of chunk i, given to `f`.
   std::vector<uint8_t> used;
   auto forUsed = [&](auto&& f) -> Status {
@@ -196,7 +197,7 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
     dist = std::max(dist, vdot(d, to_eye) + std::max(std::fabs(vdot(d, right)) / (kFill * half_w),
                                                      std::fabs(vdot(d, up)) / (kFill * half_h)));
   }));
-  used = {};
+  std::vector<uint8_t>().swap(used);
   dist = std::max(dist, std::max(mbox.diagonal(), 1e-30) * 1e-3);  // a point-like or degenerate model
   const Vec3d eye = vadd(center, vmul(to_eye, dist));
   // Rays, chunk by chunk: a pixel keeps the nearest hit (the earlier chunk on a tie), its shade, the vertex color
@@ -209,7 +210,9 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
   for (size_t i = 0; i < mesh.chunks(); ++i) {
     if (mesh.info(i).triangles == 0) continue;
     SP_ASSIGN_OR_RETURN(auto m, mesh.load(i));
-    SP_ASSIGN_OR_RETURN(SurfaceIndex scene, SurfaceIndex::build(device, m->positions, m->triangles));
+    // Every chunk around the mesh's centre: a corner two chunks share rounds alike in both, so no ray slips
+    // between them at their seam.
+    SP_ASSIGN_OR_RETURN(SurfaceIndex scene, SurfaceIndex::build(device, m->positions, m->triangles, &mesh_center));
     const bool colors = !reference && !m->colors.empty() && m->colors.size() == m->positions.size();
     if (colors && albedo.empty()) albedo.assign(pixels, {0.85, 0.85, 0.85});
     vertex_colors |= colors;
@@ -230,13 +233,13 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
       }
     });
   }
-  depth = {};
+  std::vector<double>().swap(depth);
   if (reference) {  // each visible point's distance to the reference
     std::vector<size_t> where;
     std::vector<Vec3d> points;
     for (size_t k = 0; k < pixels; ++k)
       if (shade[k] >= 0) where.push_back(k), points.push_back(hit_point[k]);
-    hit_point = {};
+    std::vector<Vec3d>().swap(hit_point);
     std::vector<double> d2;
     ChunkIndexCache cache(*against, device, cache_bytes);
     SP_RETURN_IF_ERROR(nearestSquared(*against, cache, points, d2));

@@ -267,8 +267,8 @@ Status TriangleSpill::read(uint64_t first, std::span<SpilledTriangle> out) const
 }
 
 void TriangleSpill::release() {
-  memory_ = {};
-  buffer_ = {};
+  std::vector<SpilledTriangle>().swap(memory_);  // frees (`= {}` would keep the capacity)
+  std::vector<SpilledTriangle>().swap(buffer_);
 }
 
 // ------------------------------------------------------------------------------------------------- TileBins
@@ -315,7 +315,7 @@ Status TileBins::flushTile(uint32_t tile) {
 Status TileBins::finish() {
   if (!in_memory_)
     for (uint32_t t = 0; t < buffers_.size(); ++t) SP_RETURN_IF_ERROR(flushTile(t));
-  buffers_ = {};
+  std::vector<std::vector<Triangle>>().swap(buffers_);
   for (size_t t = 0; t + 1 < begin_.size(); ++t)
     if (cursor_[t] != begin_[t + 1])
       return makeError(ErrorCode::kInternal, "tile bin " + std::to_string(t) + " incomplete");

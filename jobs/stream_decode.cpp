@@ -176,7 +176,7 @@ class Welder {
       SP_RETURN_IF_ERROR(finish(it->second));
       shared_.erase(it);
     }
-    evict_[t] = {};
+    std::vector<WeldKey>().swap(evict_[t]);  // frees it (`= {}` keeps the capacity: 700 MB at 10^9)
     return Status::ok();
   }
 

@@ -270,8 +270,9 @@ SurfaceIndex::Hit SurfaceIndex::intersect(const Vec3d& origin, const Vec3d& dir)
   Vec3d n = vcross(vsub(impl_->positions[tri[1]], a), vsub(impl_->positions[tri[2]], a));
   const double nd = vdot(n, dir);
   if (nd != 0) {
+    // Kept when it agrees with Embree's: a ray grazing the plane could put the double hit far from the triangle.
     const double t = vdot(n, vsub(a, origin)) / nd;
-    if (std::isfinite(t) && t >= 0) out.t = t;
+    if (std::isfinite(t) && t >= 0 && std::fabs(t - out.t) <= 1e-4 * out.t) out.t = t;
   }
   double len = vlen(n);
   if (!(len > 0) || !std::isfinite(len)) n = {rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z}, len = vlen(n);

@@ -22,7 +22,7 @@ SurfaceIndex::~SurfaceIndex() = default;
 size_t SurfaceIndex::triangleCount() const { return impl_->triangles.size(); }
 
 Result<SurfaceIndex> SurfaceIndex::build(std::shared_ptr<EmbreeDevice> device, std::span<const Vec3d> positions,
-                                         std::span<const Triangle> triangles) {
+                                         std::span<const Triangle> triangles, const Vec3d* origin) {
   SurfaceIndex index;
   index.impl_ = std::make_unique<Impl>();
   Impl& m = *index.impl_;
@@ -39,6 +39,11 @@ Result<SurfaceIndex> SurfaceIndex::build(std::shared_ptr<EmbreeDevice> device, s
   double extent = 0;
   if (!positions.empty())
     for (int a = 0; a < 3; ++a) m.origin[a] = 0.5 * (lo[a] + hi[a]), extent = std::max(extent, hi[a] - lo[a]);
+  if (origin && !positions.empty()) {  // the slack covers the float rounding of coordinates this far from it
+    m.origin = *origin;
+    for (int a = 0; a < 3; ++a)
+      extent = std::max({extent, 2 * std::fabs(lo[a] - m.origin[a]), 2 * std::fabs(hi[a] - m.origin[a])});
+  }
   m.slack = static_cast<float>(extent * 4.0 * std::numeric_limits<float>::epsilon()) + 1e-30f;
   m.vertices.resize(positions.size() * 3 + 4);
   for (size_t i = 0; i < positions.size(); ++i)

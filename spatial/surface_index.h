@@ -45,8 +45,10 @@ class EmbreeDevice {
 
 class SurfaceIndex {
  public:
+  // `origin`: what the float coordinates are relative to (default: the box centre). Indexes of pieces of one
+  // surface built around one origin round a shared corner alike, so rays cannot slip between them.
   static Result<SurfaceIndex> build(std::shared_ptr<EmbreeDevice> device, std::span<const Vec3d> positions,
-                                    std::span<const Triangle> triangles);
+                                    std::span<const Triangle> triangles, const Vec3d* origin = nullptr);
   SurfaceIndex(SurfaceIndex&&) noexcept;
   SurfaceIndex& operator=(SurfaceIndex&&) noexcept;
   ~SurfaceIndex();

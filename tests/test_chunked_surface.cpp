@@ -274,6 +274,17 @@ TEST(ChunkedSurface, ContainerTilesMeasureAsTheWeldedDecode) {
   EXPECT_GT(whole->symmetric.rms, 0);  // a lossy encode: not a trivially equal zero
 }
 
+// Pixels that are background (245 gray) in `a` but not in `b`: holes of `a`.
+size_t holes(const Image& a, const Image& b) {
+  size_t n = 0;
+  for (size_t i = 0; i < a.rgb.size(); i += 3) {
+    const bool bg_a = a.rgb[i] == 245 && a.rgb[i + 1] == 245 && a.rgb[i + 2] == 245;
+    const bool bg_b = b.rgb[i] == 245 && b.rgb[i + 1] == 245 && b.rgb[i + 2] == 245;
+    n += bg_a && !bg_b;
+  }
+  return n;
+}
+
 // Pixels of two images that differ.
 size_t differingPixels(const Image& a, const Image& b) {
   size_t n = 0;
@@ -306,6 +317,8 @@ TEST(ChunkedSurface, PicturesDrawnAChunkAtATimeAreTheWholeOnes) {
     EXPECT_LE(differingPixels(chunked->image, whole->image), 20u) << "run " << run;
     EXPECT_LE(differingPixels(chunked_colors->image, whole_colors->image), 20u) << "run " << run;
     EXPECT_GT(differingPixels(chunked_colors->image, chunked->image), 5000u);  // colors, not the heat map
+    EXPECT_EQ(holes(chunked->image, whole->image), 0u);  // no ray slips between two chunks at their seam
+    EXPECT_EQ(holes(chunked_colors->image, whole_colors->image), 0u);
   }
 }
 
@@ -338,6 +351,7 @@ TEST(ChunkedSurface, CliMeasuresAndDrawsUnderABudget) {
   ASSERT_EQ(whole.width, 800);
   ASSERT_EQ(chunks.width, 800);
   EXPECT_LE(differingPixels(whole, chunks), 100u);
+  EXPECT_EQ(holes(chunks, whole), 0u);
   // Errors name the file.
   std::string out;
   EXPECT_NE(runScanpress("measure " + a + " " + dir.path() + "/missing.spz", &out), 0);

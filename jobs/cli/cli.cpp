@@ -370,6 +370,18 @@ std::string targetOptions(const Args& args, EncodeSettings& s) {
   return "";
 }
 
+// --memory-budget: 0 or at least 16M.
+bool budgetOption(const Args& args, uint64_t& budget, std::string& error) {
+  if (!option(args, "--memory-budget", budget, error,
+              [](const std::string& v) { return parseSize(v, "--memory-budget"); }))
+    return false;
+  if (budget != 0 && budget < (16u << 20)) {
+    error = "--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'";
+    return false;
+  }
+  return true;
+}
+
 int runEncode(int argc, char** argv) {
   Args args;
   std::string error;
@@ -405,12 +417,8 @@ int runEncode(int argc, char** argv) {
   s.allow_degenerate = args.has("--allow-degenerate");
   s.strict = args.has("--strict");
   if (!integerOption(args, "--tile-triangles", kMinTileTriangles, kMaxTileTriangles, s.tile_triangles, error) ||
-      !integerOption(args, "--threads", 0, 4096, s.threads, error) ||
-      !option(args, "--memory-budget", s.memory_budget, error,
-              [](const std::string& v) { return parseSize(v, "--memory-budget"); }))
+      !integerOption(args, "--threads", 0, 4096, s.threads, error) || !budgetOption(args, s.memory_budget, error))
     return usage(error, "encode");
-  if (s.memory_budget != 0 && s.memory_budget < (16u << 20))
-    return usage("--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'", "encode");
   if (const auto* d = args.get("--scratch-dir")) s.scratch_dir = *d;
   if (const auto* sub = args.get("--subset")) {
     auto share = parseShard(*sub, "--subset");
@@ -545,12 +553,8 @@ int runDecode(int argc, char** argv) {
     s.gltf_tile_nodes = *n == "tiles";
   }
   if (!unsignedOption(args, "--level", UINT32_MAX, s.level, error) ||
-      !unsignedOption(args, "--bytes", UINT64_MAX, s.bytes, error) ||
-      !option(args, "--memory-budget", s.memory_budget, error,
-              [](const std::string& v) { return parseSize(v, "--memory-budget"); }))
+      !unsignedOption(args, "--bytes", UINT64_MAX, s.bytes, error) || !budgetOption(args, s.memory_budget, error))
     return usage(error, "decode");
-  if (s.memory_budget != 0 && s.memory_budget < (16u << 20))
-    return usage("--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'", "decode");
   if (const auto* d = args.get("--scratch-dir")) s.scratch_dir = *d;
   // `-`: stdin and stdout (jobs/stdio.h); messages then go to stderr.
   const bool in_stdin = isStdio(s.input), out_stdout = isStdio(s.output);
@@ -605,11 +609,7 @@ int runInfo(int argc, char** argv) {
   if (args.has("--help")) return std::fputs(kInfoHelp, stdout), 0;
   if (args.positional.size() != 1) return usage("info needs IN.spz", "info");
   uint64_t budget = kDefaultDecodeBudget;
-  if (!option(args, "--memory-budget", budget, error,
-              [](const std::string& v) { return parseSize(v, "--memory-budget"); }))
-    return usage(error, "info");
-  if (budget != 0 && budget < (16u << 20))
-    return usage("--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'", "info");
+  if (!budgetOption(args, budget, error)) return usage(error, "info");
   auto file = ContainerFile::open(args.positional[0]);
   if (!file.isOk()) return fail(file.status());
   if (args.has("--verify"))
@@ -675,18 +675,6 @@ int runJobCommand(int argc, char** argv) {
   auto batch = runJob(*job, options);
   if (!batch.isOk()) return fail(batch.status());
   return batch->exitCode();
-}
-
-// --memory-budget: 0 or at least 16M.
-bool budgetOption(const Args& args, uint64_t& budget, std::string& error) {
-  if (!option(args, "--memory-budget", budget, error,
-              [](const std::string& v) { return parseSize(v, "--memory-budget"); }))
-    return false;
-  if (budget != 0 && budget < (16u << 20)) {
-    error = "--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'";
-    return false;
-  }
-  return true;
 }
 
 int runMeasure(int argc, char** argv) {
@@ -835,11 +823,7 @@ int runReport(int argc, char** argv) {
   if (Status ok = checkOutputPath(out, {summary}); !ok.isOk()) return fail(ok);
   HtmlReportOptions options;
   options.thumbnails = !args.has("--no-thumbnails");
-  if (!option(args, "--memory-budget", options.memory_budget, error,
-              [](const std::string& v) { return parseSize(v, "--memory-budget"); }))
-    return usage(error, "report");
-  if (options.memory_budget != 0 && options.memory_budget < (16u << 20))
-    return usage("--memory-budget: must be 0 or at least 16M, got '" + *args.get("--memory-budget") + "'", "report");
+  if (!budgetOption(args, options.memory_budget, error)) return usage(error, "report");
   if (Status ok = writeHtmlReport(summary, out, options); !ok.isOk()) return fail(ok);
   std::fprintf(stderr, "%s -> %s\n", summary.c_str(), out.c_str());
   return 0;
