@@ -152,8 +152,9 @@ struct ChunkIndexCache::Entry {
 };
 
 uint64_t chunkIndexBytes(const SurfaceChunkInfo& c) {
-  // Measured peaks of SurfaceIndex::build (Embree's BVH, the index's float vertices and spheres) plus the chunk's
-  // mesh: bench/RESULTS.md, "Measure and render under a memory budget".
+  // SurfaceIndex's own arrays (float vertices 12 B per vertex, spheres 16 B per triangle), Embree's BVH (about
+  // 100 B per triangle) and the chunk's mesh (24 B per vertex, 12 per triangle), rounded up; the peaks this gives
+  // are in bench/RESULTS.md, "Measure and render under a memory budget".
   constexpr uint64_t kPerTriangle = 140, kPerVertex = 40;
   return c.triangles * kPerTriangle + c.vertices * kPerVertex;
 }

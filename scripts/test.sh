@@ -15,7 +15,9 @@ if [ "${SANITIZE:-0}" = "1" ]; then
   # Under the sanitizers, two measurement-heavy families run in the Release build only, to keep CI within its
   # time: the error and size target searches (Targets.*: many pm encodes, decodes and measurements of the same
   # code the codec tests cover) and all 15 scans simplified to 10% (Data/SimplifyScans.*; test_simplify's ugly and
-  # damaged meshes run here). Together about 950 s of the sanitizer suite's 3200.
-  exclude=(-E '^(Targets\.|Data/SimplifyScans\.)')
+  # damaged meshes run here). Together about 950 s of the sanitizer suite's 3200. Also the two chunked
+  # measure/render cases that only drive the binary over 200k-triangle scans (the same code runs here through the
+  # library tests of test_chunked_surface.cpp).
+  exclude=(-E '^(Targets\.|Data/SimplifyScans\.|ChunkedSurface\.(CliMeasures|JobErrorPicture))')
 fi
 ctest --test-dir "$dir" --output-on-failure -j "$(nproc)" "${exclude[@]}"

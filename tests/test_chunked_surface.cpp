@@ -205,17 +205,21 @@ void writeInterleavedObj(const std::string& path, const Mesh& m) {
   }
 }
 
+// A synth scan of `triangles` written to dir/name; its path.
+std::string synthFile(const TempDir& dir, const std::string& name, uint64_t triangles, uint64_t seed = 1) {
+  SynthSettings synth;
+  synth.output = dir.file(name);
+  synth.triangles = triangles;
+  synth.seed = seed;
+  EXPECT_TRUE(synthesize(synth).isOk());
+  return synth.output;
+}
+
 TEST(ChunkedSurface, MeshFilesSpillTheirVerticesAndMeasureTheSame) {
   TempDir dir;
   // Over 65,536 vertices: the smallest vertex cache (4 blocks of 16,384) spills to its scratch file.
-  SynthSettings synth;
-  synth.output = dir.path() + "/a.ply";
-  synth.triangles = 160000;
-  ASSERT_TRUE(synthesize(synth).isOk());
-  synth.output = dir.path() + "/b.ply";
-  synth.triangles = 40000;
-  synth.seed = 2;
-  ASSERT_TRUE(synthesize(synth).isOk());
+  synthFile(dir, "a.ply", 160000);
+  synthFile(dir, "b.ply", 40000, 2);
   auto a = readMeshFile(dir.path() + "/a.ply");
   auto b = readMeshFile(dir.path() + "/b.ply");
   ASSERT_TRUE(a.isOk() && b.isOk());
@@ -324,10 +328,7 @@ TEST(ChunkedSurface, PicturesDrawnAChunkAtATimeAreTheWholeOnes) {
 
 TEST(ChunkedSurface, CliMeasuresAndDrawsUnderABudget) {
   TempDir dir;
-  SynthSettings synth;
-  synth.output = dir.path() + "/a.ply";
-  synth.triangles = 200000;  // about 3.8 MB: its estimate (40 MB) is over a 16M budget
-  ASSERT_TRUE(synthesize(synth).isOk());
+  synthFile(dir, "a.ply", 200000);  // about 3.8 MB: its estimate (40 MB) is over a 16M budget
   const std::string a = dir.path() + "/a.ply", spz = dir.path() + "/a.spz", b = dir.path() + "/b.ply";
   ASSERT_EQ(runScanpress("encode " + a + " " + spz + " --bits 11 --quiet"), 0);
   ASSERT_EQ(runScanpress("decode " + spz + " " + b + " --quiet"), 0);
@@ -365,15 +366,12 @@ TEST(ChunkedSurface, CliMeasuresAndDrawsUnderABudget) {
 // same picture as without a budget (up to edge pixels).
 TEST(ChunkedSurface, JobErrorPictureUnderItsBudget) {
   TempDir dir;
-  SynthSettings synth;
-  synth.output = dir.path() + "/scan.ply";
-  synth.triangles = 200000;
-  ASSERT_TRUE(synthesize(synth).isOk());
+  const std::string scan = synthFile(dir, "scan.ply", 200000);
   Image pictures[2];
   for (int budget : {0, 16}) {
     const std::string job = dir.path() + "/job" + std::to_string(budget) + ".json";
-    writeBytes(job, "{\"inputs\": [\"" + synth.output + "\"], \"output\": {\"directory\": \"out" +
-                        std::to_string(budget) + "\"}, \"memory_budget_mb\": " + std::to_string(budget) +
+    writeBytes(job, "{\"inputs\": [\"" + scan + "\"], \"output\": {\"directory\": \"out" + std::to_string(budget) +
+                        "\"}, \"memory_budget_mb\": " + std::to_string(budget) +
                         ", \"codec\": {\"bits\": 10}, \"measure\": {\"enabled\": true, \"render\": true, "
                         "\"render_size\": [300, 200], \"scale_max\": 0.001}}");
     std::string out;
