@@ -11,6 +11,7 @@
 #include "jobs/commands.h"
 #include "jobs/container_file.h"
 #include "jobs/mesh_io/mesh_reader.h"
+#include "jobs/numbers.h"
 #include "jobs/scan_store.h"
 
 namespace scanpress {
@@ -397,8 +398,30 @@ uint64_t inMemorySurfaceBytes(const std::string& path) {
   return triangles * kBytesPerTriangle;
 }
 
+uint64_t searchIndexBytes(uint64_t triangles, uint64_t vertices) {
+  // SurfaceIndex's own arrays (float vertices 12 B per vertex, spheres 16 B per triangle), Embree's BVH (about
+  // 100 B per triangle) and the chunk's mesh (24 B per vertex, 12 per triangle), rounded up; the peaks this gives
+  // are in bench/RESULTS.md, "Measure and render under a memory budget".
+  constexpr uint64_t kPerTriangle = 140, kPerVertex = 40;
+  return triangles * kPerTriangle + vertices * kPerVertex;
+}
+
 Result<ChunkedSurface> openSurface(const std::string& path, uint64_t memory_budget, const std::string& scratch_parent) {
-  if (isContainerPath(path)) return ChunkedSurface::fromContainer(path);
+  if (isContainerPath(path)) {
+    if (memory_budget > 0) {
+      SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(path));
+      for (const TileEntry& e : file.tiles()) {
+        const uint64_t need = searchIndexBytes(e.faces, e.vertices);
+        if (need > surfaceCacheBytes(memory_budget))
+          return makeError(ErrorCode::kLimitExceeded,
+                           path + ": tile " + std::to_string(e.tile_id) + " (" + std::to_string(e.faces) +
+                               " faces) needs about " + humanBytes(need) +
+                               " to search, more than half the memory budget of " + humanBytes(memory_budget) +
+                               ": give --memory-budget " + std::to_string((2 * need >> 20) + 1) + "M or more");
+      }
+    }
+    return ChunkedSurface::fromContainer(path);
+  }
   // Runs whose indexes take a sixteenth of the budget: the cache (half of it) holds eight, enough for the pieces
   // of surface around a point; the vertex cache takes an eighth while the file is read.
   const uint64_t share = memory_budget == 0 ? uint64_t(1) << 30 : memory_budget / 8;

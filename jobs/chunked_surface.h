@@ -80,8 +80,12 @@ class ChunkedSurface {
   std::string name_;
 };
 
+// Memory a chunk's search index takes with its mesh (for the index cache's accounting and the budget checks).
+uint64_t searchIndexBytes(uint64_t triangles, uint64_t vertices);
+
 // A file as a ChunkedSurface within `memory_budget` (0: no limit): a container's tiles, or a mesh file in runs
-// whose search indexes fit an eighth of the budget, its vertex cache another eighth.
+// whose search indexes fit a sixteenth of the budget, its vertex cache an eighth. A container whose largest tile's
+// index would not fit the index cache (half the budget) is refused, naming the budget it needs.
 Result<ChunkedSurface> openSurface(const std::string& path, uint64_t memory_budget, const std::string& scratch_parent);
 // The index cache's share of a budget for measure and render (half; no limit for 0).
 uint64_t surfaceCacheBytes(uint64_t memory_budget);

@@ -108,12 +108,16 @@ bool mayBeNearer(double lower, double best, double slack) {
   return lower < best || std::sqrt(lower) < std::sqrt(best) + slack;
 }
 
-// Area samples per batch: what one batch of samples and their distances may hold.
-constexpr double kBatchSamples = 1 << 20;
+// Area samples per batch: a 64th of the index cache (a sample takes about 64 bytes with its distance, group and
+// Morton order), within [2^12, 2^20].
+double batchSamples(uint64_t cache_bytes) {
+  return double(std::clamp<uint64_t>(cache_bytes / 64 / 64, 4096, 1 << 20));
+}
 
 // One direction of measureChunked: samples of `from`'s chunks in order, against `to`.
 Result<ErrorAccumulator> chunkedDirection(const ChunkedSurface& from, const ChunkedSurface& to,
-                                          const SampleOptions& opt, bool vertices, ChunkIndexCache& cache) {
+                                          const SampleOptions& opt, bool vertices, ChunkIndexCache& cache,
+                                          double batch) {
   SurfaceSampler sampler(opt);
   ErrorAccumulator acc;
   std::vector<Vec3d> samples;
@@ -123,9 +127,9 @@ Result<ErrorAccumulator> chunkedDirection(const ChunkedSurface& from, const Chun
     SP_ASSIGN_OR_RETURN(auto mesh, from.load(i));
     const std::span<const Triangle> tris(mesh->triangles);
     const auto& p = mesh->positions;
-    for (size_t t0 = 0; t0 < tris.size();) {  // batches of about kBatchSamples area samples
+    for (size_t t0 = 0; t0 < tris.size();) {  // batches of about `batch` area samples
       size_t t1 = t0;
-      for (double expect = 0; t1 < tris.size() && (t1 == t0 || expect < kBatchSamples); ++t1)
+      for (double expect = 0; t1 < tris.size() && (t1 == t0 || expect < batch); ++t1)
         expect += opt.density * triangleArea(p[tris[t1][0]], p[tris[t1][1]], p[tris[t1][2]]);
       samples.clear();
       sampler.sample(p, tris.subspan(t0, t1 - t0), samples);
@@ -151,14 +155,6 @@ struct ChunkIndexCache::Entry {
   uint64_t bytes = 0, used = 0;
 };
 
-uint64_t chunkIndexBytes(const SurfaceChunkInfo& c) {
-  // SurfaceIndex's own arrays (float vertices 12 B per vertex, spheres 16 B per triangle), Embree's BVH (about
-  // 100 B per triangle) and the chunk's mesh (24 B per vertex, 12 per triangle), rounded up; the peaks this gives
-  // are in bench/RESULTS.md, "Measure and render under a memory budget".
-  constexpr uint64_t kPerTriangle = 140, kPerVertex = 40;
-  return c.triangles * kPerTriangle + c.vertices * kPerVertex;
-}
-
 ChunkIndexCache::ChunkIndexCache(const ChunkedSurface& surface, std::shared_ptr<EmbreeDevice> device, uint64_t bytes)
     : surface_(surface), device_(std::move(device)), limit_(bytes), entries_(surface.chunks()) {}
 
@@ -166,7 +162,7 @@ ChunkIndexCache::~ChunkIndexCache() = default;
 
 Result<const SurfaceIndex*> ChunkIndexCache::get(size_t chunk) {
   if (!entries_[chunk]) {
-    const uint64_t bytes = chunkIndexBytes(surface_.info(chunk));
+    const uint64_t bytes = searchIndexBytes(surface_.info(chunk).triangles, surface_.info(chunk).vertices);
     while (held_ > 0 && held_ + bytes > limit_) {  // drop the least recently used
       size_t oldest = SIZE_MAX;
       for (size_t j = 0; j < entries_.size(); ++j)
@@ -302,12 +298,14 @@ Result<MeasureResult> measureChunked(const ChunkedSurface& original, const Chunk
   {
     ChunkIndexCache cache(decoded, device, cache_bytes);
     opt.stream = 0;
-    SP_ASSIGN_OR_RETURN(forward, chunkedDirection(original, decoded, opt, s.vertices, cache));
+    SP_ASSIGN_OR_RETURN(forward,
+                        chunkedDirection(original, decoded, opt, s.vertices, cache, batchSamples(cache_bytes)));
   }
   {
     ChunkIndexCache cache(original, device, cache_bytes);
     opt.stream = 1;
-    SP_ASSIGN_OR_RETURN(backward, chunkedDirection(decoded, original, opt, s.vertices, cache));
+    SP_ASSIGN_OR_RETURN(backward,
+                        chunkedDirection(decoded, original, opt, s.vertices, cache, batchSamples(cache_bytes)));
   }
   r.forward = statsOf(forward);
   r.backward = statsOf(backward);

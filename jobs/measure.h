@@ -73,9 +73,6 @@ class ChunkIndexCache {
   std::vector<std::unique_ptr<Entry>> entries_;  // per chunk; null when not built
 };
 
-// Memory an index of a chunk takes (its mesh and the search structures), for the cache's accounting.
-uint64_t chunkIndexBytes(const SurfaceChunkInfo& chunk);
-
 // The squared distance from each point to the nearest triangle of `surface` (infinity when it has none), exact:
 // groups of neighbouring points search the chunks nearest to their box first, each point only where the chunk's
 // box is nearer than its best so far, until no chunk left can be nearer for any point of the group.

@@ -357,6 +357,9 @@ TEST(ChunkedSurface, CliMeasuresAndDrawsUnderABudget) {
   std::string out;
   EXPECT_NE(runScanpress("measure " + a + " " + dir.path() + "/missing.spz", &out), 0);
   EXPECT_NE(runScanpress("measure " + a + " " + b + " --memory-budget 1M", &out), 0);
+  // A container's tile must fit the index cache (half the budget), as decode refuses a tile over its budget.
+  EXPECT_EQ(runScanpress("measure " + a + " " + spz + " --memory-budget 16M", &out), 2);
+  EXPECT_NE(out.find("give --memory-budget"), std::string::npos) << out;
   writeBytes(dir.path() + "/bad.spz", "not a container at all, just some bytes that are long enough to be read");
   EXPECT_NE(runScanpress("render " + dir.path() + "/bad.spz " + dir.path() + "/bad.png", &out), 0);
   EXPECT_FALSE(std::filesystem::exists(dir.path() + "/bad.png"));
