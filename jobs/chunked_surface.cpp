@@ -134,11 +134,8 @@ class VertexTable {
       pending_.push_back(r);
       if (pending_.size() == kBlock) SP_RETURN_IF_ERROR(flush());
     }
-    ++size_;
     return Status::ok();
   }
-  uint64_t size() const { return size_; }
-
   Result<const Record*> get(uint64_t i) {
     if (!spilled_) return &memory_[i];
     if (i >= written_) SP_RETURN_IF_ERROR(flush());  // OBJ: a face may follow its vertices at once
@@ -204,7 +201,7 @@ class VertexTable {
   bool spilled_ = false;
   std::vector<Record> memory_, pending_;
   ScratchFile file_;
-  uint64_t size_ = 0, written_ = 0, clock_ = 0;
+  uint64_t written_ = 0, clock_ = 0;
   std::vector<Block> blocks_;
   std::unordered_map<uint64_t, size_t> slot_of_;
   uint64_t last_block_ = UINT64_MAX;
@@ -327,7 +324,6 @@ ChunkedSurface ChunkedSurface::pieces(const Mesh& mesh, uint64_t run) {
 Result<ChunkedSurface> ChunkedSurface::fromMeshFile(const std::string& path, uint64_t run, uint64_t cache_bytes,
                                                     const std::string& scratch_parent) {
   ChunkedSurface s;
-  s.name_ = path;
   SP_ASSIGN_OR_RETURN(ScratchDir dir, ScratchDir::create(scratch_parent));
   auto source = std::make_unique<FileSource>(std::move(dir));
   SP_RETURN_IF_ERROR(source->chunks_file.open(source->dir.file("chunks")));
@@ -348,7 +344,6 @@ Result<ChunkedSurface> ChunkedSurface::fromMeshFile(const std::string& path, uin
 Result<ChunkedSurface> ChunkedSurface::fromContainer(const std::string& path) {
   SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(path));
   ChunkedSurface s;
-  s.name_ = path;
   auto source = std::make_unique<ContainerSource>(std::move(file));
   for (size_t i = 0; i < source->tiles.size(); ++i) {
     SP_ASSIGN_OR_RETURN(auto m, source->load(i));
@@ -361,12 +356,6 @@ Result<ChunkedSurface> ChunkedSurface::fromContainer(const std::string& path) {
 }
 
 Result<std::shared_ptr<const Mesh>> ChunkedSurface::load(size_t i) const { return source_->load(i); }
-
-uint64_t ChunkedSurface::largestChunk() const {
-  uint64_t n = 0;
-  for (const auto& c : info_) n = std::max(n, c.triangles);
-  return n;
-}
 
 bool isContainerPath(const std::string& path) {
   const std::string ext = ".spz";

@@ -64,8 +64,6 @@ class ChunkedSurface {
   double area() const { return area_; }
   const BoundingBox& box() const { return box_; }           // every vertex (boundingBox of the mesh)
   const BoundingBox& usedBox() const { return used_box_; }  // usedBoundingBox of the mesh
-  uint64_t largestChunk() const;                            // triangles of the largest chunk
-  const std::string& name() const { return name_; }
 
  private:
   ChunkedSurface() = default;
@@ -76,8 +74,6 @@ class ChunkedSurface {
   uint64_t triangles_ = 0;
   double area_ = 0;
   BoundingBox box_, used_box_;
-  bool any_triangle_ = false;
-  std::string name_;
 };
 
 // Memory a chunk's search index takes with its mesh (for the index cache's accounting and the budget checks).
