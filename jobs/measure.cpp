@@ -108,6 +108,14 @@ bool mayBeNearer(double lower, double best, double slack) {
   return lower < best || std::sqrt(lower) < std::sqrt(best) + slack;
 }
 
+// What measure refuses: a mesh without triangles (both the whole-mesh and the chunked measurement).
+Status needSurfaces(uint64_t original_triangles, uint64_t decoded_triangles) {
+  if (original_triangles > 0 && decoded_triangles > 0) return Status::ok();
+  return makeError(ErrorCode::kUnsupported,
+                   "both meshes need triangles to measure a surface distance (a point "
+                   "cloud has no surface; measure does not compare point sets)");
+}
+
 // Area samples per batch: a 64th of the index cache (a sample takes about 64 bytes with its distance, group and
 // Morton order), within [2^12, 2^20].
 double batchSamples(uint64_t cache_bytes) {
@@ -192,8 +200,8 @@ Status nearestSquared(const ChunkedSurface& surface, ChunkIndexCache& cache, std
   if (n == 0 || chunks.empty()) return Status::ok();
   // Rounding of distances computed from coordinates this large (a few ulps of the largest, generously).
   double magnitude = 0;
-  for (const BoundingBox* b : {&surface.box()})
-    for (int a = 0; a < 3; ++a) magnitude = std::max({magnitude, std::fabs(b->lo[a]), std::fabs(b->hi[a])});
+  for (int a = 0; a < 3; ++a)
+    magnitude = std::max({magnitude, std::fabs(surface.box().lo[a]), std::fabs(surface.box().hi[a])});
   for (const Vec3d& p : points)
     for (int a = 0; a < 3; ++a)
       if (std::isfinite(p[a])) magnitude = std::max(magnitude, std::fabs(p[a]));
@@ -283,10 +291,7 @@ Status nearestSquared(const ChunkedSurface& surface, ChunkIndexCache& cache, std
 Result<MeasureResult> measureChunked(const ChunkedSurface& original, const ChunkedSurface& decoded,
                                      const MeasureSettings& s, uint64_t cache_bytes,
                                      std::shared_ptr<EmbreeDevice> device) {
-  if (original.triangles() == 0 || decoded.triangles() == 0)
-    return makeError(ErrorCode::kUnsupported,
-                     "both meshes need triangles to measure a surface distance (a point "
-                     "cloud has no surface; measure does not compare point sets)");
+  SP_RETURN_IF_ERROR(needSurfaces(original.triangles(), decoded.triangles()));
   MeasureResult r;
   r.diagonal = original.usedBox().diagonal();
   SampleOptions opt;
@@ -315,10 +320,7 @@ Result<MeasureResult> measureChunked(const ChunkedSurface& original, const Chunk
 
 Result<MeasureResult> measureMeshes(const Mesh& original, const Mesh& decoded, const MeasureSettings& s,
                                     std::shared_ptr<EmbreeDevice> device) {
-  if (original.triangles.empty() || decoded.triangles.empty())
-    return makeError(ErrorCode::kUnsupported,
-                     "both meshes need triangles to measure a surface distance (a point "
-                     "cloud has no surface; measure does not compare point sets)");
+  SP_RETURN_IF_ERROR(needSurfaces(original.triangles.size(), decoded.triangles.size()));
   MeasureResult r;
   r.diagonal = usedBoundingBox(original).diagonal();  // as the encoder's: a stray vertex does not stretch it
   // One density for both directions, from the original, so both sample the surfaces alike.
