@@ -88,7 +88,8 @@ void measureRow(const Mesh& original, const Grid& grid, const std::vector<Vec3u>
   measureDecoded(original, decoded, opt, row);
 }
 
-void runScan(const std::string& path, int bits, int first_bits, const Options& opt, std::vector<Row>& rows) {
+void runScan(const std::string& path, int bits, int first_bits, const Options& opt, std::vector<Row>& rows,
+             std::vector<AttributeRow>& attribute_rows) {
   const int runs = opt.runs;
   auto mesh = readMeshFile(path);
   if (!mesh.isOk()) {
@@ -241,6 +242,7 @@ void runScan(const std::string& path, int bits, int first_bits, const Options& o
     }
   }
   if (opt.rd && bits == first_bits) runAnchors(scan, *mesh, opt, rows);
+  runAttributes(scan, *mesh, bits, attribute_rows);
 }
 
 }  // namespace
@@ -310,10 +312,11 @@ int main(int argc, char** argv) {
   }
   std::vector<Row> rows;
   std::vector<TargetRow> target_rows;
+  std::vector<AttributeRow> attribute_rows;
   for (const auto& s : scans) {
     for (int b : bits) {
       std::fprintf(stderr, "%s at %d bits\n", fs::path(s).filename().c_str(), b);
-      runScan(s, b, bits.front(), opt, rows);
+      runScan(s, b, bits.front(), opt, rows, attribute_rows);
     }
     if (!targets) continue;
     auto mesh = readMeshFile(s);
@@ -363,6 +366,7 @@ int main(int argc, char** argv) {
                   median(bpv), median(enc), median(dec), all ? "yes" : "NO");
     md << line;
   }
+  writeAttributeTable(md, attribute_rows);
   if (opt.rd) {  // RD columns, and one bpv-vs-error plot per scan (gnuplot, when installed)
     md << "\n| scan | codec | bits | bpv | symmetric RMS / diagonal | symmetric max / diagonal |\n|---|---|---:|---:|---:|---:|\n";
     for (const auto& r : rows) {

@@ -67,4 +67,18 @@ void runTargets(const std::string& path, const Mesh& mesh, const std::vector<Com
                 const CompareOptions& opt, std::vector<TargetRow>& out);
 void writeTargetsTable(std::ostream& md, const std::vector<TargetRow>& rows);
 
+// Attributes (bench/compare_attributes.cpp): one coder on a scan at one configuration (normals at 10 or 12
+// octahedral bits, 8-bit colors, or both), with the bytes of the same coder on the geometry alone.
+struct AttributeRow {
+  std::string scan, config, codec;
+  int bits = 0;
+  uint64_t vertices = 0, bytes = 0, geometry_bytes = 0;
+  bool exact = false;         // scanpress: every (position, normal code, color) came back
+  double max_angle_deg = -1;  // Draco: the largest angle between a decoded normal and the input's
+  bool colors_exact = true;   // Draco: every color came back
+};
+// Scans without normals or colors add no rows.
+void runAttributes(const std::string& scan, const Mesh& mesh, int bits, std::vector<AttributeRow>& rows);
+void writeAttributeTable(std::ostream& md, const std::vector<AttributeRow>& rows);
+
 }  // namespace scanpress

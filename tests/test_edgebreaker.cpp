@@ -24,7 +24,7 @@ void expectRoundTrip(const TileContext& ctx, const QuantizedMesh& q) {
   auto enc = encodeMesh(codec(), ctx, q);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
   EXPECT_TRUE(codec().floor.admits(ctx.layout, enc->decoded.vertices, enc->decoded.faces, enc->payload.size()));
-  auto d = codec().decode(ctx, 1, enc->payload, limitsOf(enc->decoded));
+  auto d = codec().decode(ctx, codec().version, enc->payload, limitsOf(enc->decoded));
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   EXPECT_EQ(d->triangles.size(), q.triangles.size());
   EXPECT_TRUE(testing::cornerMultiset(*d, ctx.layout.normal_bits) ==
@@ -164,21 +164,21 @@ TEST(Edgebreaker, HostileCountsAreRefusedBeforeDecoding) {
   const TileContext ctx{12, {}};
   const DecodeLimits lim{100, 100};
   // More than the index allows.
-  EXPECT_EQ(codec().decode(ctx, 1, header(101, 10, 10), lim).status().code(), ErrorCode::kMalformed);
-  EXPECT_EQ(codec().decode(ctx, 1, header(10, 1u << 31, 10), lim).status().code(), ErrorCode::kMalformed);
-  EXPECT_EQ(codec().decode(ctx, 1, header(uint64_t(1) << 60, 1, 1), lim).status().code(), ErrorCode::kMalformed);
+  EXPECT_EQ(codec().decode(ctx, codec().version, header(101, 10, 10), lim).status().code(), ErrorCode::kMalformed);
+  EXPECT_EQ(codec().decode(ctx, codec().version, header(10, 1u << 31, 10), lim).status().code(), ErrorCode::kMalformed);
+  EXPECT_EQ(codec().decode(ctx, codec().version, header(uint64_t(1) << 60, 1, 1), lim).status().code(), ErrorCode::kMalformed);
   // More cut faces than triangles and their boundary edges can make; faces without triangles; an empty tile
   // with bytes after it.
-  EXPECT_EQ(codec().decode(ctx, 1, header(10, 10, 41), lim).status().code(), ErrorCode::kMalformed);
-  EXPECT_EQ(codec().decode(ctx, 1, header(10, 0, 5), lim).status().code(), ErrorCode::kMalformed);
-  EXPECT_EQ(codec().decode(ctx, 1, header(0, 0, 0, 1), lim).status().code(), ErrorCode::kMalformed);
-  EXPECT_TRUE(codec().decode(ctx, 1, header(0, 0, 0, 0), lim).isOk());
+  EXPECT_EQ(codec().decode(ctx, codec().version, header(10, 10, 41), lim).status().code(), ErrorCode::kMalformed);
+  EXPECT_EQ(codec().decode(ctx, codec().version, header(10, 0, 5), lim).status().code(), ErrorCode::kMalformed);
+  EXPECT_EQ(codec().decode(ctx, codec().version, header(0, 0, 0, 1), lim).status().code(), ErrorCode::kMalformed);
+  EXPECT_TRUE(codec().decode(ctx, codec().version, header(0, 0, 0, 0), lim).isOk());
   // Garbage after a plausible header: an error or a valid mesh within the limits, never more.
   std::mt19937 rng(5);
   for (int trial = 0; trial < 500; ++trial) {
     auto bytes = header(1 + rng() % 100, 1 + rng() % 100, 1 + rng() % 100, 1 + rng() % 64);
     for (size_t i = 3; i < bytes.size(); ++i) bytes[i] = uint8_t(rng());
-    auto d = codec().decode(ctx, 1, bytes, lim);
+    auto d = codec().decode(ctx, codec().version, bytes, lim);
     if (d.isOk()) {
       EXPECT_TRUE(validateTile(ctx, *d).isOk());
       EXPECT_LE(d->positions.size(), lim.vertices);

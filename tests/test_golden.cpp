@@ -53,38 +53,27 @@ const Golden& golden() {
   return g;
 }
 
-std::string goldenPath(const CodecInfo& codec) {
-  return std::string(SCANPRESS_GOLDEN) + "/" + std::string(codec.name) + "-v" + std::to_string(codec.version) + ".spz";
+std::string goldenPath(const CodecInfo& codec, int version) {
+  return std::string(SCANPRESS_GOLDEN) + "/" + std::string(codec.name) + "-v" + std::to_string(version) + ".spz";
 }
 
-class GoldenStream : public ::testing::TestWithParam<CodecId> {};
-
-TEST_P(GoldenStream, DecodesToItsMeshAndTheEncoderStillWritesIt) {
-  const CodecInfo& codec = *findCodec(GetParam());
+// The golden stream of `version` decodes to the golden mesh.
+void expectDecodesToGolden(const CodecInfo& codec, int version, const std::vector<uint8_t>& bytes,
+                           const std::string& path) {
+  SCOPED_TRACE(path);
   const Golden& g = golden();
-  const QuantizedMesh tiles[] = {g.mesh};
-  auto now = encodeContainer(g.grid, g.layout, codec, tiles);
-  ASSERT_TRUE(now.isOk()) << now.status().toString();
-  const std::string path = goldenPath(codec);
-  if (!std::filesystem::exists(path)) {
-    const char* write = std::getenv("SCANPRESS_WRITE_GOLDEN");
-    ASSERT_TRUE(write && std::string(write) == "1")
-        << path << " is missing: a new codec or version needs its golden stream (SCANPRESS_WRITE_GOLDEN=1)";
-    testing::writeBytes(path, std::string(now->begin(), now->end()));
-  }
-  const auto bytes = testing::readBytes(path);
   auto parsed = parseContainer(bytes, path);
   ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
   ASSERT_EQ(parsed->tiles.size(), 1u);
   const auto& e = parsed->tiles[0];
   EXPECT_EQ(e.codec, codec.id);
-  EXPECT_EQ(e.codec_version, codec.version);
+  EXPECT_EQ(e.codec_version, version);
   auto payload = parseTileChunk(std::span(bytes).subspan(e.offset, e.chunk_bytes), e, path);
   ASSERT_TRUE(payload.isOk()) << payload.status().toString();
   auto decoded = decodeTilePayload(parsed->header, e, *payload, path);
   ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
   if (codec.id == CodecId::kPm) {
-    // pm v1 keeps triangles over positions (welded, without those repeating a position) and derives attributes.
+    // pm keeps triangles over positions (welded, without those repeating a position) and derives attributes.
     auto positional = [](const QuantizedMesh& m) {
       std::vector<testing::PosTriangle> out;
       for (const auto& t : testing::triangleMultiset(m))
@@ -97,8 +86,33 @@ TEST_P(GoldenStream, DecodesToItsMeshAndTheEncoderStillWritesIt) {
     EXPECT_TRUE(testing::cornerMultiset(*decoded, g.layout.normal_bits) ==
                 testing::cornerMultiset(g.mesh, g.layout.normal_bits));
   }
-  EXPECT_TRUE(*now == bytes) << "this build writes " << codec.name << " v" << codec.version
-                             << " differently from its golden stream: a format change needs a new version";
+}
+
+class GoldenStream : public ::testing::TestWithParam<CodecId> {};
+
+// Every version this build knows still decodes (old archives stay readable); the version it writes is written
+// byte for byte as its golden stream.
+TEST_P(GoldenStream, DecodesToItsMeshAndTheEncoderStillWritesIt) {
+  const CodecInfo& codec = *findCodec(GetParam());
+  const Golden& g = golden();
+  const QuantizedMesh tiles[] = {g.mesh};
+  auto now = encodeContainer(g.grid, g.layout, codec, tiles);
+  ASSERT_TRUE(now.isOk()) << now.status().toString();
+  const std::string path = goldenPath(codec, codec.version);
+  if (!std::filesystem::exists(path)) {
+    const char* write = std::getenv("SCANPRESS_WRITE_GOLDEN");
+    ASSERT_TRUE(write && std::string(write) == "1")
+        << path << " is missing: a new codec or version needs its golden stream (SCANPRESS_WRITE_GOLDEN=1)";
+    testing::writeBytes(path, std::string(now->begin(), now->end()));
+  }
+  for (int version = 1; version <= codec.version; ++version) {
+    const std::string older = goldenPath(codec, version);
+    ASSERT_TRUE(std::filesystem::exists(older)) << older << " is missing: golden streams are kept forever";
+    expectDecodesToGolden(codec, version, testing::readBytes(older), older);
+  }
+  EXPECT_TRUE(*now == testing::readBytes(path))
+      << "this build writes " << codec.name << " v" << codec.version
+      << " differently from its golden stream: a format change needs a new version";
 }
 
 std::vector<CodecId> everyCodec() {

@@ -94,7 +94,7 @@ Encoded encodeTile(const TileContext& ctx, const QuantizedMesh& m, std::span<con
   auto e = pm().encode(ctx, TileView{m, locked}, o);
   EXPECT_TRUE(e.isOk()) << e.status().toString();
   if (!e.isOk()) return {};
-  auto levels = pm().levels(ctx, 1, e->payload, limitsOf(e->decoded));
+  auto levels = pm().levels(ctx, pm().version, e->payload, limitsOf(e->decoded));
   EXPECT_TRUE(levels.isOk()) << levels.status().toString();
   EXPECT_EQ(levels->size(), e->levels.size());
   for (size_t i = 0; i < levels->size() && i < e->levels.size(); ++i) {
@@ -123,7 +123,7 @@ void expectLevelsReplay(const TileContext& ctx, const QuantizedMesh& tile, std::
     ASSERT_TRUE(s1.isOk());
     auto passes = replayPasses(welded, *s1);
     const std::vector<PosTriangle> expect_last = passes.empty() ? triangleMultiset(welded) : passes.back();
-    auto d = pm().decode(ctx, 1, enc.tile.payload, limitsOf(enc.tile.decoded));
+    auto d = pm().decode(ctx, pm().version, enc.tile.payload, limitsOf(enc.tile.decoded));
     ASSERT_TRUE(d.isOk()) << d.status().toString();
     EXPECT_TRUE(triangleMultiset(*d) == expect_last) << "the last level is not the simplified tile";
     return;  // the coarser levels are checked on lossless encodes (the same code path from the last level on)
@@ -147,7 +147,7 @@ void expectLevelsReplay(const TileContext& ctx, const QuantizedMesh& tile, std::
   for (const CodecLevel& l : enc.levels) {
     SCOPED_TRACE(l.level);
     auto d =
-        pm().decode_level(ctx, 1, std::span(enc.tile.payload).first(l.end_bytes), l.level, limitsOf(enc.tile.decoded));
+        pm().decode_level(ctx, pm().version, std::span(enc.tile.payload).first(l.end_bytes), l.level, limitsOf(enc.tile.decoded));
     ASSERT_TRUE(d.isOk()) << d.status().toString();
     EXPECT_TRUE(validateTile(ctx, *d).isOk());
     EXPECT_EQ(d->positions.size(), l.vertices);
@@ -159,7 +159,7 @@ void expectLevelsReplay(const TileContext& ctx, const QuantizedMesh& tile, std::
     for (const auto& p : locked_positions) EXPECT_TRUE(have.count(p)) << "a locked vertex is missing";
   }
   EXPECT_TRUE(enc.levels.back().complete);
-  auto full = pm().decode(ctx, 1, enc.tile.payload, limitsOf(enc.tile.decoded));
+  auto full = pm().decode(ctx, pm().version, enc.tile.payload, limitsOf(enc.tile.decoded));
   ASSERT_TRUE(full.isOk()) << full.status().toString();
   EXPECT_TRUE(weldedTriangles(*full) == weldedTriangles(tile)) << "the last level is not the tile";
   const TileSummary got = summarize(*full);
@@ -209,7 +209,7 @@ TEST(Pm, LockedVerticesSurviveEveryLevel) {
   opt.ratio = 0.1;
   const Encoded enc = encodeTile(ctx, sphere, locked, opt);
   for (const CodecLevel& l : enc.levels) {
-    auto d = pm().decode_level(ctx, 1, enc.tile.payload, l.level, limitsOf(enc.tile.decoded));
+    auto d = pm().decode_level(ctx, pm().version, enc.tile.payload, l.level, limitsOf(enc.tile.decoded));
     ASSERT_TRUE(d.isOk());
     std::set<Vec3u> have(d->positions.begin(), d->positions.end());
     for (size_t v = 0; v < locked.size(); ++v)
@@ -275,7 +275,7 @@ TEST(Pm, AttributesAreDerived) {
   ASSERT_TRUE(q.isOk());
   auto e = encodeMesh(pm(), ctx, *q);
   ASSERT_TRUE(e.isOk()) << e.status().toString();
-  auto d = pm().decode(ctx, 1, e->payload, limitsOf(e->decoded));
+  auto d = pm().decode(ctx, pm().version, e->payload, limitsOf(e->decoded));
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   EXPECT_EQ(d->normals.size(), d->positions.size());
   EXPECT_EQ(d->colors.size(), d->positions.size());
@@ -291,10 +291,10 @@ TEST(Pm, EveryTruncationFailsCleanlyOrDecodesALevel) {
   const DecodeLimits limits = limitsOf(enc.tile.decoded);
   for (size_t cut = 0; cut < bytes.size(); ++cut) {
     const auto part = std::span(bytes).first(cut);
-    EXPECT_FALSE(pm().decode(ctx, 1, part, limits).isOk()) << cut;
-    EXPECT_FALSE(pm().levels(ctx, 1, part, limits).isOk()) << cut;
+    EXPECT_FALSE(pm().decode(ctx, pm().version, part, limits).isOk()) << cut;
+    EXPECT_FALSE(pm().levels(ctx, pm().version, part, limits).isOk()) << cut;
     for (const CodecLevel& l : enc.levels) {
-      auto d = pm().decode_level(ctx, 1, part, l.level, limits);
+      auto d = pm().decode_level(ctx, pm().version, part, l.level, limits);
       EXPECT_EQ(d.isOk(), cut >= l.end_bytes) << "cut " << cut << " level " << l.level;
       if (d.isOk()) {
         EXPECT_EQ(d->positions.size(), l.vertices);
@@ -313,7 +313,7 @@ TEST(Pm, CorruptPayloadsFailCleanlyOrStayWithinLimits) {
     std::vector<uint8_t> bad = enc.tile.payload;
     const int flips = 1 + int(rng() % 3);
     for (int f = 0; f < flips; ++f) bad[rng() % bad.size()] ^= uint8_t(1u << (rng() % 8));
-    auto d = pm().decode(ctx, 1, bad, limits);
+    auto d = pm().decode(ctx, pm().version, bad, limits);
     if (d.isOk()) {
       EXPECT_LE(d->positions.size(), limits.vertices);
       EXPECT_LE(d->triangles.size(), limits.faces);
@@ -327,9 +327,9 @@ TEST(Pm, HostileCountsAreRefusedBeforeAllocating) {
   const QuantizedMesh sphere = quantized(icosphere(3), 12);
   const Encoded enc = encodeTile(ctx, sphere, {});
   const TileSummary s = enc.tile.decoded;
-  EXPECT_EQ(pm().decode(ctx, 1, enc.tile.payload, DecodeLimits{s.vertices - 1, s.faces}).status().code(),
+  EXPECT_EQ(pm().decode(ctx, pm().version, enc.tile.payload, DecodeLimits{s.vertices - 1, s.faces}).status().code(),
             ErrorCode::kMalformed);
-  EXPECT_EQ(pm().decode(ctx, 1, enc.tile.payload, DecodeLimits{s.vertices, s.faces - 1}).status().code(),
+  EXPECT_EQ(pm().decode(ctx, pm().version, enc.tile.payload, DecodeLimits{s.vertices, s.faces - 1}).status().code(),
             ErrorCode::kMalformed);
   // A header claiming 2^40 base vertices, and one claiming a level of 2^33 faces, within a few bytes.
   auto varint = [](std::vector<uint8_t>& out, uint64_t v) {
@@ -338,7 +338,7 @@ TEST(Pm, HostileCountsAreRefusedBeforeAllocating) {
   };
   std::vector<uint8_t> h1 = {2};
   varint(h1, 1), varint(h1, 0), varint(h1, uint64_t(1) << 40), varint(h1, 10);
-  auto r1 = pm().decode(ctx, 1, h1, DecodeLimits{1000, 2000});
+  auto r1 = pm().decode(ctx, pm().version, h1, DecodeLimits{1000, 2000});
   EXPECT_EQ(r1.status().code(), ErrorCode::kMalformed) << r1.status().toString();
   std::vector<uint8_t> h2 = {2};
   varint(h2, 1), varint(h2, 0), varint(h2, 4), varint(h2, 4);
@@ -346,10 +346,10 @@ TEST(Pm, HostileCountsAreRefusedBeforeAllocating) {
   varint(h2, 1), varint(h2, 1), varint(h2, 5), varint(h2, uint64_t(1) << 33);
   for (int i = 0; i < 4; ++i) h2.push_back(0);
   varint(h2, 3);
-  auto r2 = pm().decode(ctx, 1, h2, DecodeLimits{1000, 2000});
+  auto r2 = pm().decode(ctx, pm().version, h2, DecodeLimits{1000, 2000});
   EXPECT_EQ(r2.status().code(), ErrorCode::kMalformed) << r2.status().toString();
   // An unknown version.
-  EXPECT_EQ(pm().decode(ctx, 2, enc.tile.payload, limitsOf(s)).status().code(), ErrorCode::kUnknownVersion);
+  EXPECT_EQ(pm().decode(ctx, pm().version + 1, enc.tile.payload, limitsOf(s)).status().code(), ErrorCode::kUnknownVersion);
   // The payload admits the registry's floor.
   EXPECT_TRUE(pm().floor.admits(ctx.layout, s.vertices, s.faces, enc.tile.payload.size()));
 }

@@ -53,13 +53,13 @@ TEST(PmScans, EveryLevelOfRealScansDecodes) {
       const DecodeLimits limits = limitsOf(enc->decoded);
       uint64_t prev = 0;
       for (const CodecLevel& l : enc->levels) {
-        auto d = pm.decode_level(ctx, 1, std::span(enc->payload).first(l.end_bytes), l.level, limits);
+        auto d = pm.decode_level(ctx, pm.version, std::span(enc->payload).first(l.end_bytes), l.level, limits);
         ASSERT_TRUE(d.isOk()) << d.status().toString();
         EXPECT_EQ(d->positions.size(), l.vertices);
         EXPECT_GE(l.vertices, prev);
         prev = l.vertices;
       }
-      auto d = pm.decode(ctx, 1, enc->payload, limits);
+      auto d = pm.decode(ctx, pm.version, enc->payload, limits);
       ASSERT_TRUE(d.isOk()) << d.status().toString();
       if (ratio == 1.0) {
         EXPECT_TRUE(weldedTriangles(*d) == weldedTriangles(*q)) << "the last level is not the scan";

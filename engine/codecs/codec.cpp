@@ -21,11 +21,13 @@ namespace {
 // The slack is small because a tile costs only 92 bytes of chunk header and index entry: a larger one would let
 // many small tiles claim more than the floor.
 constexpr PayloadFloor kStoreFloor{6.0, 3.0, 8};
-constexpr PayloadFloor kHierarchyFloor{1.0 / 8, 1.0 / 16, 8};
+// Version 2 of kdtree, octree and edgebreaker predicts normals and colors (attributes.h): a well-predicted attribute
+// costs a few thousandths of a bit, so their floors count none (version 1 payloads, raw, are admitted all the more).
+constexpr PayloadFloor kHierarchyFloor{1.0 / 8, 1.0 / 16, 8, false};
 
 // edgebreaker: every point codes three residual classes and every face a symbol, each at least the cost of a
 // model's likeliest symbol (a width of 2^15 less one per other symbol); the slack covers the header and flush.
-constexpr PayloadFloor kEdgebreakerFloor{8.0 / 2048, 8.0 / 65536, 1024};
+constexpr PayloadFloor kEdgebreakerFloor{8.0 / 2048, 8.0 / 65536, 1024, false};
 // pm: its base mesh is coded by store, kdtree or octree, and every vertex split costs at least its split flag, a
 // placement symbol and three residual buckets, each a few thousandths of a bit at the models' most skewed
 // probabilities: half the hierarchy codecs' floor per vertex and face.
@@ -33,10 +35,10 @@ constexpr PayloadFloor kPmFloor{4.0 / 1024, 4.0 / (1024 * 64), 1024, false};
 
 constexpr std::array<CodecInfo, 5> kCodecs = {{
     {CodecId::kStore, "store", 1, kStoreFloor, &storeEncode, &storeDecode},
-    {CodecId::kKdtree, "kdtree", 1, kHierarchyFloor, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel},
-    {CodecId::kOctree, "octree", 1, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel},
-    {CodecId::kPm, "pm", 1, kPmFloor, &pmEncode, &pmDecode, &pmLevels, &pmDecodeLevel, false},
-    {CodecId::kEdgebreaker, "edgebreaker", 1, kEdgebreakerFloor, &edgebreakerEncode, &edgebreakerDecode},
+    {CodecId::kKdtree, "kdtree", 2, kHierarchyFloor, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel},
+    {CodecId::kOctree, "octree", 2, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel},
+    {CodecId::kPm, "pm", 2, kPmFloor, &pmEncode, &pmDecode, &pmLevels, &pmDecodeLevel, false},
+    {CodecId::kEdgebreaker, "edgebreaker", 2, kEdgebreakerFloor, &edgebreakerEncode, &edgebreakerDecode},
 }};
 
 }  // namespace
@@ -169,7 +171,7 @@ Status validateTile(const TileContext& ctx, const QuantizedMesh& mesh) {
     for (uint32_t c : mesh.positions[i])
       if (c > max_coord)
         return makeError(ErrorCode::kMalformed, "vertex " + std::to_string(i) + " lies outside the grid");
-  const uint32_t max_oct = ctx.layout.hasNormals() ? (1u << ctx.layout.normal_bits) - 1 : 0;
+  const uint32_t max_oct = ctx.layout.hasNormals() ? (1u << ctx.layout.normal_bits) - 2 : 0;  // octahedral.h
   for (const auto& e : mesh.normals)
     if (e[0] > max_oct || e[1] > max_oct) return makeError(ErrorCode::kMalformed, "normal outside its range");
   for (size_t t = 0; t < mesh.triangles.size(); ++t)

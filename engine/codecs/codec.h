@@ -124,8 +124,10 @@ struct PayloadFloor {
   double bits_per_vertex = 0;
   double bits_per_face = 0;
   uint64_t slack_bytes = 0;
-  bool raw_attributes = true;  // false: the codec keeps no normals or colors (pm v1), so they cost nothing
-  // Every codec that keeps attributes spends a vertex's normal and color bits raw (2 x normal_bits + 8 x color_channels), on top of bits_per_vertex.
+  // true: the codec spends a vertex's normal and color bits raw (2 x normal_bits + 8 x color_channels), on top of
+  // bits_per_vertex (store). false: it keeps none (pm) or predicts them at a cost near zero (kdtree, octree and
+  // edgebreaker from version 2).
+  bool raw_attributes = true;
   bool admits(const AttributeLayout& layout, uint64_t vertices, uint64_t faces, uint64_t payload_bytes) const;
   // The fewest payload bytes that admit these counts (0 when the slack covers them): what an encoder pads to.
   uint64_t minPayloadBytes(const AttributeLayout& layout, uint64_t vertices, uint64_t faces) const;
@@ -147,7 +149,7 @@ struct CodecInfo {
                                             const DecodeLimits& limits) = nullptr;
   Result<QuantizedMesh> (*decode_level)(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         uint32_t level, const DecodeLimits& limits) = nullptr;
-  // False when the codec derives normals and colors from the triangles instead of keeping them (pm v1): its tiles
+  // False when the codec derives normals and colors from the triangles instead of keeping them (pm): its tiles
   // weld by position even when complete, as coarse levels do, and get attributes derived from the welded mesh.
   bool keeps_attributes = true;
   bool progressive() const { return levels != nullptr; }

@@ -48,6 +48,7 @@
 #include <string>
 
 #include "engine/codecs/codec.h"
+#include "engine/codecs/attributes.h"
 #include "engine/codecs/hierarchy.h"
 #include "engine/entropy/range_coder.h"
 #include "engine/io/bytes.h"
@@ -284,6 +285,7 @@ class Engine {
   }
 
   AttributeLayout layout;
+  uint16_t version = kPredictedAttributes;  // the payload's (attribute coding)
   u64 ops[kNumOps] = {};
 
   Status run() {
@@ -304,7 +306,7 @@ class Engine {
     io_.meter(&CodecStats::connectivity_bits);
     SP_RETURN_IF_ERROR(triangles());
     io_.meter(&CodecStats::attribute_bits);
-    codeRawAttributes(io_, layout, n_, truth_ ? &truth_->ordered : nullptr, normals_, colors_);
+    codeTileAttributes(io_, version, layout, pos_, tris_, truth_ ? &truth_->ordered : nullptr, normals_, colors_);
     return Status::ok();
   }
 
@@ -847,7 +849,7 @@ Status edgebreakerEncodeWithStats(const TileContext& ctx, const QuantizedMesh& m
 
 Result<QuantizedMesh> edgebreakerDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         const DecodeLimits& limits) {
-  if (version != 1)
+  if (version < 1 || version > kPredictedAttributes)
     return makeError(ErrorCode::kUnknownVersion, "edgebreaker payload: unknown version " + std::to_string(version));
   ByteReader r(payload, "edgebreaker payload");
   u64 n = 0, t = 0, faces = 0;
@@ -868,6 +870,7 @@ Result<QuantizedMesh> edgebreakerDecode(const TileContext& ctx, uint16_t version
   SP_RETURN_IF_ERROR(io.begin());
   Engine<DecodeIo> engine(io, ctx.bits, u32(n), t, u32(faces), nullptr);
   engine.layout = ctx.layout;
+  engine.version = version;
   SP_RETURN_IF_ERROR(engine.run());
   SP_RETURN_IF_ERROR(io.end());
   QuantizedMesh mesh = engine.mesh();

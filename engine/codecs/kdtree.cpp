@@ -48,6 +48,7 @@
 #include <string>
 
 #include "engine/codecs/codec.h"
+#include "engine/codecs/attributes.h"
 #include "engine/codecs/hierarchy.h"
 #include "engine/entropy/range_coder.h"
 #include "engine/io/bytes.h"
@@ -308,6 +309,7 @@ class Engine {
   }
 
   AttributeLayout layout;  // set by the caller before run()
+  uint16_t version = kPredictedAttributes;  // the payload's (attribute coding)
 
  private:
   struct Cell {
@@ -711,7 +713,7 @@ class Engine {
 
   void codeAttributes() {
     io_.meter(&CodecStats::attribute_bits);
-    codeRawAttributes(io_, layout, n_, truth_, normals_, colors_);
+    codeTileAttributes(io_, version, layout, lo_, triangles_, truth_, normals_, colors_);
   }
 
  public:
@@ -859,6 +861,7 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   SP_ASSIGN_OR_RETURN(io.segments, levelSegments("kdtree", h, ctx.bits, payload, target));
   Engine<DecodeIo> engine(io, ctx.bits, h.n, h.k0, h.root, nullptr);
   engine.layout = ctx.layout;
+  engine.version = version;
   engine.max_triangles_ = h.t;
   SP_RETURN_IF_ERROR(engine.run(target));
   QuantizedMesh mesh = engine.mesh(ctx.layout);

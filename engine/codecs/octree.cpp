@@ -48,6 +48,7 @@
 #include <string>
 
 #include "engine/codecs/codec.h"
+#include "engine/codecs/attributes.h"
 #include "engine/codecs/hierarchy.h"
 
 namespace scanpress {
@@ -155,7 +156,7 @@ class Engine {
       return makeError(ErrorCode::kInternal, "octree encoder: split sequence mismatch");
     SP_RETURN_IF_ERROR(codeFaces());
     io_.meter(&CodecStats::attribute_bits);
-    codeRawAttributes(io_, layout, n_, truth_ ? &truth_->by_id : nullptr, normals_, colors_);
+    codeTileAttributes(io_, version, layout, lo_, triangles_, truth_ ? &truth_->by_id : nullptr, normals_, colors_);
     SP_RETURN_IF_ERROR(io_.end());
     level_ = bits_;
     complete_ = true;
@@ -200,6 +201,7 @@ class Engine {
   }
 
   AttributeLayout layout;            // set by the caller before run()
+  uint16_t version = kPredictedAttributes;  // the payload's (attribute coding)
   u64 max_cliques_ = kMaxTriangles;  // coarse levels' triangles (set by the decoder from the index)
   bool flat_ = false;                // one model per symbol kind (measuring the contexts' gain)
   u64 splits_ = 0;
@@ -629,6 +631,7 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   SP_ASSIGN_OR_RETURN(io.segments, levelSegments(kCodec, h, ctx.bits, payload, target));
   Engine<DecodeIo> engine(io, ctx.bits, h, nullptr);
   engine.layout = ctx.layout;
+  engine.version = version;
   engine.max_cliques_ = std::min<u64>(kMaxTriangles, coarseTriangleLimit(limits));
   SP_RETURN_IF_ERROR(engine.run(target));
   SP_ASSIGN_OR_RETURN(QuantizedMesh mesh, engine.mesh(ctx.layout));

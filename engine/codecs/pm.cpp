@@ -32,9 +32,9 @@
 //    step; each level is one range-coder stream (models carry over), so a payload cut after a level's end decodes it.
 //  - The encoder welds vertices sharing a grid position and drops triangles that repeat a vertex after the weld:
 //    the last level is the tile as triangles over positions (with multiplicity and orientation), not its vertex
-//    list. Normals and colors are not kept (v1): every level derives them from its triangles (deriveAttributes).
+//    list. Normals and colors are not kept (v1, v2): every level derives them from its triangles (deriveAttributes).
 //
-// Payload v1 (FORMAT.md, "Codec pm"):
+// Payload v1 and v2 (FORMAT.md, "Codec pm"):
 //   u8 base codec id (1 store, 2 kdtree, 3 octree), varint base codec version, varint base payload bytes B,
 //   varint base vertices V0, varint base faces F0, f32 base error (grid cells, little-endian bits),
 //   varint L (levels after the base), L x { varint batches, varint vertices, varint faces, f32 error,
@@ -54,7 +54,8 @@
 namespace scanpress {
 namespace {
 
-constexpr uint16_t kVersion = 1;
+// 2: the same layout as 1; its base payloads are kdtree's and octree's version 2 (so are its golden bytes).
+constexpr uint16_t kVersion = 2;
 // A level closes once it has at least this many splits and grew the vertex count by this factor (or at the last
 // batch): fewer, larger levels pay less per-level overhead (a 4-byte flush and the table entry).
 constexpr uint64_t kMinLevelSplits = 64;
@@ -471,9 +472,9 @@ void putF32(ByteWriter& w, float f) {
 }
 
 Status checkVersion(uint16_t version) {
-  if (version != kVersion)
+  if (version < 1 || version > kVersion)
     return makeError(ErrorCode::kUnknownVersion,
-                     "pm codec version " + std::to_string(version) + " is not known to this build (knows 1)");
+                     "pm codec version " + std::to_string(version) + " is not known to this build (knows 1 and 2)");
   return Status::ok();
 }
 

@@ -1,0 +1,231 @@
+// Per-vertex normals and colors of a tile's lossless level, predicted from what the decoder already holds (format
+// version 2 of kdtree, octree and edgebreaker; version 1 wrote them raw, codeRawAttributes in hierarchy.h). Coded
+// after the positions and triangles, in vertex order:
+//
+// - Normals: predicted from the decoded geometry, the sum of the cross products of the vertex's triangles (the
+//   area-weighted face normal), projected onto the octahedral square in integer arithmetic, so that encoder and
+//   decoder agree on every machine. A flip bit says when the scan's normal points away from the prediction (normals
+//   pointing inward); a vertex without triangles is predicted by the previous vertex's normal. When the prediction
+//   lies in the folded lower half of the square, prediction and normal are both mirrored through the z = 0 plane
+//   (the fold), which maps the lower hemisphere onto the unfolded diamond, so that normals on either side of the
+//   square's folded border stay close; the few border codes that two codes of one direction fold onto carry an index
+//   among them, so that the code itself comes back, not only its direction. The residual of each component,
+//   modulo the 2^bits - 1 codes, is coded as a bit-length class (adaptive, context: the mean class of the vertex's
+//   decoded neighbours, and for the second component the first's class), a sign, a modelled top bit and raw bits.
+// - Colors: each channel predicted by the mean of the decoded neighbours (lower vertex numbers; the previous vertex
+//   when there is none). Green's residual is coded first; red's and blue's after subtracting green's (colors of
+//   scans are mostly grey or brown, their channel residuals move together); alpha on its own. Classes as for normals.
+//
+// Draco predicts normals the same way (its geometric normal predictor with the canonicalised octahedral transform);
+// the integer projection, the neighbour-activity contexts and the exact code round trip are ours.
+#pragma once
+
+#include <span>
+#include <vector>
+
+#include "engine/codecs/hierarchy.h"
+#include "engine/octahedral.h"
+
+namespace scanpress::hierarchy {
+
+using i128 = __int128;
+using Sum3 = std::array<i128, 3>;
+
+// For each vertex, the triangles that use it (a triangle once per corner naming it).
+struct VertexFaces {
+  std::vector<u32> start;  // n + 1 entries
+  std::vector<u32> faces;
+  VertexFaces(u32 n, std::span<const Triangle> tris);
+  std::span<const u32> of(u32 v) const { return {faces.data() + start[v], faces.data() + start[v + 1]}; }
+};
+
+// The octahedral code (signed units, each in [-M, M], M = 2^(bits-1) - 1) of the direction s != 0: the projection of
+// encodeOctahedral, in exact integer arithmetic with rounding half away from zero.
+std::array<int, 2> octahedralOfSum(const Sum3& s, int bits);
+
+// The z-mirror of a signed octahedral code: the fold between the upper diamond and the lower corners.
+inline std::array<int, 2> foldCode(std::array<int, 2> c, int m) {
+  return {(m - std::abs(c[1])) * (c[0] >= 0 ? 1 : -1), (m - std::abs(c[0])) * (c[1] >= 0 ? 1 : -1)};
+}
+
+// The codes that fold onto `f` (one, or two to four on the square's border), in a fixed order.
+int foldPreimages(std::array<int, 2> f, int m, std::array<std::array<int, 2>, 4>& out);
+
+struct AttributeModels {
+  static constexpr int kActivity = 8;  // bins of the neighbours' mean residual class (0: no decoded neighbour)
+  explicit AttributeModels(const AttributeLayout& layout);
+  std::vector<SymbolModel> normal_u, normal_v;  // [activity], [activity][min(class u, 4)]
+  BitModel normal_sign[2], normal_top[2][17], flip[2];
+  std::vector<SymbolModel> color;  // [activity][channel][min(class of green, 3)]
+  BitModel color_sign[4], color_top[4][9];
+};
+
+inline int activityBin(u32 sum, u32 count) {
+  if (count == 0) return 0;
+  const u32 m = 2 * sum / count;  // the mean class, in halves
+  static constexpr u32 kEdges[] = {1, 2, 4, 6, 9, 14};
+  int bin = 1;
+  while (bin < AttributeModels::kActivity - 1 && m >= kEdges[bin - 1]) ++bin;
+  return bin;
+}
+
+inline int bitLength(u32 v) { return v == 0 ? 0 : 32 - __builtin_clz(v); }
+
+// A residual r as class (bit length of |r|), sign, top bit below the leading one, raw bits. Returns r; `cls` gets
+// its class.
+template <class Io>
+int codeResidual(Io& io, SymbolModel& class_model, BitModel& sign, BitModel* top, int r, int& cls) {
+  const u32 mag_in = u32(std::abs(r));
+  const int k = int(io.sym(class_model, u32(bitLength(mag_in))));
+  cls = k;
+  if (k == 0) return 0;
+  u32 mag = 1u << (k - 1);
+  if (k >= 2) mag |= u32(io.bit(top[k], int((mag_in >> (k - 2)) & 1))) << (k - 2);
+  if (k >= 3) mag |= io.bits(mag_in & ((1u << (k - 2)) - 1), k - 2);
+  return io.bit(sign, r < 0) ? -int(mag) : int(mag);
+}
+
+// (a mod q) in [-(q-1)/2, (q-1)/2] for odd q.
+inline int wrapCentered(int a, int q) {
+  const int h = (q - 1) / 2;
+  a %= q;
+  if (a > h) a -= q;
+  if (a < -h) a += q;
+  return a;
+}
+
+// Normals and colors of the n vertices at positions `pos` with triangles `tris`; `truth` (encoder) holds them in
+// the vertices' order.
+template <class Io>
+void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::vector<Vec3u>& pos,
+                             const std::vector<Triangle>& tris, const Points* truth, std::vector<OctNormal>& normals,
+                             std::vector<Rgba8>& colors) {
+  if (!layout.hasNormals() && !layout.hasColors()) return;
+  const u32 n = u32(pos.size());
+  const VertexFaces vf(n, tris);
+  AttributeModels models(layout);
+  std::vector<u8> activity(n, 0);
+  // The mean class of the vertex's decoded neighbours (lower numbers), as a context bin.
+  auto neighbourBin = [&](u32 v) {
+    u32 sum = 0, count = 0;
+    for (u32 t : vf.of(v))
+      for (u32 w : tris[t])
+        if (w < v) sum += activity[w], ++count;
+    return activityBin(sum, count);
+  };
+
+  if (layout.hasNormals()) {
+    const int bits = layout.normal_bits, m = (1 << (bits - 1)) - 1, q = 2 * m + 1;
+    normals.resize(n);
+    int last_flip = 0;
+    for (u32 v = 0; v < n; ++v) {
+      Sum3 s{0, 0, 0};
+      for (u32 t : vf.of(v)) {
+        const Triangle& tri = tris[t];
+        int64_t e1[3], e2[3];
+        for (int a = 0; a < 3; ++a) {
+          e1[a] = int64_t(pos[tri[1]][a]) - pos[tri[0]][a];
+          e2[a] = int64_t(pos[tri[2]][a]) - pos[tri[0]][a];
+        }
+        s[0] += i128(e1[1] * e2[2]) - i128(e1[2] * e2[1]);
+        s[1] += i128(e1[2] * e2[0]) - i128(e1[0] * e2[2]);
+        s[2] += i128(e1[0] * e2[1]) - i128(e1[1] * e2[0]);
+      }
+      std::array<int, 2> pred{0, 0};
+      const std::array<int, 2> actual =
+          truth ? std::array<int, 2>{int(truth->normals[v][0]) - m, int(truth->normals[v][1]) - m}
+                : std::array<int, 2>{0, 0};
+      if (s[0] != 0 || s[1] != 0 || s[2] != 0) {
+        pred = octahedralOfSum(s, bits);
+        int flip = 0;
+        if (truth) {
+          const Vec3f a = decodeOctahedral(truth->normals[v], bits);
+          const Vec3f p = decodeOctahedral(OctNormal{uint16_t(pred[0] + m), uint16_t(pred[1] + m)}, bits);
+          flip = double(a[0]) * p[0] + double(a[1]) * p[1] + double(a[2]) * p[2] < 0;
+        }
+        flip = io.bit(models.flip[last_flip], flip);
+        last_flip = flip;
+        if (flip) pred = octahedralOfSum(Sum3{-s[0], -s[1], -s[2]}, bits);
+      } else if (v > 0) {
+        pred = {int(normals[v - 1][0]) - m, int(normals[v - 1][1]) - m};
+      } else {
+        pred = {0, 0};
+      }
+      const bool mirror = std::abs(pred[0]) + std::abs(pred[1]) > m;
+      std::array<int, 2> target = actual;
+      if (mirror) pred = foldCode(pred, m), target = foldCode(actual, m);
+      const int bin = neighbourBin(v);
+      int ku = 0, kv = 0;
+      const int ru = codeResidual(io, models.normal_u[bin], models.normal_sign[0], models.normal_top[0],
+                                  wrapCentered(target[0] - pred[0], q), ku);
+      const int rv = codeResidual(io, models.normal_v[bin * 5 + std::min(ku, 4)], models.normal_sign[1],
+                                  models.normal_top[1], wrapCentered(target[1] - pred[1], q), kv);
+      std::array<int, 2> code{wrapCentered(pred[0] + ru, q), wrapCentered(pred[1] + rv, q)};
+      if (mirror) {
+        std::array<std::array<int, 2>, 4> pre;
+        const int count = foldPreimages(code, m, pre);
+        u32 index = 0;
+        if (truth)
+          while (index + 1 < u32(count) && pre[index] != actual) ++index;
+        if (count > 1) index = io.uniform(index, u32(count));
+        code = pre[index];
+      }
+      normals[v] = {uint16_t(code[0] + m), uint16_t(code[1] + m)};
+      activity[v] = u8(ku + kv);
+    }
+  }
+
+  if (layout.hasColors()) {
+    const int channels = layout.color_channels;
+    colors.assign(n, Rgba8{0, 0, 0, 255});
+    std::fill(activity.begin(), activity.end(), u8(0));
+    for (u32 v = 0; v < n; ++v) {
+      u32 sum[4] = {0, 0, 0, 0}, count = 0;
+      for (u32 t : vf.of(v))
+        for (u32 w : tris[t])
+          if (w < v) {
+            for (int c = 0; c < channels; ++c) sum[c] += colors[w][c];
+            ++count;
+          }
+      int pred[4];
+      for (int c = 0; c < 4; ++c)
+        pred[c] = count ? int((sum[c] + count / 2) / count) : v > 0 ? colors[v - 1][c] : c == 3 ? 255 : 128;
+      const int bin = neighbourBin(v);
+      const auto cm = [&](int channel, int green_class) -> SymbolModel& {
+        return models.color[(bin * 4 + channel) * 4 + std::min(green_class, 3)];
+      };
+      auto res = [&](int c) { return truth ? wrapCentered(int(truth->colors[v][c]) - pred[c], 256) : 0; };
+      int kg = 0, kr = 0, kb = 0, ka = 0;
+      const int rg = codeResidual(io, cm(1, 0), models.color_sign[1], models.color_top[1], res(1), kg);
+      const int rr = codeResidual(io, cm(0, kg), models.color_sign[0], models.color_top[0],
+                                  wrapCentered(res(0) - rg, 256), kr);
+      const int rb = codeResidual(io, cm(2, kg), models.color_sign[2], models.color_top[2],
+                                  wrapCentered(res(2) - rg, 256), kb);
+      Rgba8& out = colors[v];
+      out[1] = u8(pred[1] + rg);
+      out[0] = u8(pred[0] + rg + rr);
+      out[2] = u8(pred[2] + rg + rb);
+      if (channels == 4) {
+        const int ra = codeResidual(io, cm(3, 0), models.color_sign[3], models.color_top[3], res(3), ka);
+        out[3] = u8(pred[3] + ra);
+      }
+      activity[v] = u8(std::min(kg + kr + kb + ka, 255));
+    }
+  }
+}
+
+}  // namespace scanpress::hierarchy
+
+namespace scanpress::hierarchy {
+
+// The attribute coding of a payload version: raw before kPredictedAttributes, predicted from it on.
+constexpr uint16_t kPredictedAttributes = 2;
+template <class Io>
+void codeTileAttributes(Io& io, uint16_t version, const AttributeLayout& layout, const std::vector<Vec3u>& pos,
+                        const std::vector<Triangle>& tris, const Points* truth, std::vector<OctNormal>& normals,
+                        std::vector<Rgba8>& colors) {
+  if (version >= kPredictedAttributes) codePredictedAttributes(io, layout, pos, tris, truth, normals, colors);
+  else codeRawAttributes(io, layout, u32(pos.size()), truth, normals, colors);
+}
+
+}  // namespace scanpress::hierarchy

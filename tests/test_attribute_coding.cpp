@@ -1,0 +1,211 @@
+// Predicted normals and colors (engine/codecs/attributes.h, version 2 of kdtree, octree and edgebreaker): the
+// integer octahedral projection against the float one, the fold and its preimages on every code, exact round trips
+// of every normal code at every precision (inward normals, codes on the folded border, twins at one position,
+// isolated vertices, point clouds), RGB and RGBA, truncations, and the prediction actually predicting.
+#include <gtest/gtest.h>
+
+#include <map>
+#include <random>
+#include <tuple>
+
+#include "engine/codecs/attributes.h"
+#include "engine/codecs/codec.h"
+#include "engine/octahedral.h"
+#include "engine/quantize.h"
+#include "engine/shapes.h"
+#include "test_util.h"
+
+namespace scanpress {
+namespace {
+
+using hierarchy::foldCode;
+using hierarchy::foldPreimages;
+using hierarchy::octahedralOfSum;
+using hierarchy::Sum3;
+
+TEST(AttributeCoding, IntegerProjectionMatchesTheFloatOne) {
+  std::mt19937_64 rng(7);
+  std::uniform_int_distribution<int64_t> coord(-(int64_t(1) << 40), int64_t(1) << 40);
+  for (int bits : {4, 8, 10, 12, 16}) {
+    const int m = (1 << (bits - 1)) - 1;
+    for (int i = 0; i < 20000; ++i) {
+      Sum3 s{coord(rng), coord(rng), coord(rng)};
+      if (i % 7 == 0) s[i % 3] = 0;  // on the coordinate planes
+      if (s[0] == 0 && s[1] == 0 && s[2] == 0) continue;
+      const auto code = octahedralOfSum(s, bits);
+      ASSERT_LE(std::abs(code[0]) + 0, m);
+      ASSERT_LE(std::abs(code[1]) + 0, m);
+      // The float projection (encodeOctahedral's rounding, without its best-of-four search) agrees within a code.
+      const double l1 = std::fabs(double(s[0])) + std::fabs(double(s[1])) + std::fabs(double(s[2]));
+      double u = double(s[0]) / l1, v = double(s[1]) / l1;
+      if (s[2] < 0) {
+        const double fu = (1 - std::fabs(v)) * (u >= 0 ? 1 : -1), fv = (1 - std::fabs(u)) * (v >= 0 ? 1 : -1);
+        u = fu, v = fv;
+      }
+      EXPECT_LE(std::fabs(code[0] - u * m), 0.5 + 1e-9) << bits;
+      EXPECT_LE(std::fabs(code[1] - v * m), 0.5 + 1e-9) << bits;
+      // Scaling the sum does not move the code.
+      EXPECT_EQ(octahedralOfSum(Sum3{s[0] * 3, s[1] * 3, s[2] * 3}, bits), code);
+    }
+  }
+}
+
+TEST(AttributeCoding, FoldIsTheZMirrorAndItsPreimagesAreExact) {
+  for (int bits : {4, 5, 8}) {
+    const int m = (1 << (bits - 1)) - 1;
+    for (int u = -m; u <= m; ++u)
+      for (int v = -m; v <= m; ++v) {
+        const std::array<int, 2> c{u, v};
+        const auto f = foldCode(c, m);
+        ASSERT_LE(std::abs(f[0]) + 0, m);
+        ASSERT_LE(std::abs(f[1]) + 0, m);
+        // The fold mirrors the direction through z = 0.
+        const Vec3f d = decodeOctahedral({uint16_t(u + m), uint16_t(v + m)}, bits);
+        const Vec3f e = decodeOctahedral({uint16_t(f[0] + m), uint16_t(f[1] + m)}, bits);
+        EXPECT_NEAR(d[0], e[0], 1e-6);
+        EXPECT_NEAR(d[1], e[1], 1e-6);
+        EXPECT_NEAR(d[2], -e[2], 1e-6);
+        // c is among the preimages of its fold, and every preimage folds onto it.
+        std::array<std::array<int, 2>, 4> pre;
+        const int count = foldPreimages(f, m, pre);
+        ASSERT_GE(count, 1);
+        bool found = false;
+        for (int i = 0; i < count; ++i) {
+          EXPECT_EQ(foldCode(pre[i], m), f);
+          found |= pre[i] == c;
+        }
+        EXPECT_TRUE(found) << u << "," << v;
+        // Off the square's border the fold is its own inverse.
+        if (std::abs(u) < m && std::abs(v) < m) {
+          EXPECT_EQ(count, 1);
+          EXPECT_EQ(foldCode(f, m), c);
+        }
+      }
+  }
+}
+
+// The distinct vertices as (position, normal code, color): what an exact round trip keeps, whatever the vertex
+// order (the codecs merge vertices equal in all three).
+std::vector<std::tuple<Vec3u, OctNormal, Rgba8>> vertexMultiset(const QuantizedMesh& m) {
+  std::vector<std::tuple<Vec3u, OctNormal, Rgba8>> out;
+  for (size_t i = 0; i < m.positions.size(); ++i)
+    out.emplace_back(m.positions[i], m.normals.empty() ? OctNormal{0, 0} : m.normals[i],
+                     m.colors.empty() ? Rgba8{0, 0, 0, 0} : m.colors[i]);
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+// A sphere whose normals run through every code of the square (when there are fewer codes than vertices), half of
+// them pointing inward, with smooth colors, twins at one position with another normal and color, and an isolated
+// vertex.
+QuantizedMesh attributedSphere(int normal_bits, int channels, bool point_cloud) {
+  const Mesh sphere = icosphere(4);
+  const Grid grid = *makeGrid(boundingBox(sphere), 12);
+  QuantizedMesh q = *quantizeMesh(sphere, grid, {}, nullptr);
+  const int m = (1 << (normal_bits - 1)) - 1, codes = (2 * m + 1) * (2 * m + 1);
+  const bool every_code = codes <= int(q.positions.size());
+  std::mt19937 rng(normal_bits * 10 + channels);
+  for (size_t i = 0; i < q.positions.size(); ++i) {
+    const Vec3d& p = sphere.positions[i];
+    const float s = (i % 3 == 0) ? -1.f : 1.f;  // inward on a third
+    q.normals.push_back(every_code ? OctNormal{uint16_t(i % (2 * m + 1)), uint16_t((i / (2 * m + 1)) % (2 * m + 1))}
+                                   : encodeOctahedral({s * float(p[0]), s * float(p[1]), s * float(p[2])}, normal_bits));
+    q.colors.push_back({uint8_t(128 + 120 * p[0]), uint8_t(128 + 100 * p[1] + (rng() % 5)), uint8_t(rng()),
+                        uint8_t(channels == 4 ? 200 + rng() % 50 : 255)});
+  }
+  for (int k = 0; k < 20; ++k) {  // twins: a vertex's position with another normal and color, in a triangle
+    const uint32_t twin = uint32_t(q.positions.size());
+    const auto t = q.triangles[size_t(k) * 37];
+    q.positions.push_back(q.positions[t[0]]);
+    q.normals.push_back({uint16_t((q.normals[t[0]][0] + 3) % (2 * m + 1)), q.normals[t[0]][1]});
+    q.colors.push_back({0, 255, 0, 255});
+    q.triangles.push_back({twin, t[2], t[1]});
+  }
+  q.positions.push_back({2048, 2048, 2048});  // isolated, inside
+  q.normals.push_back({uint16_t(2 * m), uint16_t(2 * m)});
+  q.colors.push_back({1, 2, 3, 255});
+  if (point_cloud) q.triangles.clear();
+  return q;
+}
+
+class AttributeRoundTrip : public ::testing::TestWithParam<CodecId> {
+ protected:
+  const CodecInfo& codec() const { return *findCodec(GetParam()); }
+};
+
+TEST_P(AttributeRoundTrip, EveryNormalPrecisionAndColorLayoutIsExact) {
+  for (int normal_bits : {4, 5, 8, 10, 12, 16})
+    for (int channels : {0, 3, 4})
+      for (bool point_cloud : {false, true}) {
+        if (point_cloud && GetParam() == CodecId::kEdgebreaker) continue;  // refuses a tile without triangles
+        SCOPED_TRACE(std::to_string(normal_bits) + " normal bits, " + std::to_string(channels) + " channels" +
+                     (point_cloud ? ", point cloud" : ""));
+        const AttributeLayout layout{uint8_t(normal_bits), uint8_t(channels)};
+        QuantizedMesh q = attributedSphere(normal_bits, channels, point_cloud);
+        if (!channels) q.colors.clear();
+        for (auto& c : q.colors)
+          if (channels == 3) c[3] = 255;
+        const TileContext ctx{12, layout};
+        auto enc = encodeMesh(codec(), ctx, q);
+        ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+        auto d = codec().decode(ctx, codec().version, enc->payload, limitsOf(enc->decoded));
+        ASSERT_TRUE(d.isOk()) << d.status().toString();
+        const auto got = vertexMultiset(*d), want = vertexMultiset(q);
+        ASSERT_EQ(got.size(), want.size());
+        for (size_t i = 0; i < got.size(); ++i)
+          ASSERT_TRUE(got[i] == want[i]) << i << ": normal " << std::get<1>(got[i])[0] << "," << std::get<1>(got[i])[1]
+                                         << " want " << std::get<1>(want[i])[0] << "," << std::get<1>(want[i])[1]
+                                         << " color " << int(std::get<2>(got[i])[0]) << " want "
+                                         << int(std::get<2>(want[i])[0]);
+        EXPECT_TRUE(testing::cornerMultiset(*d, normal_bits) == testing::cornerMultiset(q, normal_bits));
+      }
+}
+
+TEST_P(AttributeRoundTrip, EveryTruncationFailsCleanly) {
+  const AttributeLayout layout{10, 4};
+  const QuantizedMesh q = attributedSphere(10, 4, false);
+  const TileContext ctx{12, layout};
+  auto enc = encodeMesh(codec(), ctx, q);
+  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+  const auto& bytes = enc->payload;
+  // The attributes are the payload's tail: cut within them, and a stride through the rest.
+  for (size_t n = 0; n < bytes.size(); n += (n + 4096 < bytes.size() ? 97 : 1)) {
+    auto d = codec().decode(ctx, codec().version, std::span<const uint8_t>(bytes.data(), n), limitsOf(enc->decoded));
+    EXPECT_FALSE(d.isOk()) << "a payload cut to " << n << " of " << bytes.size() << " bytes decoded";
+  }
+}
+
+// On a smooth sphere with its own normals and colors the predictions hold: well below the raw 48 bits per vertex
+// (normals at 12 bits, RGB); a broken predictor (a wrong sign, a wrong vertex) costs about the raw bits.
+TEST_P(AttributeRoundTrip, PredictionsPredict) {
+  const Mesh sphere = icosphere(5);
+  const Grid grid = *makeGrid(boundingBox(sphere), 14);
+  Mesh with = sphere;
+  for (const auto& p : sphere.positions) {
+    with.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
+    with.colors.push_back({uint8_t(128 + 100 * p[0]), uint8_t(128 + 100 * p[1]), uint8_t(128 + 100 * p[2]), 255});
+  }
+  with.color_channels = 3;
+  const AttributeLayout layout{12, 3};
+  const QuantizedMesh q = *quantizeMesh(with, grid, layout, nullptr);
+  QuantizedMesh bare = q;
+  bare.normals.clear();
+  bare.colors.clear();
+  auto full = encodeMesh(codec(), TileContext{14, layout}, q);
+  auto geometry = encodeMesh(codec(), TileContext{14, {}}, bare);
+  ASSERT_TRUE(full.isOk() && geometry.isOk());
+  const double bits_per_vertex =
+      8.0 * double(full->payload.size() - geometry->payload.size()) / double(q.positions.size());
+  EXPECT_LT(bits_per_vertex, 24.0) << "normals and colors (raw: 48 bits) cost " << bits_per_vertex << " bits per vertex";
+}
+
+std::vector<CodecId> predictingCodecs() { return {CodecId::kKdtree, CodecId::kOctree, CodecId::kEdgebreaker}; }
+
+INSTANTIATE_TEST_SUITE_P(Codecs, AttributeRoundTrip, ::testing::ValuesIn(predictingCodecs()),
+                         [](const ::testing::TestParamInfo<CodecId>& info) {
+  return std::string(findCodec(info.param)->name);
+});
+
+}  // namespace
+}  // namespace scanpress
