@@ -50,6 +50,52 @@ TEST(AttributeCoding, IntegerProjectionMatchesTheFloatOne) {
   }
 }
 
+// The predicted normal against an independent angle-weighted normal (std::atan2, long double) on random fans,
+// degenerate triangles among them.
+TEST(AttributeCoding, AngleWeightedNormalMatchesAnIndependentOne) {
+  std::mt19937 rng(3);
+  std::uniform_int_distribution<uint32_t> coord(0, (1u << 24) - 1);
+  for (int trial = 0; trial < 2000; ++trial) {
+    std::vector<Vec3u> pos = {{coord(rng), coord(rng), coord(rng)}};
+    std::vector<Triangle> tris;
+    std::vector<uint32_t> faces;
+    const int k = 1 + int(rng() % 8);
+    for (int i = 0; i < k; ++i) {
+      pos.push_back({coord(rng), coord(rng), coord(rng)});
+      pos.push_back(i % 5 == 4 ? pos.back() : Vec3u{coord(rng), coord(rng), coord(rng)});  // some zero-area
+      const uint32_t a = uint32_t(pos.size() - 2), b = uint32_t(pos.size() - 1);
+      // v at every corner position, the winding kept
+      tris.push_back(i % 3 == 0 ? Triangle{0, a, b} : i % 3 == 1 ? Triangle{a, b, 0} : Triangle{b, 0, a});
+      faces.push_back(uint32_t(tris.size() - 1));
+    }
+    const Sum3 s = hierarchy::angleWeightedNormal(pos, tris, faces, 0);
+    long double want[3] = {0, 0, 0};
+    for (const auto& t : tris) {
+      const int c = t[0] == 0 ? 0 : t[1] == 0 ? 1 : 2;
+      long double e1[3], e2[3];
+      for (int a = 0; a < 3; ++a) {
+        e1[a] = (long double)pos[t[(c + 1) % 3]][a] - pos[t[c]][a];
+        e2[a] = (long double)pos[t[(c + 2) % 3]][a] - pos[t[c]][a];
+      }
+      const long double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                                e1[0] * e2[1] - e1[1] * e2[0]};
+      const long double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+      if (len == 0) continue;
+      const long double angle = std::atan2(len, e1[0] * e2[0] + e1[1] * e2[1] + e1[2] * e2[2]);
+      for (int a = 0; a < 3; ++a) want[a] += n[a] / len * angle;
+    }
+    const long double wl = std::sqrt(want[0] * want[0] + want[1] * want[1] + want[2] * want[2]);
+    const long double got[3] = {(long double)s[0], (long double)s[1], (long double)s[2]};
+    const long double gl = std::sqrt(got[0] * got[0] + got[1] * got[1] + got[2] * got[2]);
+    if (wl < 1e-2) continue;  // opposite triangles cancelling: no direction to compare
+    ASSERT_GT(gl, 0);
+    const long double dot = (got[0] * want[0] + got[1] * want[1] + got[2] * want[2]) / (gl * wl);
+    // The arctangent is within 1e-5 rad per triangle: the direction within that over the sum's length.
+    const long double allowed = std::min(1e-5L * k / wl + 1e-9L, 0.5L);
+    EXPECT_GE(dot, std::cos(allowed)) << trial;
+  }
+}
+
 TEST(AttributeCoding, FoldIsTheZMirrorAndItsPreimagesAreExact) {
   for (int bits : {4, 5, 8}) {
     const int m = (1 << (bits - 1)) - 1;
@@ -109,8 +155,9 @@ QuantizedMesh attributedSphere(int normal_bits, int channels, bool point_cloud) 
   for (size_t i = 0; i < q.positions.size(); ++i) {
     const Vec3d& p = sphere.positions[i];
     const float s = (i % 3 == 0) ? -1.f : 1.f;  // inward on a third
-    q.normals.push_back(every_code ? OctNormal{uint16_t(i % (2 * m + 1)), uint16_t((i / (2 * m + 1)) % (2 * m + 1))}
-                                   : encodeOctahedral({s * float(p[0]), s * float(p[1]), s * float(p[2])}, normal_bits));
+    q.normals.push_back(every_code
+                            ? OctNormal{uint16_t(i % (2 * m + 1)), uint16_t((i / (2 * m + 1)) % (2 * m + 1))}
+                            : encodeOctahedral({s * float(p[0]), s * float(p[1]), s * float(p[2])}, normal_bits));
     q.colors.push_back({uint8_t(128 + 120 * p[0]), uint8_t(128 + 100 * p[1] + (rng() % 5)), uint8_t(rng()),
                         uint8_t(channels == 4 ? 200 + rng() % 50 : 255)});
   }
@@ -154,10 +201,10 @@ TEST_P(AttributeRoundTrip, EveryNormalPrecisionAndColorLayoutIsExact) {
         const auto got = vertexMultiset(*d), want = vertexMultiset(q);
         ASSERT_EQ(got.size(), want.size());
         for (size_t i = 0; i < got.size(); ++i)
-          ASSERT_TRUE(got[i] == want[i]) << i << ": normal " << std::get<1>(got[i])[0] << "," << std::get<1>(got[i])[1]
-                                         << " want " << std::get<1>(want[i])[0] << "," << std::get<1>(want[i])[1]
-                                         << " color " << int(std::get<2>(got[i])[0]) << " want "
-                                         << int(std::get<2>(want[i])[0]);
+          ASSERT_TRUE(got[i] == want[i])
+              << i << ": normal " << std::get<1>(got[i])[0] << "," << std::get<1>(got[i])[1] << " want "
+              << std::get<1>(want[i])[0] << "," << std::get<1>(want[i])[1] << " color " << int(std::get<2>(got[i])[0])
+              << " want " << int(std::get<2>(want[i])[0]);
         EXPECT_TRUE(testing::cornerMultiset(*d, normal_bits) == testing::cornerMultiset(q, normal_bits));
       }
 }
@@ -195,9 +242,10 @@ TEST_P(AttributeRoundTrip, PredictionsPredict) {
   auto full = encodeMesh(codec(), TileContext{14, layout}, q);
   auto geometry = encodeMesh(codec(), TileContext{14, {}}, bare);
   ASSERT_TRUE(full.isOk() && geometry.isOk());
-  const double bits_per_vertex =
-      8.0 * double(full->payload.size() - geometry->payload.size()) / double(q.positions.size());
-  EXPECT_LT(bits_per_vertex, 24.0) << "normals and colors (raw: 48 bits) cost " << bits_per_vertex << " bits per vertex";
+  const double bits_per_vertex = 8.0 * double(full->payload.size() - geometry->payload.size()) /
+                                 double(q.positions.size());
+  EXPECT_LT(bits_per_vertex, 24.0) << "normals and colors (raw: 48 bits) cost " << bits_per_vertex
+                                   << " bits per vertex";
 }
 
 std::vector<CodecId> predictingCodecs() { return {CodecId::kKdtree, CodecId::kOctree, CodecId::kEdgebreaker}; }

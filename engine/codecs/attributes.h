@@ -2,9 +2,10 @@
 // version 2 of kdtree, octree and edgebreaker; version 1 wrote them raw, codeRawAttributes in hierarchy.h). Coded
 // after the positions and triangles, in vertex order:
 //
-// - Normals: predicted from the decoded geometry, the sum of the cross products of the vertex's triangles (the
-//   area-weighted face normal), projected onto the octahedral square in integer arithmetic, so that encoder and
-//   decoder agree on every machine. A flip bit says when the scan's normal points away from the prediction (normals
+// - Normals: predicted from the decoded geometry, the angle-weighted normal of the vertex's triangles (scans'
+//   normals are mostly computed so: on gargo and parasaurolophus it halves the normals' bytes against the
+//   area-weighted sum of cross products, and it is a little better on rs1), projected onto the octahedral square in
+//   integer arithmetic, so that encoder and decoder agree on every machine. A flip bit says when the scan's normal points away from the prediction (normals
 //   pointing inward); a vertex without triangles is predicted by the previous vertex's normal. When the prediction
 //   lies in the folded lower half of the square, prediction and normal are both mirrored through the z = 0 plane
 //   (the fold), which maps the lower hemisphere onto the unfolded diamond, so that normals on either side of the
@@ -94,6 +95,13 @@ inline int wrapCentered(int a, int q) {
   return a;
 }
 
+// The angle-weighted normal of vertex v over its triangles `faces` (Thürmer and Wüthrich 1998: each triangle's unit
+// normal weighted by its angle at v), scaled to integers. In double arithmetic with basic operations and sqrt only
+// (IEEE-exact everywhere; attributes.cpp is compiled without floating-point contraction) and an arctangent of our own,
+// so that encoder and decoder agree on every machine and C library.
+Sum3 angleWeightedNormal(const std::vector<Vec3u>& pos, const std::vector<Triangle>& tris, std::span<const u32> faces,
+                         u32 v);
+
 // Normals and colors of the n vertices at positions `pos` with triangles `tris`; `truth` (encoder) holds them in
 // the vertices' order.
 template <class Io>
@@ -119,18 +127,7 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
     normals.resize(n);
     int last_flip = 0;
     for (u32 v = 0; v < n; ++v) {
-      Sum3 s{0, 0, 0};
-      for (u32 t : vf.of(v)) {
-        const Triangle& tri = tris[t];
-        int64_t e1[3], e2[3];
-        for (int a = 0; a < 3; ++a) {
-          e1[a] = int64_t(pos[tri[1]][a]) - pos[tri[0]][a];
-          e2[a] = int64_t(pos[tri[2]][a]) - pos[tri[0]][a];
-        }
-        s[0] += i128(e1[1] * e2[2]) - i128(e1[2] * e2[1]);
-        s[1] += i128(e1[2] * e2[0]) - i128(e1[0] * e2[2]);
-        s[2] += i128(e1[0] * e2[1]) - i128(e1[1] * e2[0]);
-      }
+      const Sum3 s = angleWeightedNormal(pos, tris, vf.of(v), v);
       std::array<int, 2> pred{0, 0};
       const std::array<int, 2> actual =
           truth ? std::array<int, 2>{int(truth->normals[v][0]) - m, int(truth->normals[v][1]) - m}
@@ -197,10 +194,10 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
       auto res = [&](int c) { return truth ? wrapCentered(int(truth->colors[v][c]) - pred[c], 256) : 0; };
       int kg = 0, kr = 0, kb = 0, ka = 0;
       const int rg = codeResidual(io, cm(1, 0), models.color_sign[1], models.color_top[1], res(1), kg);
-      const int rr = codeResidual(io, cm(0, kg), models.color_sign[0], models.color_top[0],
-                                  wrapCentered(res(0) - rg, 256), kr);
-      const int rb = codeResidual(io, cm(2, kg), models.color_sign[2], models.color_top[2],
-                                  wrapCentered(res(2) - rg, 256), kb);
+      const int rr =
+          codeResidual(io, cm(0, kg), models.color_sign[0], models.color_top[0], wrapCentered(res(0) - rg, 256), kr);
+      const int rb =
+          codeResidual(io, cm(2, kg), models.color_sign[2], models.color_top[2], wrapCentered(res(2) - rg, 256), kb);
       Rgba8& out = colors[v];
       out[1] = u8(pred[1] + rg);
       out[0] = u8(pred[0] + rg + rr);

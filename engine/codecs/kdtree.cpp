@@ -308,7 +308,7 @@ class Engine {
     return m;
   }
 
-  AttributeLayout layout;  // set by the caller before run()
+  AttributeLayout layout;                   // set by the caller before run()
   uint16_t version = kPredictedAttributes;  // the payload's (attribute coding)
 
  private:

@@ -200,10 +200,10 @@ class Engine {
     return m;
   }
 
-  AttributeLayout layout;            // set by the caller before run()
+  AttributeLayout layout;                   // set by the caller before run()
   uint16_t version = kPredictedAttributes;  // the payload's (attribute coding)
-  u64 max_cliques_ = kMaxTriangles;  // coarse levels' triangles (set by the decoder from the index)
-  bool flat_ = false;                // one model per symbol kind (measuring the contexts' gain)
+  u64 max_cliques_ = kMaxTriangles;         // coarse levels' triangles (set by the decoder from the index)
+  bool flat_ = false;                       // one model per symbol kind (measuring the contexts' gain)
   u64 splits_ = 0;
   std::vector<std::array<u32, 2>> range_;   // encoder: the points [s, e) of each vertex
   std::vector<std::array<u32, 2>> events_;  // planning: the splits in order
