@@ -166,7 +166,8 @@ TEST(Edgebreaker, HostileCountsAreRefusedBeforeDecoding) {
   // More than the index allows.
   EXPECT_EQ(codec().decode(ctx, codec().version, header(101, 10, 10), lim).status().code(), ErrorCode::kMalformed);
   EXPECT_EQ(codec().decode(ctx, codec().version, header(10, 1u << 31, 10), lim).status().code(), ErrorCode::kMalformed);
-  EXPECT_EQ(codec().decode(ctx, codec().version, header(uint64_t(1) << 60, 1, 1), lim).status().code(), ErrorCode::kMalformed);
+  EXPECT_EQ(codec().decode(ctx, codec().version, header(uint64_t(1) << 60, 1, 1), lim).status().code(),
+            ErrorCode::kMalformed);
   // More cut faces than triangles and their boundary edges can make; faces without triangles; an empty tile
   // with bytes after it.
   EXPECT_EQ(codec().decode(ctx, codec().version, header(10, 10, 41), lim).status().code(), ErrorCode::kMalformed);

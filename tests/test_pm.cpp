@@ -146,8 +146,8 @@ void expectLevelsReplay(const TileContext& ctx, const QuantizedMesh& tile, std::
   uint64_t prev_vertices = 0;
   for (const CodecLevel& l : enc.levels) {
     SCOPED_TRACE(l.level);
-    auto d =
-        pm().decode_level(ctx, pm().version, std::span(enc.tile.payload).first(l.end_bytes), l.level, limitsOf(enc.tile.decoded));
+    auto d = pm().decode_level(ctx, pm().version, std::span(enc.tile.payload).first(l.end_bytes), l.level,
+                               limitsOf(enc.tile.decoded));
     ASSERT_TRUE(d.isOk()) << d.status().toString();
     EXPECT_TRUE(validateTile(ctx, *d).isOk());
     EXPECT_EQ(d->positions.size(), l.vertices);
@@ -349,7 +349,8 @@ TEST(Pm, HostileCountsAreRefusedBeforeAllocating) {
   auto r2 = pm().decode(ctx, pm().version, h2, DecodeLimits{1000, 2000});
   EXPECT_EQ(r2.status().code(), ErrorCode::kMalformed) << r2.status().toString();
   // An unknown version.
-  EXPECT_EQ(pm().decode(ctx, pm().version + 1, enc.tile.payload, limitsOf(s)).status().code(), ErrorCode::kUnknownVersion);
+  EXPECT_EQ(pm().decode(ctx, pm().version + 1, enc.tile.payload, limitsOf(s)).status().code(),
+            ErrorCode::kUnknownVersion);
   // The payload admits the registry's floor.
   EXPECT_TRUE(pm().floor.admits(ctx.layout, s.vertices, s.faces, enc.tile.payload.size()));
 }

@@ -49,14 +49,16 @@ void expectRoundTrip(const CodecInfo& codec, const TileContext& ctx, const Quant
   EXPECT_EQ(got.hi, enc.decoded.hi);
   // A limit one below either count is refused before decoding.
   if (enc.decoded.vertices > 0) {
-    EXPECT_EQ(
-        codec.decode(ctx, codec.version, enc.payload, DecodeLimits{enc.decoded.vertices - 1, enc.decoded.faces}).status().code(),
-        ErrorCode::kMalformed);
+    EXPECT_EQ(codec.decode(ctx, codec.version, enc.payload, DecodeLimits{enc.decoded.vertices - 1, enc.decoded.faces})
+                  .status()
+                  .code(),
+              ErrorCode::kMalformed);
   }
   if (enc.decoded.faces > 0) {
-    EXPECT_EQ(
-        codec.decode(ctx, codec.version, enc.payload, DecodeLimits{enc.decoded.vertices, enc.decoded.faces - 1}).status().code(),
-        ErrorCode::kMalformed);
+    EXPECT_EQ(codec.decode(ctx, codec.version, enc.payload, DecodeLimits{enc.decoded.vertices, enc.decoded.faces - 1})
+                  .status()
+                  .code(),
+              ErrorCode::kMalformed);
   }
   // Every input position comes back (isolated vertices included).
   auto positions = [](const QuantizedMesh& m) {
@@ -217,7 +219,8 @@ TEST_P(Progressive, EveryLevelDecodesToAValidMesh) {
     EXPECT_EQ(full->positions, m->positions);
     EXPECT_EQ(full->triangles, m->triangles);
     if (lv.level < 12 && lv.end_bytes > 0) {  // one byte short of the level is an error, not a crash
-      auto cut = codec().decode_level(ctx, codec().version, std::span<const uint8_t>(bytes.data(), lv.end_bytes - 1), lv.level, lim);
+      auto cut = codec().decode_level(ctx, codec().version, std::span<const uint8_t>(bytes.data(), lv.end_bytes - 1),
+                                      lv.level, lim);
       if (lv.level > levels->front().level) {
         EXPECT_FALSE(cut.isOk());
       }
@@ -263,7 +266,8 @@ TEST_P(Progressive, RandomCorruptionsNeverCrash) {
     const int flips = 1 + trial % 4;
     for (int f = 0; f < flips; ++f) b[rng() % b.size()] ^= uint8_t(1 + rng() % 255);
     const uint32_t level = trial % 3 == 0 ? uint32_t(rng() % 13) : 12u;
-    auto d = codec().progressive() ? codec().decode_level(ctx, codec().version, b, level, lim) : codec().decode(ctx, codec().version, b, lim);
+    auto d = codec().progressive() ? codec().decode_level(ctx, codec().version, b, level, lim)
+                                   : codec().decode(ctx, codec().version, b, lim);
     if (!d.isOk()) {
       ++failures;
     } else {

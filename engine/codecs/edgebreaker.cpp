@@ -36,9 +36,9 @@
 //    then the bit below the leading one with a model per class, the rest raw. Measured at 12 bits (bunny, igea,
 //    rs1, fandisk): the point's earlier axes and the modelled second bit gain 1-3% on the large scans; coding
 //    residuals below 32 as symbols of their own lost 1-8% (models too many to learn on small meshes).
-//  - Attributes: raw per point in decode order, as kdtree stores them.
+//  - Attributes: per point in decode order, as kdtree codes them (v1 raw, v2 predicted: attributes.h).
 //
-// Payload v1: varint N (points), varint T (triangles, with multiplicity), varint F (faces of the cut mesh with the
+// Payload v1 and v2: varint N (points), varint T (triangles, with multiplicity), varint F (faces of the cut mesh with the
 // dummy faces); if N == 0 nothing follows. Then one range-coder stream to the end of the payload: connectivity,
 // geometry, orientation and multiplicity, attributes.
 #include <algorithm>

@@ -32,10 +32,11 @@
 //  - Orientation and multiplicity (the paper codes unoriented complexes): after the last split, triangles are
 //    visited breadth-first across shared edges; each codes whether it has one copy oriented as its parent predicts
 //    (almost free on oriented manifolds), one copy the other way, or explicit counts of both orientations.
-//  - Attributes (normals, colors) are stored raw per vertex in the final segment; coarse levels get normals
-//    computed from their triangles and gray colors. Attribute coding through the hierarchy is a later codec.
+//  - Attributes (normals, colors) are coded per vertex in the final segment: raw in v1, predicted from the decoded
+//    positions, triangles and neighbours in v2 (attributes.h). Coarse levels get normals computed from their
+//    triangles and gray colors; attribute coding through the hierarchy is still to come.
 //
-// Payload v1:
+// Payload v1 and v2 (the same layout; they differ in the attributes' coding):
 //   varint N (points), varint T (triangles, with multiplicity); if N == 0 nothing follows.
 //   u8 k0 (root level), 3 x varint root cell index (coordinate >> (bits - k0)),
 //   varint S (= bits - k0 + 1 segments), S x varint segment length, then the segments.

@@ -34,10 +34,10 @@
 //    consistently where possible without bits.
 //  - Vertices at one grid position with different attributes split apart after the last level, one per round,
 //    by the same VS codes with no geometry.
-//  - Attributes (normals, colors) are stored raw per vertex in the final segment; coarse levels get normals from
-//    their triangles and gray colors. Attribute coding through the hierarchy is a separate codec.
+//  - Attributes (normals, colors) are coded per vertex in the final segment: raw in v1, predicted in v2
+//    (attributes.h). Coarse levels get normals from their triangles and gray colors.
 //
-// Payload v1 (hierarchy.h's header with the axis order byte):
+// Payload v1 and v2 (hierarchy.h's header with the axis order byte; they differ in the attributes' coding):
 //   varint N (points), varint T (triangles, with multiplicity); if N == 0 nothing follows.
 //   u8 k0 (root level), u8 axis order (0..5: xyz xzy yxz yzx zxy zyx, decoder order), 3 x varint root cell index,
 //   varint S (= bits - k0 + 1), S x varint segment length, then the segments, each one range-coder stream.
