@@ -58,7 +58,6 @@ TEST(AttributeCoding, AngleWeightedNormalMatchesAnIndependentOne) {
   for (int trial = 0; trial < 2000; ++trial) {
     std::vector<Vec3u> pos = {{coord(rng), coord(rng), coord(rng)}};
     std::vector<Triangle> tris;
-    std::vector<uint32_t> faces;
     const int k = 1 + int(rng() % 8);
     for (int i = 0; i < k; ++i) {
       pos.push_back({coord(rng), coord(rng), coord(rng)});
@@ -66,9 +65,8 @@ TEST(AttributeCoding, AngleWeightedNormalMatchesAnIndependentOne) {
       const uint32_t a = uint32_t(pos.size() - 2), b = uint32_t(pos.size() - 1);
       // v at every corner position, the winding kept
       tris.push_back(i % 3 == 0 ? Triangle{0, a, b} : i % 3 == 1 ? Triangle{a, b, 0} : Triangle{b, 0, a});
-      faces.push_back(uint32_t(tris.size() - 1));
     }
-    const Sum3 s = hierarchy::angleWeightedNormal(pos, tris, faces, 0);
+    const Sum3 s = hierarchy::scaledSum(hierarchy::angleWeightedNormals(pos, tris)[0]);
     long double want[3] = {0, 0, 0};
     for (const auto& t : tris) {
       const int c = t[0] == 0 ? 0 : t[1] == 0 ? 1 : 2;

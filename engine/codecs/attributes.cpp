@@ -34,28 +34,28 @@ i128 absolute(i128 x) { return x < 0 ? -x : x; }
 int roundDiv(i128 num, i128 den) { return num >= 0 ? int((num + den / 2) / den) : -int((-num + den / 2) / den); }
 }  // namespace
 
-Sum3 angleWeightedNormal(const std::vector<Vec3u>& pos, const std::vector<Triangle>& tris, std::span<const u32> faces,
-                         u32 v) {
-  double sum[3] = {0, 0, 0};
-  for (u32 t : faces) {
-    const Triangle& tri = tris[t];
-    const int k = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
-    const Vec3u& p = pos[tri[k]];
-    const Vec3u& q = pos[tri[(k + 1) % 3]];
-    const Vec3u& r = pos[tri[(k + 2) % 3]];
-    int64_t a[3], b[3];
-    for (int i = 0; i < 3; ++i) a[i] = int64_t(q[i]) - p[i], b[i] = int64_t(r[i]) - p[i];
-    // Exact in int64 (coordinates below 2^24) and in double (below 2^53).
-    const double c[3] = {double(a[1] * b[2] - a[2] * b[1]), double(a[2] * b[0] - a[0] * b[2]),
-                         double(a[0] * b[1] - a[1] * b[0])};
-    const double dot = double(a[0] * b[0] + a[1] * b[1] + a[2] * b[2]);
+std::vector<std::array<double, 3>> angleWeightedNormals(const std::vector<Vec3u>& pos,
+                                                        const std::vector<Triangle>& tris) {
+  std::vector<std::array<double, 3>> sum(pos.size(), {0.0, 0.0, 0.0});
+  for (const Triangle& t : tris) {
+    int64_t e[3][3];  // e[k]: from corner k to corner k + 1
+    for (int k = 0; k < 3; ++k)
+      for (int i = 0; i < 3; ++i) e[k][i] = int64_t(pos[t[(k + 1) % 3]][i]) - pos[t[k]][i];
+    // Exact in int64 (coordinates below 2^24) and in double (below 2^53); the same from every corner.
+    const double c[3] = {double(e[0][1] * -e[2][2] - e[0][2] * -e[2][1]),
+                         double(e[0][2] * -e[2][0] - e[0][0] * -e[2][2]),
+                         double(e[0][0] * -e[2][1] - e[0][1] * -e[2][0])};
     const double len = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
     if (len == 0) continue;  // a zero-area triangle has no normal
-    const double w = arctangent(len, dot) / len;
-    for (int i = 0; i < 3; ++i) sum[i] += c[i] * w;
+    for (int k = 0; k < 3; ++k) {
+      const int64_t* a = e[k];            // to the next corner
+      const int64_t* b = e[(k + 2) % 3];  // from the previous corner: the edge to it is -b
+      const double dot = -double(a[0] * b[0] + a[1] * b[1] + a[2] * b[2]);
+      const double w = arctangent(len, dot) / len;
+      for (int i = 0; i < 3; ++i) sum[t[k]][i] += c[i] * w;
+    }
   }
-  // At most pi per triangle: far inside i128 after the scaling.
-  return {i128(std::ldexp(sum[0], 60)), i128(std::ldexp(sum[1], 60)), i128(std::ldexp(sum[2], 60))};
+  return sum;
 }
 
 std::array<int, 2> octahedralOfSum(const Sum3& s, int bits) {

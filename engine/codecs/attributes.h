@@ -21,6 +21,7 @@
 // the integer projection, the neighbour-activity contexts and the exact code round trip are ours.
 #pragma once
 
+#include <cmath>
 #include <span>
 #include <vector>
 
@@ -95,12 +96,16 @@ inline int wrapCentered(int a, int q) {
   return a;
 }
 
-// The angle-weighted normal of vertex v over its triangles `faces` (Thürmer and Wüthrich 1998: each triangle's unit
-// normal weighted by its angle at v), scaled to integers. In double arithmetic with basic operations and sqrt only
-// (IEEE-exact everywhere; attributes.cpp is compiled without floating-point contraction) and an arctangent of our own,
-// so that encoder and decoder agree on every machine and C library.
-Sum3 angleWeightedNormal(const std::vector<Vec3u>& pos, const std::vector<Triangle>& tris, std::span<const u32> faces,
-                         u32 v);
+// The angle-weighted normals of the vertices (Thürmer and Wüthrich 1998: each triangle's unit normal weighted by its
+// angle at the vertex), unscaled, in one pass over the triangles in their order. In double arithmetic with basic
+// operations and sqrt only (IEEE-exact everywhere; attributes.cpp is compiled without floating-point contraction)
+// and an arctangent of our own, so that encoder and decoder agree on every machine and C library.
+std::vector<std::array<double, 3>> angleWeightedNormals(const std::vector<Vec3u>& pos,
+                                                        const std::vector<Triangle>& tris);
+// A sum of at most pi per triangle, scaled by 2^60 to integers: far inside i128.
+inline Sum3 scaledSum(const std::array<double, 3>& d) {
+  return {i128(std::ldexp(d[0], 60)), i128(std::ldexp(d[1], 60)), i128(std::ldexp(d[2], 60))};
+}
 
 // Normals and colors of the n vertices at positions `pos` with triangles `tris`; `truth` (encoder) holds them in
 // the vertices' order.
@@ -125,9 +130,10 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
   if (layout.hasNormals()) {
     const int bits = layout.normal_bits, m = (1 << (bits - 1)) - 1, q = 2 * m + 1;
     normals.resize(n);
+    const std::vector<std::array<double, 3>> geometric = angleWeightedNormals(pos, tris);
     int last_flip = 0;
     for (u32 v = 0; v < n; ++v) {
-      const Sum3 s = angleWeightedNormal(pos, tris, vf.of(v), v);
+      const Sum3 s = scaledSum(geometric[v]);
       std::array<int, 2> pred{0, 0};
       const std::array<int, 2> actual =
           truth ? std::array<int, 2>{int(truth->normals[v][0]) - m, int(truth->normals[v][1]) - m}
