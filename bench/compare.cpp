@@ -1,6 +1,7 @@
 // scanpress-compare: side-by-side comparison of every scanpress codec with Draco (edgebreaker, -cl 7 and -cl 10)
 // and meshoptimizer (vertex cache and fetch optimisation, index and vertex codecs; raw and with zstd -19 on top),
-// on the same quantized input, in one process.
+// on the same quantized input, in one process; on scans with normals or colors, the bytes they add against Draco's
+// (compare_attributes.cpp).
 //
 // For each scan in a folder and each quantization, the scan is quantized once on scanpress's grid (cubic cells
 // over the largest extent, as Draco's -qp). Draco is given the cell centers: its lattice (largest extent of the
@@ -341,6 +342,18 @@ int main(int argc, char** argv) {
                  {"lossless", r.lossless},
                  {"symmetric_rms_relative", r.rms_rel},
                  {"symmetric_max_relative", r.max_rel}});
+  for (const auto& r : attribute_rows)  // the attribute table's rows: "attributes" names the configuration
+    j.push_back({{"scan", r.scan},
+                 {"codec", r.codec},
+                 {"attributes", r.config},
+                 {"bits", r.bits},
+                 {"vertices", r.vertices},
+                 {"bytes", r.bytes},
+                 {"geometry_bytes", r.geometry_bytes},
+                 {"attribute_bpv", 8.0 * (double(r.bytes) - double(r.geometry_bytes)) / double(r.vertices)},
+                 {"exact", r.exact},
+                 {"max_normal_angle_deg", r.max_angle_deg},
+                 {"colors_exact", r.colors_exact}});
   std::ofstream(json_path) << j.dump(2) << "\n";
   std::ofstream md(md_path);
   md << "| scan | bits | codec | bytes | bpv | encode Mtri/s | decode Mtri/s | lossless |\n|---|---:|---|---:|---:|---:|---:|---|\n";

@@ -1,7 +1,8 @@
 // What the two progressive hierarchy codecs (kdtree.cpp, octree.cpp) share: the distinct points of a tile in
 // Morton order with its triangles as unordered keys, the root cube, the level-segmented payload header, the
 // range-coder plumbing of an engine that is templated on encoding or decoding, and the final segment's coding of
-// triangle orientation and multiplicity and of raw attributes. Internal to engine/codecs.
+// triangle orientation and multiplicity and of raw attributes (payload v1; v2's predicted ones: attributes.h).
+// Internal to engine/codecs.
 #pragma once
 
 #include <algorithm>
