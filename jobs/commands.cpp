@@ -191,11 +191,13 @@ Result<MergeResult> mergeContainers(const std::vector<std::string>& parts, const
   std::vector<uint8_t> chunk;
   for (const auto& [e, f] : tiles) {
     const CodecInfo* codec = findCodec(e->codec);
-    if (!codec || codec->version != e->codec_version)
+    if (!codec || e->codec_version == 0 || e->codec_version > codec->version)
       return makeError(ErrorCode::kUnsupported, f->path() + ": tile " + std::to_string(e->tile_id) +
-                                                    " was coded by a codec version this build does not write");
+                                                    " was coded by a codec version this build does not know");
     SP_ASSIGN_OR_RETURN(auto payload, f->readPayload(*e, chunk));
-    SP_RETURN_IF_ERROR(writer.addTile(e->tile_id, *codec, TileSummary{e->vertices, e->faces, e->lo, e->hi}, payload));
+    // Parts from an older build keep their tiles' versions (every version still decodes).
+    SP_RETURN_IF_ERROR(writer.addTile(e->tile_id, *codec, TileSummary{e->vertices, e->faces, e->lo, e->hi}, payload,
+                                      e->codec_version));
   }
   SP_RETURN_IF_ERROR(writer.finish());
   SP_RETURN_IF_ERROR(out->commit());

@@ -23,6 +23,8 @@ using hierarchy::foldPreimages;
 using hierarchy::octahedralOfSum;
 using hierarchy::Sum3;
 
+constexpr uint64_t kPinnedHash = 0xa5bd5863bbfd8dbaull;  // AngleWeightedNormalsArePinnedBitForBit
+
 TEST(AttributeCoding, IntegerProjectionMatchesTheFloatOne) {
   std::mt19937_64 rng(7);
   std::uniform_int_distribution<int64_t> coord(-(int64_t(1) << 40), int64_t(1) << 40);
@@ -94,6 +96,22 @@ TEST(AttributeCoding, AngleWeightedNormalMatchesAnIndependentOne) {
   }
 }
 
+// The predicted normals bit for bit on a fixed mesh: a compiler, flag or machine that computes them differently
+// would decode version 2 payloads to other normals. If this fails, the build is not format-compatible.
+TEST(AttributeCoding, AngleWeightedNormalsArePinnedBitForBit) {
+  const Mesh sphere = icosphere(3);
+  const Grid grid = *makeGrid(boundingBox(sphere), 16);
+  const QuantizedMesh q = *quantizeMesh(sphere, grid, {}, nullptr);
+  uint64_t hash = 1469598103934665603ull;  // FNV-1a over the scaled sums' 128-bit values
+  for (const auto& d : hierarchy::angleWeightedNormals(q.positions, q.triangles)) {
+    const Sum3 s = hierarchy::scaledSum(d);
+    for (const auto& c : s)
+      for (int byte = 0; byte < 16; ++byte)
+        hash = (hash ^ uint8_t(uint64_t(c >> (8 * byte)) & 0xff)) * 1099511628211ull;
+  }
+  EXPECT_EQ(hash, kPinnedHash) << std::hex << hash;
+}
+
 TEST(AttributeCoding, FoldIsTheZMirrorAndItsPreimagesAreExact) {
   for (int bits : {4, 5, 8}) {
     const int m = (1 << (bits - 1)) - 1;
@@ -153,9 +171,14 @@ QuantizedMesh attributedSphere(int normal_bits, int channels, bool point_cloud) 
   for (size_t i = 0; i < q.positions.size(); ++i) {
     const Vec3d& p = sphere.positions[i];
     const float s = (i % 3 == 0) ? -1.f : 1.f;  // inward on a third
-    q.normals.push_back(every_code
-                            ? OctNormal{uint16_t(i % (2 * m + 1)), uint16_t((i / (2 * m + 1)) % (2 * m + 1))}
-                            : encodeOctahedral({s * float(p[0]), s * float(p[1]), s * float(p[2])}, normal_bits));
+    OctNormal code = every_code ? OctNormal{uint16_t(i % (2 * m + 1)), uint16_t((i / (2 * m + 1)) % (2 * m + 1))}
+                                : encodeOctahedral({s * float(p[0]), s * float(p[1]), s * float(p[2])}, normal_bits);
+    if (!every_code && i % 4 == 1) {  // codes on the square's border (two codes of one direction), spread along it
+      const uint32_t j = uint32_t(i / 4), along = (j / 4 * 7919u) % uint32_t(2 * m + 1);
+      const uint16_t edge = (j % 2) ? uint16_t(2 * m) : uint16_t(0);
+      code = (j % 4) < 2 ? OctNormal{edge, uint16_t(along)} : OctNormal{uint16_t(along), edge};
+    }
+    q.normals.push_back(code);
     q.colors.push_back({uint8_t(128 + 120 * p[0]), uint8_t(128 + 100 * p[1] + (rng() % 5)), uint8_t(rng()),
                         uint8_t(channels == 4 ? 200 + rng() % 50 : 255)});
   }
@@ -218,6 +241,33 @@ TEST_P(AttributeRoundTrip, EveryTruncationFailsCleanly) {
   for (size_t n = 0; n < bytes.size(); n += (n + 4096 < bytes.size() ? 97 : 1)) {
     auto d = codec().decode(ctx, codec().version, std::span<const uint8_t>(bytes.data(), n), limitsOf(enc->decoded));
     EXPECT_FALSE(d.isOk()) << "a payload cut to " << n << " of " << bytes.size() << " bytes decoded";
+  }
+}
+
+// Encoders refuse a normal that is not an octahedral code (2^bits - 1: quantization never writes it) instead of
+// coding another one.
+TEST_P(AttributeRoundTrip, RefusesANormalAboveTheOctahedralCodes) {
+  QuantizedMesh q = attributedSphere(10, 3, false);
+  q.normals[5] = {1023, 100};
+  auto enc = encodeMesh(codec(), TileContext{12, {10, 3}}, q);
+  ASSERT_FALSE(enc.isOk());
+  EXPECT_EQ(enc.status().code(), ErrorCode::kInvalidArgument);
+}
+
+// Bytes changed in the attributes (the payload's tail): an error or some valid mesh, never a crash or a bad index
+// (the sanitizer build checks memory).
+TEST_P(AttributeRoundTrip, CorruptedAttributesFailCleanly) {
+  const QuantizedMesh q = attributedSphere(12, 4, false);
+  const TileContext ctx{12, {12, 4}};
+  auto enc = encodeMesh(codec(), ctx, q);
+  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+  std::mt19937 rng(11);
+  const size_t n = enc->payload.size(), tail = n / 3;
+  for (int trial = 0; trial < 300; ++trial) {
+    std::vector<uint8_t> bad = enc->payload;
+    for (int k = 0; k < 1 + trial % 4; ++k) bad[n - 1 - rng() % tail] ^= uint8_t(1 + rng() % 255);
+    auto d = codec().decode(ctx, codec().version, bad, limitsOf(enc->decoded));
+    if (d.isOk()) EXPECT_TRUE(validateTile(ctx, *d).isOk());
   }
 }
 

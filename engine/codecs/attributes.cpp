@@ -9,7 +9,7 @@ VertexFaces::VertexFaces(u32 n, std::span<const Triangle> tris) : start(size_t(n
     for (u32 v : t) ++start[v + 1];
   for (u32 v = 0; v < n; ++v) start[v + 1] += start[v];
   faces.resize(start[n]);
-  std::vector<u32> fill(start.begin(), start.end() - 1);
+  std::vector<u64> fill(start.begin(), start.end() - 1);
   for (u32 i = 0; i < u32(tris.size()); ++i)
     for (u32 v : tris[i]) faces[fill[v]++] = i;
 }

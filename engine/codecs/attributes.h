@@ -26,7 +26,6 @@
 #include <vector>
 
 #include "engine/codecs/hierarchy.h"
-#include "engine/octahedral.h"
 
 namespace scanpress::hierarchy {
 
@@ -35,7 +34,7 @@ using Sum3 = std::array<i128, 3>;
 
 // For each vertex, the triangles that use it (a triangle once per corner naming it).
 struct VertexFaces {
-  std::vector<u32> start;  // n + 1 entries
+  std::vector<u64> start;  // n + 1 entries (a hostile edgebreaker tile may claim more than 2^32 / 3 triangles)
   std::vector<u32> faces;
   VertexFaces(u32 n, std::span<const Triangle> tris);
   std::span<const u32> of(u32 v) const { return {faces.data() + start[v], faces.data() + start[v + 1]}; }
@@ -48,6 +47,14 @@ std::array<int, 2> octahedralOfSum(const Sum3& s, int bits);
 // The z-mirror of a signed octahedral code: the fold between the upper diamond and the lower corners.
 inline std::array<int, 2> foldCode(std::array<int, 2> c, int m) {
   return {(m - std::abs(c[1])) * (c[0] >= 0 ? 1 : -1), (m - std::abs(c[0])) * (c[1] >= 0 ? 1 : -1)};
+}
+
+// The direction of a signed code as an integer vector on the octahedron |x| + |y| + |z| = m (exact).
+inline std::array<int64_t, 3> octahedralVector(std::array<int, 2> c, int m) {
+  const int z = m - std::abs(c[0]) - std::abs(c[1]);
+  if (z >= 0) return {c[0], c[1], z};
+  const auto f = foldCode(c, m);
+  return {f[0], f[1], z};
 }
 
 // The codes that fold onto `f` (one, or two to four on the square's border), in a fixed order.
@@ -87,7 +94,7 @@ int codeResidual(Io& io, SymbolModel& class_model, BitModel& sign, BitModel* top
   return io.bit(sign, r < 0) ? -int(mag) : int(mag);
 }
 
-// (a mod q) in [-(q-1)/2, (q-1)/2] for odd q.
+// (a mod q) in [-(q-1)/2, (q-1)/2] for odd q (normals), in [-127, 128] for q = 256 (colors).
 inline int wrapCentered(int a, int q) {
   const int h = (q - 1) / 2;
   a %= q;
@@ -142,9 +149,9 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
         pred = octahedralOfSum(s, bits);
         int flip = 0;
         if (truth) {
-          const Vec3f a = decodeOctahedral(truth->normals[v], bits);
-          const Vec3f p = decodeOctahedral(OctNormal{uint16_t(pred[0] + m), uint16_t(pred[1] + m)}, bits);
-          flip = double(a[0]) * p[0] + double(a[1]) * p[1] + double(a[2]) * p[2] < 0;
+          // In integers, so that every machine writes the same bytes.
+          const auto a = octahedralVector(actual, m), p = octahedralVector(pred, m);
+          flip = a[0] * p[0] + a[1] * p[1] + a[2] * p[2] < 0;
         }
         flip = io.bit(models.flip[last_flip], flip);
         last_flip = flip;

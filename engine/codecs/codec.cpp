@@ -171,7 +171,7 @@ Status validateTile(const TileContext& ctx, const QuantizedMesh& mesh) {
     for (uint32_t c : mesh.positions[i])
       if (c > max_coord)
         return makeError(ErrorCode::kMalformed, "vertex " + std::to_string(i) + " lies outside the grid");
-  const uint32_t max_oct = ctx.layout.hasNormals() ? (1u << ctx.layout.normal_bits) - 2 : 0;  // octahedral.h
+  const uint32_t max_oct = ctx.layout.hasNormals() ? (1u << ctx.layout.normal_bits) - 1 : 0;
   for (const auto& e : mesh.normals)
     if (e[0] > max_oct || e[1] > max_oct) return makeError(ErrorCode::kMalformed, "normal outside its range");
   for (size_t t = 0; t < mesh.triangles.size(); ++t)

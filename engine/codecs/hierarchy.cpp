@@ -38,6 +38,12 @@ Status collectPoints(std::string_view codec, const TileContext& ctx, const Quant
   for (const auto& p : mesh.positions)
     if (p[0] > max_coord || p[1] > max_coord || p[2] > max_coord)
       return makeError(ErrorCode::kInvalidArgument, name + ": vertex outside the grid");
+  // Octahedral codes run to 2^bits - 2 (octahedral.h); the predicted coding (attributes.h) codes no other.
+  const u32 max_oct = ctx.layout.hasNormals() ? (1u << ctx.layout.normal_bits) - 2 : 0;
+  for (size_t i = 0; i < mesh.normals.size(); ++i)
+    if (mesh.normals[i][0] > max_oct || mesh.normals[i][1] > max_oct)
+      return makeError(ErrorCode::kInvalidArgument, name + ": normal of vertex " + std::to_string(i) +
+                                                        " is not an octahedral code (above 2^bits - 2)");
 
   std::vector<Key> keys(nv);
   for (size_t i = 0; i < nv; ++i) keys[i] = mortonKey(mesh.positions[i], ctx.bits, axes);

@@ -101,7 +101,7 @@ Status ContainerWriter::begin() {
 }
 
 Status ContainerWriter::addTile(uint32_t tile_id, const CodecInfo& codec, const TileSummary& decoded,
-                                std::span<const uint8_t> payload) {
+                                std::span<const uint8_t> payload, uint16_t version) {
   if (entries_.size() >= kMaxTiles) return makeError(ErrorCode::kLimitExceeded, "too many tiles");
   if (!codec.floor.admits(header_.layout, decoded.vertices, decoded.faces, payload.size()))
     return makeError(ErrorCode::kInternal, "tile " + std::to_string(tile_id) + ": " + std::string(codec.name) +
@@ -111,7 +111,7 @@ Status ContainerWriter::addTile(uint32_t tile_id, const CodecInfo& codec, const 
   TileEntry e;
   e.tile_id = tile_id;
   e.codec = codec.id;
-  e.codec_version = codec.version;
+  e.codec_version = version ? version : codec.version;
   e.offset = offset_;
   e.vertices = decoded.vertices;
   e.faces = decoded.faces;

@@ -73,8 +73,9 @@ class ContainerWriter {
   Status begin();
   // `decoded` is what the codec's decoder yields from `payload` (EncodedTile::decoded): the index records it.
   // Fails with kInternal if the counts are below the codec's payload floor (the reader would refuse the file).
+  // `version`: the payload's codec version, when it is not the one this build writes (a merge of older parts).
   Status addTile(uint32_t tile_id, const CodecInfo& codec, const TileSummary& decoded,
-                 std::span<const uint8_t> payload);
+                 std::span<const uint8_t> payload, uint16_t version = 0);
   Status finish();
   // Marks the container as subset `index` of `count` (before finish()).
   void setSubset(uint16_t index, uint16_t count) { header_.subset_index = index, header_.subset_count = count; }
