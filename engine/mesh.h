@@ -22,6 +22,9 @@ using OctNormal = std::array<uint16_t, 2>;
 struct AttributeLayout {
   uint8_t normal_bits = 0;     // 0: no normals; else octahedral bits per component (4..16)
   uint8_t color_channels = 0;  // 0: no colors; 3: RGB; 4: RGBA (8 bits per channel)
+  // Levels per color channel: 2^color_bits (1..8). Below 8 the colors are snapped to those levels (quantize.h's
+  // quantizeColor) and codecs that predict them code levels; the mesh keeps their 8-bit values.
+  uint8_t color_bits = 8;
   bool hasNormals() const { return normal_bits != 0; }
   bool hasColors() const { return color_channels != 0; }
   bool operator==(const AttributeLayout&) const = default;

@@ -98,7 +98,7 @@ Result<QuantizedMesh> quantizeMesh(const Mesh& mesh, const Grid& grid, const Att
     remap[i] = next++;
     out.positions.push_back(q[i]);
     if (layout.hasNormals()) out.normals.push_back(encodeOctahedral(mesh.normals[i], layout.normal_bits));
-    if (layout.hasColors()) out.colors.push_back(mesh.colors[i]);
+    if (layout.hasColors()) out.colors.push_back(quantizeColor(mesh.colors[i], layout));
   }
   for (Triangle& t : out.triangles)
     for (uint32_t& v : t) v = remap[v];

@@ -55,8 +55,26 @@ struct QuantizeStats {
   uint64_t unreferenced_vertices = 0;  // vertices used by no kept triangle, dropped
 };
 
+// A color channel's level on `bits` bits (1..8), and the 8-bit value a level stands for (both rounded; level ->
+// value -> level is exact, and at 8 bits both are the identity).
+inline uint8_t colorLevel(uint8_t value, int bits) {
+  const int top = (1 << bits) - 1;
+  return static_cast<uint8_t>((value * top + 127) / 255);
+}
+inline uint8_t colorOfLevel(int level, int bits) {
+  const int top = (1 << bits) - 1;
+  return static_cast<uint8_t>((level * 255 + top / 2) / top);
+}
+// A color snapped to the layout's levels (the channels the layout keeps; the identity at 8 bits).
+inline Rgba8 quantizeColor(const Rgba8& c, const AttributeLayout& layout) {
+  Rgba8 out = c;
+  for (int k = 0; k < layout.color_channels; ++k)
+    out[k] = colorOfLevel(colorLevel(c[k], layout.color_bits), layout.color_bits);
+  return out;
+}
+
 // Quantizes positions onto `grid`, normals to octahedral `layout.normal_bits` bits (if the mesh has normals and
-// the layout wants them), colors as they are (if the layout has colors). Triangles that quantization makes
+// the layout wants them), colors to the layout's levels (quantizeColor; as they are at 8 bits). Triangles that quantization makes
 // degenerate and vertices no kept triangle uses are dropped and counted; the other vertices keep their order.
 // Fails with kInvalidArgument if a triangle indexes past the vertex array or attributes do not match the layout.
 Result<QuantizedMesh> quantizeMesh(const Mesh& mesh, const Grid& grid, const AttributeLayout& layout,

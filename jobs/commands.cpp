@@ -161,7 +161,7 @@ Result<MergeResult> mergeContainers(const std::vector<std::string>& parts, const
                                                         std::to_string(h.subset_count) + ", not of " +
                                                         std::to_string(n) + " as " + parts[0]);
     if (h.grid.bits != first.grid.bits || h.grid.cell != first.grid.cell || h.grid.origin != first.grid.origin ||
-        h.layout.normal_bits != first.layout.normal_bits || h.layout.color_channels != first.layout.color_channels)
+        h.layout != first.layout)
       return makeError(ErrorCode::kInvalidArgument, f.path() + ": another grid or attribute layout than " + parts[0] +
                                                         ": parts of different scans or settings");
     if (by_index[h.subset_index])

@@ -249,6 +249,7 @@ std::vector<std::string> knownConfigKeys() {
           "/codec/name",
           "/codec/bits",
           "/codec/normal_bits",
+          "/codec/color_bits",
           "/codec/normals",
           "/codec/colors",
           "/codec/allow_degenerate",
@@ -335,6 +336,7 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     c.string("name", s.encode.codec, false);
     c.integer("bits", kMinGridBits, kMaxGridBits, s.encode.bits);
     c.integer("normal_bits", 4, 16, s.encode.normal_bits);
+    c.integer("color_bits", 1, 8, s.encode.color_bits);
     c.boolean("normals", s.encode.keep_normals);
     c.boolean("colors", s.encode.keep_colors);
     c.boolean("allow_degenerate", s.encode.allow_degenerate);

@@ -184,7 +184,7 @@ class IngestSink : public MeshSink {
       r.q = grid_.quantize(p[i]);
       for (int a = 0; a < 3; ++a) r.original[a] = static_cast<float>(p[i][a] - grid_.origin[a]);
       if (layout_.hasNormals()) r.normal = n.empty() ? no_normal : encodeOctahedral(n[i], layout_.normal_bits);
-      if (layout_.hasColors() && !c.empty()) r.color = c[i];
+      if (layout_.hasColors() && !c.empty()) r.color = quantizeColor(c[i], layout_);
       if (points_) {
         const uint32_t v = static_cast<uint32_t>(store_.size());
         hist_.add(r.q);
@@ -321,7 +321,10 @@ class ScanEncoder {
     stage("reading");
     SP_ASSIGN_OR_RETURN(result_.read, readInput(survey_));
     if (s_.keep_normals && survey_.has_normals) result_.layout.normal_bits = static_cast<uint8_t>(s_.normal_bits);
-    if (s_.keep_colors && survey_.colorChannels()) result_.layout.color_channels = survey_.colorChannels();
+    if (s_.keep_colors && survey_.colorChannels()) {
+      result_.layout.color_channels = survey_.colorChannels();
+      result_.layout.color_bits = static_cast<uint8_t>(s_.color_bits);
+    }
     result_.point_cloud = survey_.triangle_count == 0 && survey_.vertex_count > 0;
     SP_ASSIGN_OR_RETURN(const BoundingBox box, gridBox());
     auto grid = makeGrid(box, s_.bits);
@@ -716,6 +719,8 @@ Result<EncodeResult> encodeFileOnce(const EncodeSettings& s, ProgressListener* p
     return makeError(ErrorCode::kInvalidArgument, "unknown codec '" + s.codec + "' (available: " + codecNames() + ")");
   if (s.normal_bits < 4 || s.normal_bits > 16)
     return makeError(ErrorCode::kInvalidArgument, "normal bits must be in [4, 16]");
+  if (s.color_bits < 1 || s.color_bits > 8)
+    return makeError(ErrorCode::kInvalidArgument, "color bits must be in [1, 8]");
   for (const StageSpec& st : s.stages)
     if (!findStage(st.kind)) return makeError(ErrorCode::kInvalidArgument, "unknown stage");
   SP_RETURN_IF_ERROR(checkOutputPath(s.output, {s.input}));  // before reading: `encode X X` must not replace X

@@ -66,6 +66,7 @@ struct EncodeSettings {
   std::string codec = "edgebreaker";  // the smallest lossless codec (bench/RESULTS.md)
   int bits = kDefaultGridBits;
   int normal_bits = kDefaultNormalBits;
+  int color_bits = 8;  // levels per color channel: 2^color_bits (8: exact)
   bool keep_normals = true;
   bool keep_colors = true;
   bool allow_degenerate = false;     // quantization may drop more than kMaxDegenerateShare of the triangles

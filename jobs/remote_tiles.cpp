@@ -16,7 +16,7 @@ namespace scanpress {
 namespace {
 
 // Bumped whenever a message's layout changes.
-constexpr uint32_t kWireVersion = 1;
+constexpr uint32_t kWireVersion = 2;  // 2: the layout's color bits
 
 // The wire spells out every field of these structs: a new field must be added to the messages below too (this
 // fails to compile until its size is updated here).
@@ -164,6 +164,7 @@ Status readScan(std::span<const uint8_t> message, EncodeSettings& s, TileScanFac
   f.grid.bits = bits;
   SP_RETURN_IF_ERROR(r.u8(f.layout.normal_bits));
   SP_RETURN_IF_ERROR(r.u8(f.layout.color_channels));
+  SP_RETURN_IF_ERROR(r.u8(f.layout.color_bits));
   SP_RETURN_IF_ERROR(toBool(r, f.measured));
   SP_RETURN_IF_ERROR(r.f64(f.diagonal));
   SP_RETURN_IF_ERROR(r.f64(f.density));
@@ -173,6 +174,8 @@ Status readScan(std::span<const uint8_t> message, EncodeSettings& s, TileScanFac
     return r.error(ErrorCode::kMalformed, "normal bits out of range");
   if (f.layout.color_channels != 0 && f.layout.color_channels != 3 && f.layout.color_channels != 4)
     return r.error(ErrorCode::kMalformed, "color channels out of range");
+  if (f.layout.color_bits < 1 || f.layout.color_bits > 8)
+    return r.error(ErrorCode::kMalformed, "color bits out of range");
   return expectEnd(r);
 }
 
@@ -214,6 +217,7 @@ std::vector<uint8_t> scanMessage(const EncodeSettings& s, const TileScanFacts& f
   w.u8(static_cast<uint8_t>(f.grid.bits));
   w.u8(f.layout.normal_bits);
   w.u8(f.layout.color_channels);
+  w.u8(f.layout.color_bits);
   w.u8(f.measured);
   w.f64(f.diagonal);
   w.f64(f.density);

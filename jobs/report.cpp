@@ -75,7 +75,10 @@ const json kInfoCounts = {
      "by the distinct vertices"}};
 
 json layoutJson(const AttributeLayout& l) {
-  return {{"normals", l.hasNormals()}, {"normal_bits", l.normal_bits}, {"color_channels", l.color_channels}};
+  return {{"normals", l.hasNormals()},
+          {"normal_bits", l.normal_bits},
+          {"color_channels", l.color_channels},
+          {"color_bits", l.hasColors() ? l.color_bits : 0}};
 }
 
 // The target, what the search chose and tried, and whether the target was met.
@@ -398,7 +401,10 @@ std::string containerInfoText(const ContainerFile& file) {
      << " bpv over the vertices above; an encode report's bpv divides by the distinct vertices)\n"
      << "  normals:   " << (h.layout.hasNormals() ? std::to_string(h.layout.normal_bits) + "-bit octahedral" : "no")
      << "\n"
-     << "  colors:    " << (h.layout.hasColors() ? std::to_string(h.layout.color_channels) + " channels" : "no")
+     << "  colors:    "
+     << (h.layout.hasColors() ? std::to_string(h.layout.color_channels) + " channels of " +
+                                    std::to_string(h.layout.color_bits) + " bits"
+                              : "no")
      << "\n"
      << "  tiles:     " << h.tile_count << "\n";
   for (const auto& t : file.tiles()) {

@@ -112,6 +112,19 @@ TEST(AttributeCoding, AngleWeightedNormalsArePinnedBitForBit) {
   EXPECT_EQ(hash, kPinnedHash) << std::hex << hash;
 }
 
+TEST(AttributeCoding, ColorLevelsRoundTripAndRoundToTheNearest) {
+  for (int bits = 1; bits <= 8; ++bits) {
+    const int top = (1 << bits) - 1;
+    for (int level = 0; level <= top; ++level) EXPECT_EQ(colorLevel(colorOfLevel(level, bits), bits), level);
+    for (int v = 0; v < 256; ++v) {
+      const int level = colorLevel(uint8_t(v), bits);
+      ASSERT_LE(level, top);
+      EXPECT_LE(std::abs(level * 255.0 / top - v), 255.0 / top / 2 + 1e-9) << bits << " " << v;
+    }
+  }
+  for (int v = 0; v < 256; ++v) EXPECT_EQ(colorOfLevel(colorLevel(uint8_t(v), 8), 8), v);
+}
+
 TEST(AttributeCoding, FoldIsTheZMirrorAndItsPreimagesAreExact) {
   for (int bits : {4, 5, 8}) {
     const int m = (1 << (bits - 1)) - 1;
@@ -242,6 +255,34 @@ TEST_P(AttributeRoundTrip, EveryTruncationFailsCleanly) {
     auto d = codec().decode(ctx, codec().version, std::span<const uint8_t>(bytes.data(), n), limitsOf(enc->decoded));
     EXPECT_FALSE(d.isOk()) << "a payload cut to " << n << " of " << bytes.size() << " bytes decoded";
   }
+}
+
+// Colors at fewer bits: snapped to their levels by quantization, coded as levels, back exactly; a color off its
+// levels is refused.
+TEST_P(AttributeRoundTrip, ColorLevelsAtEveryPrecision) {
+  for (int color_bits = 1; color_bits <= 8; ++color_bits)
+    for (int channels : {3, 4}) {
+      SCOPED_TRACE(std::to_string(color_bits) + " color bits, " + std::to_string(channels) + " channels");
+      AttributeLayout layout{10, uint8_t(channels)};
+      layout.color_bits = uint8_t(color_bits);
+      QuantizedMesh q = attributedSphere(10, channels, false);
+      for (auto& c : q.colors) c = quantizeColor(c, layout);
+      const TileContext ctx{12, layout};
+      auto enc = encodeMesh(codec(), ctx, q);
+      ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+      auto d = codec().decode(ctx, codec().version, enc->payload, limitsOf(enc->decoded));
+      ASSERT_TRUE(d.isOk()) << d.status().toString();
+      EXPECT_TRUE(vertexMultiset(*d) == vertexMultiset(q));
+      if (color_bits < 8) {
+        QuantizedMesh off = q;
+        off.colors[7][1] = uint8_t(colorOfLevel(1, color_bits) + 1);  // between two levels (no level is 1 above one)
+        if (quantizeColor(off.colors[7], layout) != off.colors[7]) {
+          auto refused = encodeMesh(codec(), ctx, off);
+          ASSERT_FALSE(refused.isOk());
+          EXPECT_EQ(refused.status().code(), ErrorCode::kInvalidArgument);
+        }
+      }
+    }
 }
 
 // Encoders refuse a normal that is not an octahedral code (2^bits - 1: quantization never writes it) instead of

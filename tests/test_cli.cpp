@@ -9,7 +9,10 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "engine/quantize.h"
+#include "engine/shapes.h"
 #include "jobs/mesh_io/mesh_reader.h"
+#include "jobs/mesh_io/mesh_writer.h"
 #include "jobs_util.h"
 
 namespace scanpress {
@@ -110,6 +113,52 @@ TEST(Cli, EncodeInfoDecodeWithReport) {
   EXPECT_EQ(run("decode '" + dir.file("b.spz") + "' '" + dir.file("c.ply") + "' --tiles 5", &out), 1);
   EXPECT_FALSE(fs::exists(dir.file("c.ply")));
   EXPECT_EQ(temporaries(dir.path()), 0);
+}
+
+// --color-bits N keeps 2^N levels per channel: the report and info name them, every decoded color is the level
+// nearest the input's; out-of-range values are usage errors.
+TEST(Cli, ColorBitsKeepTheNearestLevel) {
+  testing::TempDir dir;
+  Mesh sphere = icosphere(3);
+  for (const auto& p : sphere.positions)
+    sphere.colors.push_back({uint8_t(128 + 127 * p[0]), uint8_t(128 + 90 * p[1]), uint8_t(128 + 60 * p[2]), 255});
+  sphere.color_channels = 3;
+  ASSERT_TRUE(writePly(dir.file("s.ply"), sphere).isOk());
+  std::string out;
+  for (const char* codec : {"kdtree", "edgebreaker", "store"}) {
+    SCOPED_TRACE(codec);
+    ASSERT_EQ(run("encode '" + dir.file("s.ply") + "' '" + dir.file("s.spz") + "' --color-bits 5 --codec " + codec +
+                      " --report '" + dir.file("r.json") + "'",
+                  &out),
+              0)
+        << out;
+    const auto report = nlohmann::json::parse(std::ifstream(dir.file("r.json")));
+    EXPECT_EQ(report["attributes"]["color_bits"], 5);
+    ASSERT_EQ(run("info '" + dir.file("s.spz") + "' --json", &out), 0) << out;
+    EXPECT_EQ(nlohmann::json::parse(out)["attributes"]["color_bits"], 5);
+    ASSERT_EQ(run("decode '" + dir.file("s.spz") + "' '" + dir.file("d.ply") + "'", &out), 0) << out;
+    auto decoded = readMeshFile(dir.file("d.ply"));
+    ASSERT_TRUE(decoded.isOk());
+    ASSERT_EQ(decoded->colors.size(), sphere.colors.size());
+    // Match vertices by position (the grid keeps the sphere's vertices apart).
+    for (size_t i = 0; i < decoded->positions.size(); ++i) {
+      size_t best = 0;
+      double best_d = 1e300;
+      for (size_t j = 0; j < sphere.positions.size(); ++j) {
+        double d = 0;
+        for (int a = 0; a < 3; ++a) d += std::pow(decoded->positions[i][a] - sphere.positions[j][a], 2);
+        if (d < best_d) best_d = d, best = j;
+      }
+      for (int c = 0; c < 3; ++c) {
+        const int level = colorLevel(sphere.colors[best][c], 5);
+        EXPECT_EQ(decoded->colors[i][c], colorOfLevel(level, 5)) << i << " channel " << c;
+        EXPECT_LE(std::abs(int(decoded->colors[i][c]) - int(sphere.colors[best][c])), 5);  // half of 255/31
+      }
+    }
+  }
+  EXPECT_EQ(run("encode '" + dir.file("s.ply") + "' '" + dir.file("t.spz") + "' --color-bits 0", &out), 1);
+  EXPECT_EQ(run("encode '" + dir.file("s.ply") + "' '" + dir.file("t.spz") + "' --color-bits 9", &out), 1);
+  EXPECT_FALSE(fs::exists(dir.file("t.spz")));
 }
 
 // kdtree containers list their levels; decode --level and --bytes give coarser meshes; single-rate codecs and

@@ -76,6 +76,56 @@ void patchHeader(std::vector<uint8_t>& bytes, size_t offset, const void* value, 
   std::memcpy(bytes.data() + kHeaderSize - 4, &crc, 4);
 }
 
+// Byte 51 holds the color bits (0: 8). A container at fewer bits names them and decodes to its colors; a nonzero
+// byte without colors, or above 7, is malformed.
+TEST(Container, ColorBitsAreKeptAndChecked) {
+  testing::ContainerFixture f = testing::makeContainerFixture(1);
+  EXPECT_EQ(f.bytes[51], 0);
+  auto parsed = parseContainer(f.bytes, "mem");
+  ASSERT_TRUE(parsed.isOk());
+  EXPECT_EQ(parsed->header.layout.color_bits, 8);
+
+  AttributeLayout layout = f.layout;
+  layout.color_bits = 5;
+  QuantizedMesh tile = f.tiles[0];
+  for (auto& c : tile.colors) c = quantizeColor(c, layout);
+  const QuantizedMesh tiles[] = {tile};
+  for (CodecId id : {CodecId::kStore, CodecId::kKdtree, CodecId::kEdgebreaker}) {
+    auto bytes = encodeContainer(f.grid, layout, *findCodec(id), tiles);
+    ASSERT_TRUE(bytes.isOk()) << bytes.status().toString();
+    EXPECT_EQ((*bytes)[51], 5);
+    auto pc = parseContainer(*bytes, "mem");
+    ASSERT_TRUE(pc.isOk()) << pc.status().toString();
+    EXPECT_TRUE(pc->header.layout == layout);
+    const auto& e = pc->tiles[0];
+    auto payload = parseTileChunk(std::span(*bytes).subspan(e.offset, e.chunk_bytes), e, "mem");
+    ASSERT_TRUE(payload.isOk());
+    auto mesh = decodeTilePayload(pc->header, e, *payload, "mem");
+    ASSERT_TRUE(mesh.isOk()) << mesh.status().toString();
+    auto sorted = [](std::vector<Rgba8> v) {
+      std::sort(v.begin(), v.end());
+      return v;
+    };
+    EXPECT_EQ(sorted(mesh->colors), sorted(tile.colors));
+  }
+
+  for (uint8_t bad : {uint8_t{8}, uint8_t{9}, uint8_t{255}}) {
+    auto bytes = f.bytes;
+    patchHeader(bytes, 51, &bad, 1);
+    EXPECT_EQ(decodeAll(bytes).code(), ErrorCode::kMalformed) << int(bad);
+  }
+  // Without colors the byte must stay 0.
+  AttributeLayout bare{12, 0};
+  QuantizedMesh plain = f.tiles[0];
+  plain.colors.clear();
+  const QuantizedMesh plain_tiles[] = {plain};
+  auto bytes = *encodeContainer(f.grid, bare, *findCodec(CodecId::kStore), plain_tiles);
+  EXPECT_TRUE(decodeAll(bytes).isOk());
+  const uint8_t five = 5;
+  patchHeader(bytes, 51, &five, 1);
+  EXPECT_EQ(decodeAll(bytes).code(), ErrorCode::kMalformed);
+}
+
 TEST(Container, UnknownVersionAndCodecAreTheirOwnErrors) {
   testing::ContainerFixture f = testing::makeContainerFixture(1);
   auto bytes = f.bytes;

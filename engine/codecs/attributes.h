@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "engine/codecs/hierarchy.h"
+#include "engine/quantize.h"
 
 namespace scanpress::hierarchy {
 
@@ -94,7 +95,7 @@ int codeResidual(Io& io, SymbolModel& class_model, BitModel& sign, BitModel* top
   return io.bit(sign, r < 0) ? -int(mag) : int(mag);
 }
 
-// (a mod q) in [-(q-1)/2, (q-1)/2] for odd q (normals), in [-127, 128] for q = 256 (colors).
+// (a mod q) in [-(q-1)/2, (q-1)/2] for odd q (normals), in [-(q/2 - 1), q/2] for even q (color levels).
 inline int wrapCentered(int a, int q) {
   const int h = (q - 1) / 2;
   a %= q;
@@ -186,39 +187,49 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
   }
 
   if (layout.hasColors()) {
-    const int channels = layout.color_channels;
+    // In levels (2^color_bits of them; at 8 bits the values themselves).
+    const int channels = layout.color_channels, cb = layout.color_bits, levels = 1 << cb;
     colors.assign(n, Rgba8{0, 0, 0, 255});
+    std::vector<Rgba8> level(n, Rgba8{0, 0, 0, 0});
     std::fill(activity.begin(), activity.end(), u8(0));
     for (u32 v = 0; v < n; ++v) {
       u32 sum[4] = {0, 0, 0, 0}, count = 0;
       for (u32 t : vf.of(v))
         for (u32 w : tris[t])
           if (w < v) {
-            for (int c = 0; c < channels; ++c) sum[c] += colors[w][c];
+            for (int c = 0; c < channels; ++c) sum[c] += level[w][c];
             ++count;
           }
       int pred[4];
       for (int c = 0; c < 4; ++c)
-        pred[c] = count ? int((sum[c] + count / 2) / count) : v > 0 ? colors[v - 1][c] : c == 3 ? 255 : 128;
+        pred[c] = count    ? int((sum[c] + count / 2) / count)
+                  : v > 0  ? level[v - 1][c]
+                  : c == 3 ? levels - 1
+                           : levels / 2;
       const int bin = neighbourBin(v);
       const auto cm = [&](int channel, int green_class) -> SymbolModel& {
         return models.color[(bin * 4 + channel) * 4 + std::min(green_class, 3)];
       };
-      auto res = [&](int c) { return truth ? wrapCentered(int(truth->colors[v][c]) - pred[c], 256) : 0; };
+      auto res = [&](int c) {
+        return truth ? wrapCentered(int(colorLevel(truth->colors[v][c], cb)) - pred[c], levels) : 0;
+      };
       int kg = 0, kr = 0, kb = 0, ka = 0;
       const int rg = codeResidual(io, cm(1, 0), models.color_sign[1], models.color_top[1], res(1), kg);
-      const int rr =
-          codeResidual(io, cm(0, kg), models.color_sign[0], models.color_top[0], wrapCentered(res(0) - rg, 256), kr);
-      const int rb =
-          codeResidual(io, cm(2, kg), models.color_sign[2], models.color_top[2], wrapCentered(res(2) - rg, 256), kb);
-      Rgba8& out = colors[v];
-      out[1] = u8(pred[1] + rg);
-      out[0] = u8(pred[0] + rg + rr);
-      out[2] = u8(pred[2] + rg + rb);
+      const int rr = codeResidual(io, cm(0, kg), models.color_sign[0], models.color_top[0],
+                                  wrapCentered(res(0) - rg, levels), kr);
+      const int rb = codeResidual(io, cm(2, kg), models.color_sign[2], models.color_top[2],
+                                  wrapCentered(res(2) - rg, levels), kb);
+      Rgba8& lv = level[v];
+      const auto wrap = [&](int x) { return u8(((x % levels) + levels) % levels); };
+      lv[1] = wrap(pred[1] + rg);
+      lv[0] = wrap(pred[0] + rg + rr);
+      lv[2] = wrap(pred[2] + rg + rb);
       if (channels == 4) {
         const int ra = codeResidual(io, cm(3, 0), models.color_sign[3], models.color_top[3], res(3), ka);
-        out[3] = u8(pred[3] + ra);
+        lv[3] = wrap(pred[3] + ra);
       }
+      Rgba8& out = colors[v];
+      for (int c = 0; c < channels; ++c) out[c] = colorOfLevel(lv[c], cb);
       activity[v] = u8(std::min(kg + kr + kb + ka, 255));
     }
   }

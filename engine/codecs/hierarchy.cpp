@@ -4,6 +4,7 @@
 
 #include "engine/io/bytes.h"
 #include "engine/octahedral.h"
+#include "engine/quantize.h"
 
 namespace scanpress::hierarchy {
 namespace {
@@ -38,6 +39,12 @@ Status collectPoints(std::string_view codec, const TileContext& ctx, const Quant
   for (const auto& p : mesh.positions)
     if (p[0] > max_coord || p[1] > max_coord || p[2] > max_coord)
       return makeError(ErrorCode::kInvalidArgument, name + ": vertex outside the grid");
+  // Colors below 8 bits must sit on their levels: the predicted coding codes levels.
+  for (size_t i = 0; i < mesh.colors.size(); ++i)
+    if (quantizeColor(mesh.colors[i], ctx.layout) != mesh.colors[i])
+      return makeError(ErrorCode::kInvalidArgument,
+                       name + ": color of vertex " + std::to_string(i) + " is not one of " +
+                           std::to_string(1 << ctx.layout.color_bits) + " levels per channel (quantizeColor)");
   // Octahedral codes run to 2^bits - 2 (octahedral.h); the predicted coding (attributes.h) codes no other.
   const u32 max_oct = ctx.layout.hasNormals() ? (1u << ctx.layout.normal_bits) - 2 : 0;
   for (size_t i = 0; i < mesh.normals.size(); ++i)

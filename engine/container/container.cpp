@@ -78,7 +78,7 @@ std::vector<uint8_t> serializeHeader(const ContainerHeader& h) {
   w.u8(static_cast<uint8_t>(h.grid.bits));
   w.u8(h.layout.normal_bits);
   w.u8(h.layout.color_channels);
-  w.u8(0);
+  w.u8(h.layout.color_bits == 8 ? 0 : h.layout.color_bits);  // 0: 8 bits (the byte was reserved, 0)
   w.u32(h.tile_count);
   w.u64(h.vertices);
   w.u64(h.faces);
@@ -94,6 +94,9 @@ ContainerWriter::ContainerWriter(ByteSink& sink, const Grid& grid, const Attribu
 }
 
 Status ContainerWriter::begin() {
+  if (header_.layout.color_bits < 1 || header_.layout.color_bits > 8)
+    return makeError(ErrorCode::kInvalidArgument, "color bits must be in [1, 8]");
+  if (!header_.layout.hasColors()) header_.layout.color_bits = 8;  // byte 51 is 0 without colors
   const auto bytes = serializeHeader(header_);
   SP_RETURN_IF_ERROR(sink_.append(bytes));
   offset_ = bytes.size();
@@ -206,7 +209,11 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
   if (h.layout.color_channels != 0 && h.layout.color_channels != 3 && h.layout.color_channels != 4)
     return makeError(ErrorCode::kMalformed,
                      where + " at byte 50: color channels " + std::to_string(h.layout.color_channels));
-  if (reserved != 0) return makeError(ErrorCode::kMalformed, where + " at byte 51: reserved byte not 0");
+  // Byte 51: color bits, 0 meaning 8 (files before this field wrote 0).
+  if (reserved > 7 || (reserved != 0 && h.layout.color_channels == 0))
+    return makeError(ErrorCode::kMalformed, where + " at byte 51: color bits " + std::to_string(reserved) +
+                                                (h.layout.color_channels ? "" : " without colors"));
+  h.layout.color_bits = reserved == 0 ? 8 : reserved;
   if (h.subset_count == 1 || h.subset_index >= std::max<uint16_t>(h.subset_count, 1))
     return makeError(ErrorCode::kMalformed, where + " at byte 72: subset " + std::to_string(h.subset_index) + " of " +
                                                 std::to_string(h.subset_count));

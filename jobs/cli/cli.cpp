@@ -86,6 +86,7 @@ options:
                       coarsest setting is larger)
   --bpv R             size target: at most R bits per encoded vertex, at the least error
   --normal-bits N     octahedral bits per normal component, 4..16 (default 12)
+  --color-bits N      levels per color channel: 2^N, 1..8 (default 8: exact)
   --no-normals        drop normals
   --no-colors         drop colors
   --allow-degenerate  keep going when quantization makes more than 0.1%% of the triangles degenerate (they are
@@ -386,9 +387,9 @@ int runEncode(int argc, char** argv) {
   Args args;
   std::string error;
   if (!parseArgs(argc, argv, 2,
-                 {"--codec", "--stages", "--bits", "--normal-bits", "--report", "--tile-triangles", "--threads",
-                  "--memory-budget", "--scratch-dir", "--samples-per-triangle", "--format", "--max-error", "--error",
-                  "--max-bytes", "--bpv", "--subset"},
+                 {"--codec", "--stages", "--bits", "--normal-bits", "--color-bits", "--report", "--tile-triangles",
+                  "--threads", "--memory-budget", "--scratch-dir", "--samples-per-triangle", "--format", "--max-error",
+                  "--error", "--max-bytes", "--bpv", "--subset"},
                  {"--no-normals", "--no-colors", "--allow-degenerate", "--strict", "--measure", "--quiet", "--help"},
                  args, error))
     return usage(error, "encode");
@@ -409,7 +410,8 @@ int runEncode(int argc, char** argv) {
     s.stages = std::move(stages).value();
   }
   if (!integerOption(args, "--bits", kMinGridBits, kMaxGridBits, s.bits, error) ||
-      !integerOption(args, "--normal-bits", 4, 16, s.normal_bits, error))
+      !integerOption(args, "--normal-bits", 4, 16, s.normal_bits, error) ||
+      !integerOption(args, "--color-bits", 1, 8, s.color_bits, error))
     return usage(error, "encode");
   if (std::string target_error = targetOptions(args, s); !target_error.empty()) return usage(target_error, "encode");
   s.keep_normals = !args.has("--no-normals");
