@@ -115,23 +115,6 @@ TEST_P(GoldenStream, DecodesToItsMeshAndTheEncoderStillWritesIt) {
       << " differently from its golden stream: a format change needs a new version";
 }
 
-class BytesSink : public ByteSink {
- public:
-  explicit BytesSink(std::vector<uint8_t>& out) : out_(out) {}
-  Status append(std::span<const uint8_t> b) override {
-    out_.insert(out_.end(), b.begin(), b.end());
-    return Status::ok();
-  }
-  Status writeAt(uint64_t offset, std::span<const uint8_t> b) override {
-    if (offset + b.size() > out_.size()) return makeError(ErrorCode::kInternal, "writeAt past the end");
-    std::copy(b.begin(), b.end(), out_.begin() + static_cast<ptrdiff_t>(offset));
-    return Status::ok();
-  }
-
- private:
-  std::vector<uint8_t>& out_;
-};
-
 // A tile of an older version copied into a new container (as `merge` does with parts from an older build) keeps
 // its version and still decodes to its mesh.
 TEST_P(GoldenStream, OlderTilesKeepTheirVersionWhenCopied) {
@@ -146,7 +129,7 @@ TEST_P(GoldenStream, OlderTilesKeepTheirVersionWhenCopied) {
     auto payload = parseTileChunk(std::span(bytes).subspan(e.offset, e.chunk_bytes), e, path);
     ASSERT_TRUE(payload.isOk());
     std::vector<uint8_t> copy;
-    BytesSink sink(copy);
+    VectorSink sink(copy);
     ContainerWriter writer(sink, g.grid, g.layout);
     ASSERT_TRUE(writer.begin().isOk());
     ASSERT_TRUE(writer.addTile(0, codec, TileSummary{e.vertices, e.faces, e.lo, e.hi}, *payload, e.codec_version).isOk());

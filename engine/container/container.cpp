@@ -46,24 +46,6 @@ std::vector<uint8_t> chunkHeader(const TileEntry& e, std::span<const uint8_t> pa
   return out;
 }
 
-// In-memory sink for encodeContainer.
-class VectorSink : public ByteSink {
- public:
-  explicit VectorSink(std::vector<uint8_t>& out) : out_(out) {}
-  Status append(std::span<const uint8_t> b) override {
-    out_.insert(out_.end(), b.begin(), b.end());
-    return Status::ok();
-  }
-  Status writeAt(uint64_t offset, std::span<const uint8_t> b) override {
-    if (offset + b.size() > out_.size()) return makeError(ErrorCode::kInternal, "writeAt past the end");
-    std::copy(b.begin(), b.end(), out_.begin() + static_cast<ptrdiff_t>(offset));
-    return Status::ok();
-  }
-
- private:
-  std::vector<uint8_t>& out_;
-};
-
 }  // namespace
 
 std::vector<uint8_t> serializeHeader(const ContainerHeader& h) {

@@ -7,6 +7,7 @@
 // the caller's (jobs/), through ByteSink for writing and spans for reading.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <optional>
@@ -63,6 +64,24 @@ class ByteSink {
   virtual ~ByteSink() = default;
   virtual Status append(std::span<const uint8_t> bytes) = 0;
   virtual Status writeAt(uint64_t offset, std::span<const uint8_t> bytes) = 0;
+};
+
+// In memory (encodeContainer, tests).
+class VectorSink : public ByteSink {
+ public:
+  explicit VectorSink(std::vector<uint8_t>& out) : out_(out) {}
+  Status append(std::span<const uint8_t> b) override {
+    out_.insert(out_.end(), b.begin(), b.end());
+    return Status::ok();
+  }
+  Status writeAt(uint64_t offset, std::span<const uint8_t> b) override {
+    if (offset + b.size() > out_.size()) return makeError(ErrorCode::kInternal, "writeAt past the end");
+    std::copy(b.begin(), b.end(), out_.begin() + static_cast<ptrdiff_t>(offset));
+    return Status::ok();
+  }
+
+ private:
+  std::vector<uint8_t>& out_;
 };
 
 // Writes a container: begin(), addTile() per tile in the order they should appear, finish(). Totals in the
