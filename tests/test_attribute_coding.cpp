@@ -178,8 +178,9 @@ QuantizedMesh attributedSphere(int normal_bits, int channels, bool point_cloud) 
   const Mesh sphere = icosphere(4);
   const Grid grid = *makeGrid(boundingBox(sphere), 12);
   QuantizedMesh q = *quantizeMesh(sphere, grid, {}, nullptr);
-  const int m = (1 << (normal_bits - 1)) - 1, codes = (2 * m + 1) * (2 * m + 1);
-  const bool every_code = codes <= int(q.positions.size());
+  const int m = (1 << (normal_bits - 1)) - 1;
+  const int64_t codes = int64_t(2 * m + 1) * (2 * m + 1);
+  const bool every_code = codes <= int64_t(q.positions.size());
   std::mt19937 rng(normal_bits * 10 + channels);
   for (size_t i = 0; i < q.positions.size(); ++i) {
     const Vec3d& p = sphere.positions[i];
