@@ -193,11 +193,13 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
     std::vector<Rgba8> level(n, Rgba8{0, 0, 0, 0});
     std::fill(activity.begin(), activity.end(), u8(0));
     for (u32 v = 0; v < n; ++v) {
-      u32 sum[4] = {0, 0, 0, 0}, count = 0;
+      // One pass over the decoded neighbours: their levels (the prediction) and activity (the context).
+      u32 sum[4] = {0, 0, 0, 0}, count = 0, active = 0;
       for (u32 t : vf.of(v))
         for (u32 w : tris[t])
           if (w < v) {
             for (int c = 0; c < channels; ++c) sum[c] += level[w][c];
+            active += activity[w];
             ++count;
           }
       int pred[4];
@@ -206,7 +208,7 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
                   : v > 0  ? level[v - 1][c]
                   : c == 3 ? levels - 1
                            : levels / 2;
-      const int bin = neighbourBin(v);
+      const int bin = activityBin(active, count);
       const auto cm = [&](int channel, int green_class) -> SymbolModel& {
         return models.color[(bin * 4 + channel) * 4 + std::min(green_class, 3)];
       };
@@ -234,10 +236,6 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
     }
   }
 }
-
-}  // namespace scanpress::hierarchy
-
-namespace scanpress::hierarchy {
 
 // The attribute coding of a payload version: raw before kPredictedAttributes, predicted from it on.
 constexpr uint16_t kPredictedAttributes = 2;
