@@ -1,0 +1,485 @@
+// Relief resampling (see resample.h), after section 2.2 of Szymczak, Rossignac, King, "Piecewise Regular Meshes:
+// Construction and Compression" (../shared/papers/prm-piecewise-regular-meshes.md).
+//
+// As in the paper: every triangle is sliced by the grid's three line families into convex polygons, each inside one
+// grid triangle (a cell), and the polygons are cut into triangles by diagonals. Then vertices are removed by
+// half-edge collapses, one endpoint moving onto the other, never moving a boundary vertex or a grid vertex, never
+// making an edge that crosses a grid edge (unless it lies along one), never flipping a triangle (its projection
+// stays counterclockwise, so its normal stays within 90 degrees of the defining vector).
+//
+// Departures and choices the paper leaves open:
+// - The grid is on the integer grid (resample.h's HexLattice), so that the coder can rebuild every grid vertex's
+//   base coordinates exactly from its lattice coordinates.
+// - A vertex is classified against a grid line by its own lattice coordinates only (below, on, above), and a point
+//   where a line crosses an edge depends only on that edge and line; a point made on a line has that coordinate
+//   exactly (an integer), so the slicing is conforming across triangles and consistent at every level. Coordinates
+//   within 1e-7 of an integer are snapped to it, so that a grid point on (or within rounding of) an edge is one
+//   vertex, not one per line through it.
+// - "Never crosses a grid edge" is kept as: every triangle lies in one closed cell. Each vertex knows the cells it
+//   touches (from the pieces around it after slicing, which never change, since collapses keep positions), and a
+//   collapse is allowed only when each triangle it makes has a cell common to its three corners.
+// - Collapses keep the mesh a manifold: the link condition (the two endpoints share only the vertices opposite the
+//   edge), and only vertices whose triangles form one closed fan move.
+// - A vertex prefers to collapse onto a grid vertex, then onto a vertex on a grid line, then onto any other, nearest
+//   first; passes repeat until none is possible.
+#include "engine/remesh/resample.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <unordered_map>
+
+#include "engine/geometry.h"
+
+namespace scanpress {
+namespace {
+
+using u32 = uint32_t;
+using u64 = uint64_t;
+// Lattice coordinates this close to an integer are on that line: far above the rounding noise of coordinates up
+// to 2^32 grid units, far below any spacing.
+constexpr double kSnap = 1e-7;
+// Twice the smallest area, in lattice units (a cell has 1/2), of a triangle the slicing makes or a collapse leaves:
+// collinear corners give rounding noise around 1e-14.
+constexpr double kMinArea = 1e-9;
+
+struct SliceVertex {
+  double f[3];     // lattice coordinates s, t and u = s + t
+  uint8_t on = 0;  // bit F: exactly on a line of family F (f[F] is an integer)
+};
+
+struct CrossingKey {
+  u32 lo, hi;
+  int64_t line;  // family * 2^40 + k (k fits in 32 bits for any 32-bit grid)
+  bool operator==(const CrossingKey&) const = default;
+};
+struct CrossingHash {
+  size_t operator()(const CrossingKey& k) const {
+    u64 h = (u64(k.lo) << 32 | k.hi) * 0x9e3779b97f4a7c15ull;
+    return size_t(h ^ (u64(k.line) * 0xc2b2ae3d27d4eb4full) ^ (h >> 29));
+  }
+};
+
+// Cell ids: up cell (i, j) has lattice corners (i, j), (i+1, j), (i, j+1); down cell (i, j) has (i+1, j),
+// (i, j+1), (i+1, j+1).
+u64 cellId(int64_t i, int64_t j, bool up) {
+  return (u64(i + (int64_t(1) << 31)) << 33) | (u64(j + (int64_t(1) << 31)) << 1) | (up ? 1u : 0u);
+}
+
+double cross2(const double* a, const double* b, const double* c) {
+  return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+}
+
+class Resampler {
+ public:
+  Resampler(std::span<const Vec3d> positions, std::span<const Triangle> triangles, int relief,
+            const HexLattice& lattice, std::span<const uint8_t> fixed)
+      : triangles_in_(triangles), relief_(relief), lattice_(lattice), fixed_in_(fixed) {
+    out_.positions.assign(positions.begin(), positions.end());
+  }
+
+  Result<ResampledRelief> run() {
+    const size_t n = out_.positions.size();
+    verts_.resize(n);
+    for (size_t v = 0; v < n; ++v) {
+      const auto base = reliefBase(out_.positions[v], relief_);
+      const auto st = latticeCoordinates(lattice_, base);
+      const double G = lattice_.spacing, H = lattice_.row;
+      SliceVertex& s = verts_[v];
+      s.f[0] = st[0];
+      s.f[1] = st[1];
+      s.f[2] = (2 * H * base[0] + G * base[1]) / (2 * G * H);
+      completeLattice(s);
+    }
+    for (size_t t = 0; t < triangles_in_.size(); ++t) {
+      const Triangle& tri = triangles_in_[t];
+      const double a = cross2(verts_[tri[0]].f, verts_[tri[1]].f, verts_[tri[2]].f);
+      if (a < -kMinArea)
+        return makeError(ErrorCode::kInvalidArgument, "resampling relief " + std::to_string(relief_) + ": triangle " +
+                                                          std::to_string(t) + " faces away from it");
+      slice(tri, a <= kMinArea);  // (near) zero area: kept whole
+    }
+    findFixed();
+    collapseAll();
+    finish();
+    return std::move(out_);
+  }
+
+ private:
+  // A coordinate within kSnap of an integer is that integer: the vertex is on that line. Then a vertex on two line
+  // families is a lattice vertex, and its third coordinate is made exact too.
+  static void completeLattice(SliceVertex& s) {
+    for (int k = 0; k < 3; ++k) {
+      const double r = std::round(s.f[k]);
+      if (!(s.on & (1 << k)) && std::abs(s.f[k] - r) <= kSnap) {
+        s.f[k] = r;
+        s.on |= uint8_t(1 << k);
+      }
+    }
+    if ((s.on & 3) == 3) s.f[2] = s.f[0] + s.f[1];
+    else if ((s.on & 5) == 5) s.f[1] = s.f[2] - s.f[0];
+    else if ((s.on & 6) == 6) s.f[0] = s.f[2] - s.f[1];
+    else return;
+    s.on = 7;
+  }
+
+  int side(u32 v, int family, double k) const {
+    const double f = verts_[v].f[family];
+    return f < k ? -1 : f > k ? 1 : 0;
+  }
+
+  u32 crossing(u32 a, u32 b, int family, int64_t k) {
+    const u32 lo = std::min(a, b), hi = std::max(a, b);
+    const CrossingKey key{lo, hi, int64_t(family) * (int64_t(1) << 40) + k};
+    const auto it = crossings_.find(key);
+    if (it != crossings_.end()) return it->second;
+    const SliceVertex &p = verts_[lo], &q = verts_[hi];
+    const double lambda = (double(k) - p.f[family]) / (q.f[family] - p.f[family]);
+    SliceVertex x;
+    for (int g = 0; g < 3; ++g) {
+      if (g == family) {
+        x.f[g] = double(k);
+        x.on |= uint8_t(1 << g);
+      } else if ((p.on & q.on & (1 << g)) && p.f[g] == q.f[g]) {
+        x.f[g] = p.f[g];
+        x.on |= uint8_t(1 << g);
+      } else {
+        x.f[g] = p.f[g] + lambda * (q.f[g] - p.f[g]);
+      }
+    }
+    completeLattice(x);
+    const Vec3d& pa = out_.positions[lo];
+    const Vec3d& pb = out_.positions[hi];
+    const u32 id = u32(out_.positions.size());
+    out_.positions.push_back(vadd(pa, vmul(vsub(pb, pa), lambda)));
+    verts_.push_back(x);
+    crossings_.emplace(key, id);
+    return id;
+  }
+
+  void slice(const Triangle& tri, bool degenerate) {
+    std::vector<std::vector<u32>> pieces = {{tri[0], tri[1], tri[2]}}, next;
+    if (!degenerate)
+      for (int family = 0; family < 3; ++family) {
+        next.clear();
+        for (std::vector<u32>& poly : pieces) {
+          double lo = INFINITY, hi = -INFINITY;
+          for (u32 v : poly) {
+            lo = std::min(lo, verts_[v].f[family]);
+            hi = std::max(hi, verts_[v].f[family]);
+          }
+          std::vector<u32> current = std::move(poly);
+          for (int64_t k = int64_t(std::floor(lo)) + 1; double(k) < hi; ++k) {
+            if (!(double(k) > lo)) continue;
+            std::vector<u32> below, above;
+            bool any_below = false, any_above = false;
+            for (size_t i = 0; i < current.size(); ++i) {
+              const u32 p = current[i], q = current[(i + 1) % current.size()];
+              const int sp = side(p, family, double(k)), sq = side(q, family, double(k));
+              if (sp <= 0) below.push_back(p);
+              if (sp >= 0) above.push_back(p);
+              any_below = any_below || sp < 0;
+              any_above = any_above || sp > 0;
+              if (sp * sq < 0) {
+                const u32 x = crossing(p, q, family, k);
+                below.push_back(x);
+                above.push_back(x);
+              }
+            }
+            if (any_below && below.size() >= 3) next.push_back(std::move(below));
+            if (!any_above) {
+              current.clear();
+              break;
+            }
+            current = std::move(above);
+          }
+          if (current.size() >= 3) next.push_back(std::move(current));
+        }
+        pieces.swap(next);
+      }
+    for (const std::vector<u32>& poly : pieces) emitPiece(poly, degenerate);
+  }
+
+  void emitPiece(const std::vector<u32>& poly, bool degenerate) {
+    const size_t m = poly.size();
+    // The piece's cell, from its centroid.
+    double s = 0, t = 0;
+    for (u32 v : poly) {
+      s += verts_[v].f[0];
+      t += verts_[v].f[1];
+    }
+    s /= double(m);
+    t /= double(m);
+    const double fi = std::floor(s), fj = std::floor(t);
+    const u64 cell = cellId(int64_t(fi), int64_t(fj), (s - fi) + (t - fj) < 1);
+    // A fan from the first corner that makes no zero-area triangle (a convex polygon with points along its sides
+    // has one unless all its corners are on two sides of one corner); else a fan around the centroid.
+    size_t apex = m;
+    if (!degenerate) {
+      for (size_t a = 0; a < m && apex == m; ++a) {
+        bool good = true;
+        for (size_t i = 1; i + 1 < m && good; ++i)
+          good = cross2(verts_[poly[a]].f, verts_[poly[(a + i) % m]].f, verts_[poly[(a + i + 1) % m]].f) > kMinArea;
+        if (good) apex = a;
+      }
+    } else {
+      apex = 0;
+    }
+    if (apex < m) {
+      for (size_t i = 1; i + 1 < m; ++i)
+        addTriangle({poly[apex], poly[(apex + i) % m], poly[(apex + i + 1) % m]}, cell);
+      return;
+    }
+    Vec3d c{0, 0, 0};
+    SliceVertex cv;
+    cv.f[0] = cv.f[1] = cv.f[2] = 0;
+    for (u32 v : poly) {
+      c = vadd(c, out_.positions[v]);
+      for (int k = 0; k < 3; ++k) cv.f[k] += verts_[v].f[k] / double(m);
+    }
+    const u32 centre = u32(out_.positions.size());
+    out_.positions.push_back(vmul(c, 1.0 / double(m)));
+    verts_.push_back(cv);
+    for (size_t i = 0; i < m; ++i) addTriangle({centre, poly[i], poly[(i + 1) % m]}, cell);
+  }
+
+  void addTriangle(const Triangle& t, u64 cell) {
+    tris_.push_back(t);
+    tri_cell_.push_back(cell);
+  }
+
+  // Fixed vertices: the caller's, the ends of boundary or non-manifold edges, and vertices whose triangles do not
+  // form one closed fan.
+  void findFixed() {
+    const size_t n = out_.positions.size();
+    fixed_.assign(n, 0);
+    for (size_t v = 0; v < fixed_in_.size() && v < n; ++v) fixed_[v] = fixed_in_[v] ? 1 : 0;
+    incident_.assign(n, {});
+    dead_.assign(tris_.size(), 0);
+    for (u32 t = 0; t < tris_.size(); ++t)
+      for (u32 v : tris_[t]) incident_[v].push_back(t);
+    for (u32 v = 0; v < n; ++v)
+      if (!fixed_[v] && !incident_[v].empty() && !isClosedFan(v)) fixed_[v] = 1;
+    // Cells per vertex: those of the pieces around it (all six around a lattice vertex inside the relief).
+    cells_.assign(n, {});
+    for (u32 t = 0; t < tris_.size(); ++t)
+      for (u32 v : tris_[t]) {
+        auto& c = cells_[v];
+        if (std::find(c.begin(), c.end(), tri_cell_[t]) == c.end()) c.push_back(tri_cell_[t]);
+      }
+  }
+
+  // v's live triangles (v, a, b) link a -> b into one cycle through all of v's neighbours.
+  bool isClosedFan(u32 v) const {
+    std::vector<std::pair<u32, u32>> next;
+    for (u32 t : incident_[v]) {
+      if (dead_[t]) continue;
+      const Triangle& tri = tris_[t];
+      const int k = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
+      const u32 a = tri[size_t((k + 1) % 3)], b = tri[size_t((k + 2) % 3)];
+      if (a == v || b == v || a == b) return false;
+      next.push_back({a, b});
+    }
+    std::sort(next.begin(), next.end());
+    for (size_t i = 1; i < next.size(); ++i)
+      if (next[i].first == next[i - 1].first) return false;
+    if (next.size() < 3) return false;
+    u32 a = next[0].first;
+    for (size_t steps = 0; steps < next.size(); ++steps) {
+      const auto it = std::lower_bound(next.begin(), next.end(), std::pair<u32, u32>{a, 0});
+      if (it == next.end() || it->first != a) return false;
+      a = it->second;
+      if (a == next[0].first) return steps + 1 == next.size();
+    }
+    return false;
+  }
+
+  bool shareCell(u32 a, u32 b, u32 c) const {
+    for (u64 x : cells_[a])
+      if (std::find(cells_[b].begin(), cells_[b].end(), x) != cells_[b].end() &&
+          std::find(cells_[c].begin(), cells_[c].end(), x) != cells_[c].end())
+        return true;
+    return false;
+  }
+
+  int rank(u32 v) const { return (verts_[v].on == 7) ? 0 : verts_[v].on ? 1 : 2; }
+  bool removable(u32 v) const { return !fixed_[v] && verts_[v].on != 7; }
+
+  // Collapses u onto w if allowed.
+  bool tryCollapse(u32 u, u32 w) {
+    std::vector<u32> nu, nw, opposite;
+    for (u32 t : incident_[u]) {
+      if (dead_[t]) continue;
+      const Triangle& tri = tris_[t];
+      bool has_w = false;
+      for (u32 x : tri) has_w = has_w || x == w;
+      for (u32 x : tri)
+        if (x != u) {
+          nu.push_back(x);
+          if (has_w && x != w) opposite.push_back(x);
+        }
+    }
+    for (u32 t : incident_[w]) {
+      if (dead_[t]) continue;
+      for (u32 x : tris_[t])
+        if (x != w) nw.push_back(x);
+    }
+    std::sort(nu.begin(), nu.end());
+    nu.erase(std::unique(nu.begin(), nu.end()), nu.end());
+    std::sort(nw.begin(), nw.end());
+    nw.erase(std::unique(nw.begin(), nw.end()), nw.end());
+    std::sort(opposite.begin(), opposite.end());
+    std::vector<u32> common;
+    std::set_intersection(nu.begin(), nu.end(), nw.begin(), nw.end(), std::back_inserter(common));
+    if (common != opposite || opposite.size() != 2) return false;
+    // Every moved triangle stays counterclockwise in projection and inside one cell.
+    for (u32 t : incident_[u]) {
+      if (dead_[t]) continue;
+      Triangle tri = tris_[t];
+      bool has_w = false;
+      for (u32& x : tri) {
+        has_w = has_w || x == w;
+        if (x == u) x = w;
+      }
+      if (has_w) continue;
+      if (!(cross2(verts_[tri[0]].f, verts_[tri[1]].f, verts_[tri[2]].f) > kMinArea)) return false;
+      if (!shareCell(tri[0], tri[1], tri[2])) return false;
+    }
+    for (u32 t : incident_[u]) {
+      if (dead_[t]) continue;
+      Triangle& tri = tris_[t];
+      bool has_w = false;
+      for (u32 x : tri) has_w = has_w || x == w;
+      if (has_w) {
+        dead_[t] = 1;
+        continue;
+      }
+      for (u32& x : tri)
+        if (x == u) x = w;
+      incident_[w].push_back(t);
+    }
+    incident_[u].clear();
+    ++out_.collapses;
+    return true;
+  }
+
+  void collapseAll() {
+    const size_t n = out_.positions.size();
+    for (int pass = 0; pass < 64; ++pass) {
+      bool any = false;
+      for (u32 u = 0; u < n; ++u) {
+        if (!removable(u) || incident_[u].empty()) continue;
+        // Candidates: u's neighbours, grid vertices first, then vertices on a line, nearest first.
+        std::vector<std::pair<std::pair<int, double>, u32>> candidates;
+        for (u32 t : incident_[u]) {
+          if (dead_[t]) continue;
+          for (u32 w : tris_[t])
+            if (w != u) candidates.push_back({{rank(w), vlen(vsub(out_.positions[w], out_.positions[u]))}, w});
+        }
+        std::sort(candidates.begin(), candidates.end());
+        candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+        for (const auto& c : candidates)
+          if (tryCollapse(u, c.second)) {
+            any = true;
+            break;
+          }
+      }
+      if (!any) break;
+      // Compact the incidence lists of their dead triangles.
+      for (auto& list : incident_)
+        list.erase(std::remove_if(list.begin(), list.end(), [&](u32 t) { return dead_[t] != 0; }), list.end());
+    }
+  }
+
+  void finish() {
+    const size_t n = out_.positions.size();
+    out_.kind.assign(n, 0);
+    out_.lattice_ij.assign(n, {0, 0});
+    for (size_t v = 0; v < n; ++v) {
+      const SliceVertex& s = verts_[v];
+      out_.kind[v] = uint8_t((s.on == 7 ? kLatticeVertex
+                              : s.on    ? kOnGridLine
+                                        : kFreeVertex) |
+                             (fixed_[v] ? kFixedVertex : 0));
+      if (s.on == 7) out_.lattice_ij[v] = {int32_t(s.f[0]), int32_t(s.f[1])};
+    }
+    for (size_t t = 0; t < tris_.size(); ++t) {
+      if (dead_[t]) continue;
+      const Triangle& tri = tris_[t];
+      out_.triangles.push_back(tri);
+      bool regular = true;
+      for (u32 v : tri) regular = regular && verts_[v].on == 7;
+      if (regular) {  // the corners are one cell's: all within one step, one of the two cell shapes
+        int64_t si = 0, sj = 0, mini = INT64_MAX, minj = INT64_MAX;
+        for (u32 v : tri) {
+          si += out_.lattice_ij[v][0];
+          sj += out_.lattice_ij[v][1];
+          mini = std::min<int64_t>(mini, out_.lattice_ij[v][0]);
+          minj = std::min<int64_t>(minj, out_.lattice_ij[v][1]);
+        }
+        const int64_t di = si - 3 * mini, dj = sj - 3 * minj;
+        regular = (di == 1 && dj == 1) || (di == 2 && dj == 2);
+        if (regular)
+          for (u32 v : tri)
+            regular = regular && out_.lattice_ij[v][0] - mini <= 1 && out_.lattice_ij[v][1] - minj <= 1;
+      }
+      out_.regular.push_back(regular ? 1 : 0);
+    }
+  }
+
+  std::span<const Triangle> triangles_in_;
+  const int relief_;
+  const HexLattice lattice_;
+  std::span<const uint8_t> fixed_in_;
+  ResampledRelief out_;
+  std::vector<SliceVertex> verts_;
+  std::unordered_map<CrossingKey, u32, CrossingHash> crossings_;
+  std::vector<Triangle> tris_;
+  std::vector<u64> tri_cell_;
+  std::vector<uint8_t> dead_, fixed_;
+  std::vector<std::vector<u32>> incident_;
+  std::vector<std::vector<u64>> cells_;
+};
+
+}  // namespace
+
+HexLattice HexLattice::withSpacing(uint32_t spacing) {
+  HexLattice l;
+  l.spacing = spacing;
+  l.row = uint32_t(std::lround(double(spacing) * std::sqrt(3.0) / 2));
+  return l;
+}
+
+std::array<double, 2> reliefBase(const Vec3d& p, int relief) {
+  const int a = relief / 2;
+  const double b0 = p[size_t((a + 1) % 3)], b1 = p[size_t((a + 2) % 3)];
+  return relief % 2 == 0 ? std::array<double, 2>{b0, b1} : std::array<double, 2>{b1, b0};
+}
+
+double reliefHeight(const Vec3d& p, int relief) {
+  return relief % 2 == 0 ? p[size_t(relief / 2)] : -p[size_t(relief / 2)];
+}
+
+std::array<double, 2> latticeCoordinates(const HexLattice& lattice, const std::array<double, 2>& base) {
+  const double G = lattice.spacing, H = lattice.row;
+  return {(2 * H * base[0] - G * base[1]) / (2 * G * H), base[1] / H};
+}
+
+Result<ResampledRelief> resampleRelief(std::span<const Vec3d> positions, std::span<const Triangle> triangles,
+                                       int relief, const HexLattice& lattice, std::span<const uint8_t> fixed) {
+  if (lattice.spacing < 2 || lattice.spacing % 2 != 0 || lattice.row == 0)
+    return makeError(ErrorCode::kInvalidArgument,
+                     "resampling: grid spacing " + std::to_string(lattice.spacing) + " is not an even number >= 2");
+  if (relief < 0 || relief >= 6)
+    return makeError(ErrorCode::kInvalidArgument, "resampling: relief id " + std::to_string(relief));
+  if (!fixed.empty() && fixed.size() != positions.size())
+    return makeError(ErrorCode::kInvalidArgument, "resampling: fixed flags do not match the vertices");
+  for (size_t t = 0; t < triangles.size(); ++t)
+    for (uint32_t v : triangles[t])
+      if (v >= positions.size())
+        return makeError(ErrorCode::kInvalidArgument,
+                         "resampling: triangle " + std::to_string(t) + " uses vertex " + std::to_string(v));
+  return Resampler(positions, triangles, relief, lattice, fixed).run();
+}
+
+}  // namespace scanpress

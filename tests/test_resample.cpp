@@ -1,0 +1,255 @@
+// Relief resampling (engine/remesh/resample.h), PRM section 2.2, against analytic height fields: the resampled
+// relief covers exactly the input's projection (no flip, no gap, no overlap added), keeps its boundary and the
+// caller's fixed vertices, leaves no removable vertex inside, every triangle off the boundary projects onto a grid
+// triangle, and every grid vertex lies on the input surface. Also a spiral ramp whose projection overlaps itself,
+// vertices exactly on grid lines and grid points, zero-area triangles, and bad arguments.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+#include <map>
+#include <random>
+
+#include "engine/geometry.h"
+#include "engine/remesh/relief.h"
+#include "engine/remesh/resample.h"
+
+namespace scanpress {
+namespace {
+
+struct Patch {
+  std::vector<Vec3d> positions;
+  std::vector<Triangle> triangles;
+};
+
+// A (cells x cells) grid over [x0, x0 + size]^2 in relief r's base plane with height h(x, y), cells split along
+// alternating diagonals, counterclockwise in the base plane; `jitter` moves interior points by up to that share of
+// a cell (then heights are taken at the moved points).
+template <typename Height>
+Patch heightField(int relief, int cells, double x0, double size, Height h, double jitter = 0, uint32_t seed = 1) {
+  Patch p;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-jitter, jitter);
+  const double step = size / cells;
+  for (int j = 0; j <= cells; ++j)
+    for (int i = 0; i <= cells; ++i) {
+      double x = x0 + i * step, y = x0 + j * step;
+      if (i > 0 && j > 0 && i < cells && j < cells) {
+        x += u(rng) * step;
+        y += u(rng) * step;
+      }
+      // Base (x, y) and height back to 3D: the inverse of reliefBase / reliefHeight.
+      const int a = relief / 2;
+      Vec3d q{};
+      const double b0 = relief % 2 == 0 ? x : y, b1 = relief % 2 == 0 ? y : x;
+      q[size_t((a + 1) % 3)] = b0;
+      q[size_t((a + 2) % 3)] = b1;
+      q[size_t(a)] = (relief % 2 == 0 ? 1 : -1) * h(x, y);
+      p.positions.push_back(q);
+    }
+  const auto at = [&](int i, int j) { return uint32_t(j * (cells + 1) + i); };
+  for (int j = 0; j < cells; ++j)
+    for (int i = 0; i < cells; ++i) {
+      if ((i + j) % 2 == 0) {
+        p.triangles.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
+        p.triangles.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+      } else {
+        p.triangles.push_back({at(i, j), at(i + 1, j), at(i, j + 1)});
+        p.triangles.push_back({at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)});
+      }
+    }
+  return p;
+}
+
+double projectedArea(const std::vector<Vec3d>& p, const std::vector<Triangle>& triangles, int relief) {
+  double sum = 0;
+  for (const Triangle& t : triangles) {
+    const auto a = reliefBase(p[t[0]], relief), b = reliefBase(p[t[1]], relief), c = reliefBase(p[t[2]], relief);
+    sum += 0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]));
+  }
+  return sum;
+}
+
+// The checks every resampled relief must pass.
+void expectValid(const Patch& in, const ResampledRelief& r, int relief, const HexLattice& lattice,
+                 const std::vector<uint8_t>& fixed = {}) {
+  ASSERT_EQ(r.regular.size(), r.triangles.size());
+  ASSERT_EQ(r.kind.size(), r.positions.size());
+  for (size_t v = 0; v < in.positions.size(); ++v) ASSERT_EQ(r.positions[v], in.positions[v]);
+  const double in_area = projectedArea(in.positions, in.triangles, relief);
+  EXPECT_NEAR(projectedArea(r.positions, r.triangles, relief), in_area, 1e-9 * in_area);
+  std::vector<uint8_t> used(r.positions.size(), 0);
+  for (size_t i = 0; i < r.triangles.size(); ++i) {
+    const Triangle& t = r.triangles[i];
+    const auto a = reliefBase(r.positions[t[0]], relief), b = reliefBase(r.positions[t[1]], relief),
+               c = reliefBase(r.positions[t[2]], relief);
+    EXPECT_GT((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]), 0) << "triangle " << i << " flipped";
+    bool on_boundary = false;
+    for (uint32_t v : t) {
+      used[v] = 1;
+      on_boundary = on_boundary || (r.kind[v] & kFixedVertex);
+    }
+    if (!on_boundary) {
+      EXPECT_TRUE(r.regular[i]) << "interior triangle " << i << " is not a grid triangle";
+    }
+    if (r.regular[i])  // its corners are grid points of one cell, at the integer base coordinates of the lattice
+      for (uint32_t v : t) {
+        const auto ij = r.lattice_ij[v];
+        const auto base = reliefBase(r.positions[v], relief);
+        EXPECT_NEAR(base[0], ij[0] * double(lattice.spacing) + ij[1] * double(lattice.spacing / 2), 1e-6);
+        EXPECT_NEAR(base[1], ij[1] * double(lattice.row), 1e-6);
+      }
+  }
+  for (size_t v = 0; v < r.positions.size(); ++v) {
+    if (!used[v]) continue;
+    EXPECT_TRUE((r.kind[v] & kFixedVertex) || (r.kind[v] & 3) == kLatticeVertex)
+        << "removable vertex " << v << " left inside";
+  }
+  for (size_t v = 0; v < fixed.size(); ++v)
+    if (fixed[v]) {
+      EXPECT_TRUE(used[v]) << "fixed vertex " << v << " removed";
+      EXPECT_TRUE(r.kind[v] & kFixedVertex);
+    }
+  // The input's boundary vertices are all still there.
+  std::map<std::pair<uint32_t, uint32_t>, int> edges;
+  for (const Triangle& t : in.triangles)
+    for (int k = 0; k < 3; ++k) ++edges[std::minmax(t[size_t(k)], t[size_t((k + 1) % 3)])];
+  for (const auto& [e, n] : edges)
+    if (n == 1) {
+      EXPECT_TRUE(used[e.first]);
+      EXPECT_TRUE(used[e.second]);
+    }
+}
+
+TEST(Resample, PlaneBecomesGridTrianglesInsideItsUnchangedBoundary) {
+  for (int relief = 0; relief < kReliefCount; ++relief) {
+    SCOPED_TRACE("relief " + std::to_string(relief));
+    const Patch in = heightField(
+        relief, 24, 100, 1000, [](double x, double y) { return 0.3 * x - 0.2 * y + 500; }, 0.3);
+    const HexLattice lattice = HexLattice::withSpacing(40);
+    auto r = resampleRelief(in.positions, in.triangles, relief, lattice, {});
+    ASSERT_TRUE(r.isOk()) << r.status().toString();
+    expectValid(in, *r, relief, lattice);
+    // Grid vertices lie on the plane.
+    size_t regular = 0;
+    for (size_t v = 0; v < r->positions.size(); ++v)
+      if ((r->kind[v] & 3) == kLatticeVertex) {
+        const auto b = reliefBase(r->positions[v], relief);
+        EXPECT_NEAR(reliefHeight(r->positions[v], relief), 0.3 * b[0] - 0.2 * b[1] + 500, 1e-6);
+      }
+    for (uint8_t g : r->regular) regular += g;
+    // Cells wholly inside the square: its area less a band of about two cells along the rim.
+    const double cell = 0.5 * lattice.spacing * lattice.row;
+    EXPECT_GT(double(regular), (1000.0 - 4 * lattice.spacing) * (1000.0 - 4 * lattice.spacing) / cell);
+  }
+}
+
+TEST(Resample, CurvedCapKeepsItsGridVerticesOnTheInputSurface) {
+  const double R = 2000;
+  const auto cap = [&](double x, double y) {
+    return std::sqrt(R * R - (x - 1000) * (x - 1000) - (y - 1000) * (y - 1000));
+  };
+  const int cells = 32;
+  const Patch in = heightField(4, cells, 400, 1200, cap);  // no jitter: the input's height is found by its cell
+  const HexLattice lattice = HexLattice::withSpacing(30);
+  auto r = resampleRelief(in.positions, in.triangles, 4, lattice, {});
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  expectValid(in, *r, 4, lattice);
+  const double step = 1200.0 / cells;
+  size_t checked = 0;
+  for (size_t v = 0; v < r->positions.size(); ++v) {
+    if ((r->kind[v] & 3) != kLatticeVertex) continue;
+    const Vec3d& p = r->positions[v];
+    // The input's piecewise linear height at (x, y): the triangle of its cell that holds the point.
+    const int i = std::min(cells - 1, int((p[0] - 400) / step)), j = std::min(cells - 1, int((p[1] - 400) / step));
+    const double fx = (p[0] - 400) / step - i, fy = (p[1] - 400) / step - j;
+    const auto h = [&](int a, int b) { return cap(400 + a * step, 400 + b * step); };
+    double z;
+    if ((i + j) % 2 == 0)
+      z = fx >= fy ? h(i, j) + fx * (h(i + 1, j) - h(i, j)) + fy * (h(i + 1, j + 1) - h(i + 1, j))
+                   : h(i, j) + fy * (h(i, j + 1) - h(i, j)) + fx * (h(i + 1, j + 1) - h(i, j + 1));
+    else
+      z = fx + fy <= 1 ? h(i, j) + fx * (h(i + 1, j) - h(i, j)) + fy * (h(i, j + 1) - h(i, j))
+                       : h(i + 1, j + 1) + (1 - fx) * (h(i, j + 1) - h(i + 1, j + 1)) +
+                             (1 - fy) * (h(i + 1, j) - h(i + 1, j + 1));
+    EXPECT_NEAR(p[2], z, 1e-6) << "grid vertex " << v;
+    ++checked;
+  }
+  EXPECT_GT(checked, 1000u);
+}
+
+// A spiral ramp z = c * theta over an annulus, one and a half turns: its projection covers half the annulus twice.
+// Each layer gets its own grid vertices, on the ramp.
+TEST(Resample, SelfOverlappingSpiralRampResamplesEachLayer) {
+  const double c = 120, r0 = 300, r1 = 900;
+  const int nr = 12, nt = 180;
+  Patch in;
+  for (int k = 0; k <= nt; ++k)
+    for (int i = 0; i <= nr; ++i) {
+      const double th = 3 * std::numbers::pi * k / nt, rad = r0 + (r1 - r0) * i / nr;
+      in.positions.push_back({2000 + rad * std::cos(th), 2000 + rad * std::sin(th), 500 + c * th});
+    }
+  const auto at = [&](int k, int i) { return uint32_t(k * (nr + 1) + i); };
+  for (int k = 0; k < nt; ++k)
+    for (int i = 0; i < nr; ++i) {
+      in.triangles.push_back({at(k, i), at(k, i + 1), at(k + 1, i + 1)});
+      in.triangles.push_back({at(k, i), at(k + 1, i + 1), at(k + 1, i)});
+    }
+  const HexLattice lattice = HexLattice::withSpacing(24);
+  auto r = resampleRelief(in.positions, in.triangles, 4, lattice, {});
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  expectValid(in, *r, 4, lattice);
+  size_t lower = 0, upper = 0;
+  for (size_t v = 0; v < r->positions.size(); ++v) {
+    if ((r->kind[v] & 3) != kLatticeVertex) continue;
+    const Vec3d& p = r->positions[v];
+    double th = std::atan2(p[1] - 2000, p[0] - 2000);
+    if (th < 0) th += 2 * std::numbers::pi;
+    // On the ramp: its height is c times one of the angles of its direction (chords sag by under 1 unit).
+    const double turns = (p[2] - 500) / c - th;
+    const double k = std::round(turns / (2 * std::numbers::pi));
+    EXPECT_NEAR(p[2], 500 + c * (th + 2 * std::numbers::pi * k), 2.0) << "grid vertex " << v;
+    (k == 0 ? lower : upper) += 1;
+  }
+  EXPECT_GT(lower, 500u);
+  EXPECT_GT(upper, 200u);
+}
+
+TEST(Resample, FixedVerticesStayAndVerticesOnGridLinesAndPointsAreHandled) {
+  // Corners on the integer grid with the lattice's spacing: many input vertices lie exactly on grid lines or are
+  // grid points. A few interior vertices are fixed by the caller.
+  const HexLattice lattice = HexLattice::withSpacing(20);
+  Patch in = heightField(4, 20, 0, 20.0 * 20, [](double x, double y) { return std::floor(0.1 * x + 0.05 * y); });
+  std::vector<uint8_t> fixed(in.positions.size(), 0);
+  fixed[5 * 21 + 5] = fixed[10 * 21 + 13] = fixed[15 * 21 + 7] = 1;
+  auto r = resampleRelief(in.positions, in.triangles, 4, lattice, fixed);
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  expectValid(in, *r, 4, lattice, fixed);
+  // A zero-area triangle (a fin on three collinear points) is kept and does not stop the rest.
+  Patch fin = heightField(
+      4, 10, 0, 400, [](double x, double) { return 0.2 * x; }, 0.2, 5);
+  const uint32_t a = fin.triangles[40][0], b = fin.triangles[40][1];
+  fin.positions.push_back(vmul(vadd(fin.positions[a], fin.positions[b]), 0.5));
+  fin.triangles.push_back({a, b, uint32_t(fin.positions.size() - 1)});
+  r = resampleRelief(fin.positions, fin.triangles, 4, lattice, {});
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  EXPECT_NEAR(projectedArea(r->positions, r->triangles, 4), projectedArea(fin.positions, fin.triangles, 4), 1e-6);
+}
+
+TEST(Resample, RefusesBadArguments) {
+  const Patch in = heightField(4, 4, 0, 100, [](double, double) { return 1.0; });
+  EXPECT_FALSE(resampleRelief(in.positions, in.triangles, 4, HexLattice::withSpacing(3), {}).isOk());
+  EXPECT_FALSE(resampleRelief(in.positions, in.triangles, 4, HexLattice::withSpacing(0), {}).isOk());
+  EXPECT_FALSE(resampleRelief(in.positions, in.triangles, 6, HexLattice::withSpacing(10), {}).isOk());
+  EXPECT_FALSE(resampleRelief(in.positions, in.triangles, 4, HexLattice::withSpacing(10), std::vector<uint8_t>(3))
+                   .isOk());
+  auto away = resampleRelief(in.positions, in.triangles, 5, HexLattice::withSpacing(10), {});  // faces +z, not -z
+  ASSERT_FALSE(away.isOk());
+  EXPECT_NE(away.status().message().find("faces away"), std::string::npos);
+  Patch bad = in;
+  bad.triangles[2][2] = 99;
+  EXPECT_FALSE(resampleRelief(bad.positions, bad.triangles, 4, HexLattice::withSpacing(10), {}).isOk());
+}
+
+}  // namespace
+}  // namespace scanpress
