@@ -75,7 +75,16 @@ void expectValid(const Patch& in, const ResampledRelief& r, int relief, const He
                  const std::vector<uint8_t>& fixed = {}) {
   ASSERT_EQ(r.regular.size(), r.triangles.size());
   ASSERT_EQ(r.kind.size(), r.positions.size());
-  for (size_t v = 0; v < in.positions.size(); ++v) ASSERT_EQ(r.positions[v], in.positions[v]);
+  ASSERT_EQ(r.input_vertex.size(), r.positions.size());
+  // Input vertices keep their positions; `kept` says which are still there.
+  std::vector<uint8_t> kept(in.positions.size(), 0);
+  for (size_t v = 0; v < r.positions.size(); ++v)
+    if (r.input_vertex[v] != UINT32_MAX) {
+      ASSERT_LT(r.input_vertex[v], in.positions.size());
+      EXPECT_EQ(r.positions[v], in.positions[r.input_vertex[v]]);
+      EXPECT_FALSE(kept[r.input_vertex[v]]) << "input vertex " << r.input_vertex[v] << " twice";
+      kept[r.input_vertex[v]] = 1;
+    }
   const double in_area = projectedArea(in.positions, in.triangles, relief);
   EXPECT_NEAR(projectedArea(r.positions, r.triangles, relief), in_area, 1e-9 * in_area);
   std::vector<uint8_t> used(r.positions.size(), 0);
@@ -101,14 +110,13 @@ void expectValid(const Patch& in, const ResampledRelief& r, int relief, const He
       }
   }
   for (size_t v = 0; v < r.positions.size(); ++v) {
-    if (!used[v]) continue;
+    EXPECT_TRUE(used[v]) << "vertex " << v << " unused";
     EXPECT_TRUE((r.kind[v] & kFixedVertex) || (r.kind[v] & 3) == kLatticeVertex)
         << "removable vertex " << v << " left inside";
   }
   for (size_t v = 0; v < fixed.size(); ++v)
     if (fixed[v]) {
-      EXPECT_TRUE(used[v]) << "fixed vertex " << v << " removed";
-      EXPECT_TRUE(r.kind[v] & kFixedVertex);
+      EXPECT_TRUE(kept[v]) << "fixed vertex " << v << " removed";
     }
   // The input's boundary vertices are all still there.
   std::map<std::pair<uint32_t, uint32_t>, int> edges;
@@ -116,8 +124,8 @@ void expectValid(const Patch& in, const ResampledRelief& r, int relief, const He
     for (int k = 0; k < 3; ++k) ++edges[std::minmax(t[size_t(k)], t[size_t((k + 1) % 3)])];
   for (const auto& [e, n] : edges)
     if (n == 1) {
-      EXPECT_TRUE(used[e.first]);
-      EXPECT_TRUE(used[e.second]);
+      EXPECT_TRUE(kept[e.first]);
+      EXPECT_TRUE(kept[e.second]);
     }
 }
 

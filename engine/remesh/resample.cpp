@@ -39,6 +39,7 @@ using u64 = uint64_t;
 // Lattice coordinates this close to an integer are on that line: far above the rounding noise of coordinates up
 // to 2^32 grid units, far below any spacing.
 constexpr double kSnap = 1e-7;
+constexpr u32 kNone = UINT32_MAX;
 // Twice the smallest area, in lattice units (a cell has 1/2), of a triangle the slicing makes or a collapse leaves:
 // collinear corners give rounding noise around 1e-14.
 constexpr double kMinArea = 1e-9;
@@ -74,15 +75,31 @@ class Resampler {
  public:
   Resampler(std::span<const Vec3d> positions, std::span<const Triangle> triangles, int relief,
             const HexLattice& lattice, std::span<const uint8_t> fixed)
-      : triangles_in_(triangles), relief_(relief), lattice_(lattice), fixed_in_(fixed) {
-    out_.positions.assign(positions.begin(), positions.end());
+      : relief_(relief), lattice_(lattice) {
+    // The used vertices, numbered in order of first use.
+    std::unordered_map<u32, u32> local;
+    local.reserve(triangles.size());
+    triangles_in_.reserve(triangles.size());
+    for (const Triangle& t : triangles) {
+      Triangle l;
+      for (size_t k = 0; k < 3; ++k) {
+        const auto [it, added] = local.emplace(t[k], u32(positions_.size()));
+        if (added) {
+          positions_.push_back(positions[t[k]]);
+          input_vertex_.push_back(t[k]);
+          fixed_in_.push_back(!fixed.empty() && fixed[t[k]] ? 1 : 0);
+        }
+        l[k] = it->second;
+      }
+      triangles_in_.push_back(l);
+    }
   }
 
   Result<ResampledRelief> run() {
-    const size_t n = out_.positions.size();
+    const size_t n = positions_.size();
     verts_.resize(n);
     for (size_t v = 0; v < n; ++v) {
-      const auto base = reliefBase(out_.positions[v], relief_);
+      const auto base = reliefBase(positions_[v], relief_);
       const auto st = latticeCoordinates(lattice_, base);
       const double G = lattice_.spacing, H = lattice_.row;
       SliceVertex& s = verts_[v];
@@ -148,10 +165,10 @@ class Resampler {
       }
     }
     completeLattice(x);
-    const Vec3d& pa = out_.positions[lo];
-    const Vec3d& pb = out_.positions[hi];
-    const u32 id = u32(out_.positions.size());
-    out_.positions.push_back(vadd(pa, vmul(vsub(pb, pa), lambda)));
+    const Vec3d& pa = positions_[lo];
+    const Vec3d& pb = positions_[hi];
+    const u32 id = u32(positions_.size());
+    positions_.push_back(vadd(pa, vmul(vsub(pb, pa), lambda)));
     verts_.push_back(x);
     crossings_.emplace(key, id);
     return id;
@@ -234,11 +251,11 @@ class Resampler {
     SliceVertex cv;
     cv.f[0] = cv.f[1] = cv.f[2] = 0;
     for (u32 v : poly) {
-      c = vadd(c, out_.positions[v]);
+      c = vadd(c, positions_[v]);
       for (int k = 0; k < 3; ++k) cv.f[k] += verts_[v].f[k] / double(m);
     }
-    const u32 centre = u32(out_.positions.size());
-    out_.positions.push_back(vmul(c, 1.0 / double(m)));
+    const u32 centre = u32(positions_.size());
+    positions_.push_back(vmul(c, 1.0 / double(m)));
     verts_.push_back(cv);
     for (size_t i = 0; i < m; ++i) addTriangle({centre, poly[i], poly[(i + 1) % m]}, cell);
   }
@@ -251,9 +268,9 @@ class Resampler {
   // Fixed vertices: the caller's, the ends of boundary or non-manifold edges, and vertices whose triangles do not
   // form one closed fan.
   void findFixed() {
-    const size_t n = out_.positions.size();
+    const size_t n = positions_.size();
     fixed_.assign(n, 0);
-    for (size_t v = 0; v < fixed_in_.size() && v < n; ++v) fixed_[v] = fixed_in_[v] ? 1 : 0;
+    std::copy(fixed_in_.begin(), fixed_in_.end(), fixed_.begin());
     incident_.assign(n, {});
     dead_.assign(tris_.size(), 0);
     for (u32 t = 0; t < tris_.size(); ++t)
@@ -306,52 +323,50 @@ class Resampler {
   bool removable(u32 v) const { return !fixed_[v] && verts_[v].on != 7; }
 
   // Collapses u onto w if allowed.
+  // Collapses u onto w if allowed. incident_ lists hold live triangles only.
   bool tryCollapse(u32 u, u32 w) {
-    std::vector<u32> nu, nw, opposite;
-    for (u32 t : incident_[u]) {
-      if (dead_[t]) continue;
-      const Triangle& tri = tris_[t];
-      bool has_w = false;
-      for (u32 x : tri) has_w = has_w || x == w;
-      for (u32 x : tri)
-        if (x != u) {
-          nu.push_back(x);
-          if (has_w && x != w) opposite.push_back(x);
-        }
-    }
-    for (u32 t : incident_[w]) {
-      if (dead_[t]) continue;
-      for (u32 x : tris_[t])
-        if (x != w) nw.push_back(x);
-    }
-    std::sort(nu.begin(), nu.end());
-    nu.erase(std::unique(nu.begin(), nu.end()), nu.end());
-    std::sort(nw.begin(), nw.end());
-    nw.erase(std::unique(nw.begin(), nw.end()), nw.end());
-    std::sort(opposite.begin(), opposite.end());
-    std::vector<u32> common;
-    std::set_intersection(nu.begin(), nu.end(), nw.begin(), nw.end(), std::back_inserter(common));
-    if (common != opposite || opposite.size() != 2) return false;
     // Every moved triangle stays counterclockwise in projection and inside one cell.
+    opposite_.clear();
     for (u32 t : incident_[u]) {
-      if (dead_[t]) continue;
       Triangle tri = tris_[t];
       bool has_w = false;
       for (u32& x : tri) {
         has_w = has_w || x == w;
         if (x == u) x = w;
       }
-      if (has_w) continue;
+      if (has_w) {
+        for (u32 x : tri)
+          if (x != w) opposite_.push_back(x);
+        continue;
+      }
       if (!(cross2(verts_[tri[0]].f, verts_[tri[1]].f, verts_[tri[2]].f) > kMinArea)) return false;
       if (!shareCell(tri[0], tri[1], tri[2])) return false;
     }
+    // The link condition: u and w share exactly the two vertices opposite their edge.
+    if (opposite_.size() != 2 || opposite_[0] == opposite_[1]) return false;
+    neighbours_u_.clear();
+    for (u32 t : incident_[u])
+      for (u32 x : tris_[t])
+        if (x != u) neighbours_u_.push_back(x);
+    std::sort(neighbours_u_.begin(), neighbours_u_.end());
+    neighbours_u_.erase(std::unique(neighbours_u_.begin(), neighbours_u_.end()), neighbours_u_.end());
+    for (u32 t : incident_[w])
+      for (u32 x : tris_[t])
+        if (x != w && x != u && std::binary_search(neighbours_u_.begin(), neighbours_u_.end(), x) &&
+            x != opposite_[0] && x != opposite_[1])
+          return false;
+    // Collapse: u's triangles on the edge die, the others take w for u.
     for (u32 t : incident_[u]) {
-      if (dead_[t]) continue;
       Triangle& tri = tris_[t];
       bool has_w = false;
       for (u32 x : tri) has_w = has_w || x == w;
       if (has_w) {
         dead_[t] = 1;
+        for (u32 x : tri)
+          if (x != u) {
+            auto& list = incident_[x];
+            list.erase(std::remove(list.begin(), list.end(), t), list.end());
+          }
         continue;
       }
       for (u32& x : tri)
@@ -363,52 +378,71 @@ class Resampler {
     return true;
   }
 
+  // A work list: every removable vertex once, then again whenever a collapse changes its neighbourhood (a vertex
+  // that can collapse nowhere waits until then).
   void collapseAll() {
-    const size_t n = out_.positions.size();
-    for (int pass = 0; pass < 64; ++pass) {
-      bool any = false;
-      for (u32 u = 0; u < n; ++u) {
-        if (!removable(u) || incident_[u].empty()) continue;
-        // Candidates: u's neighbours, grid vertices first, then vertices on a line, nearest first.
-        std::vector<std::pair<std::pair<int, double>, u32>> candidates;
-        for (u32 t : incident_[u]) {
-          if (dead_[t]) continue;
-          for (u32 w : tris_[t])
-            if (w != u) candidates.push_back({{rank(w), vlen(vsub(out_.positions[w], out_.positions[u]))}, w});
-        }
-        std::sort(candidates.begin(), candidates.end());
-        candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
-        for (const auto& c : candidates)
-          if (tryCollapse(u, c.second)) {
-            any = true;
-            break;
-          }
+    const size_t n = positions_.size();
+    std::vector<uint8_t> queued(n, 0);
+    std::vector<u32> queue;
+    for (u32 u = 0; u < n; ++u)
+      if (removable(u) && !incident_[u].empty()) {
+        queue.push_back(u);
+        queued[u] = 1;
       }
-      if (!any) break;
-      // Compact the incidence lists of their dead triangles.
-      for (auto& list : incident_)
-        list.erase(std::remove_if(list.begin(), list.end(), [&](u32 t) { return dead_[t] != 0; }), list.end());
+    std::vector<std::pair<std::pair<int, double>, u32>> candidates;
+    for (size_t head = 0; head < queue.size(); ++head) {
+      const u32 u = queue[head];
+      queued[u] = 0;
+      if (incident_[u].empty()) continue;
+      // Candidates: u's neighbours, grid vertices first, then vertices on a line, nearest first.
+      candidates.clear();
+      for (u32 t : incident_[u])
+        for (u32 w : tris_[t])
+          if (w != u) candidates.push_back({{rank(w), vlen(vsub(positions_[w], positions_[u]))}, w});
+      std::sort(candidates.begin(), candidates.end());
+      candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+      for (const auto& c : candidates) {
+        const u32 w = c.second;
+        if (!tryCollapse(u, w)) continue;
+        for (u32 t : incident_[w])
+          for (u32 x : tris_[t])
+            if (x != w && removable(x) && !queued[x]) {
+              queued[x] = 1;
+              queue.push_back(x);
+            }
+        break;
+      }
+      if (head > (size_t(1) << 20) && head * 2 > queue.size()) {  // reclaim the consumed part of the list
+        queue.erase(queue.begin(), queue.begin() + std::ptrdiff_t(head + 1));
+        head = size_t(-1);
+      }
     }
   }
 
   void finish() {
-    const size_t n = out_.positions.size();
-    out_.kind.assign(n, 0);
-    out_.lattice_ij.assign(n, {0, 0});
-    for (size_t v = 0; v < n; ++v) {
-      const SliceVertex& s = verts_[v];
-      out_.kind[v] = uint8_t((s.on == 7 ? kLatticeVertex
-                              : s.on    ? kOnGridLine
-                                        : kFreeVertex) |
-                             (fixed_[v] ? kFixedVertex : 0));
-      if (s.on == 7) out_.lattice_ij[v] = {int32_t(s.f[0]), int32_t(s.f[1])};
-    }
+    // Only the vertices live triangles use, in order of first use.
+    std::vector<u32> id(positions_.size(), kNone);
     for (size_t t = 0; t < tris_.size(); ++t) {
       if (dead_[t]) continue;
-      const Triangle& tri = tris_[t];
+      Triangle tri = tris_[t];
+      for (u32& v : tri) {
+        if (id[v] == kNone) {
+          id[v] = u32(out_.positions.size());
+          const SliceVertex& s = verts_[v];
+          out_.positions.push_back(positions_[v]);
+          out_.input_vertex.push_back(v < input_vertex_.size() ? input_vertex_[v] : kNone);
+          out_.kind.push_back(uint8_t((s.on == 7 ? kLatticeVertex
+                                       : s.on    ? kOnGridLine
+                                                 : kFreeVertex) |
+                                      (fixed_[v] ? kFixedVertex : 0)));
+          out_.lattice_ij.push_back(s.on == 7 ? std::array<int32_t, 2>{int32_t(s.f[0]), int32_t(s.f[1])}
+                                              : std::array<int32_t, 2>{0, 0});
+        }
+        v = id[v];
+      }
       out_.triangles.push_back(tri);
       bool regular = true;
-      for (u32 v : tri) regular = regular && verts_[v].on == 7;
+      for (u32 v : tri) regular = regular && (out_.kind[v] & 3) == kLatticeVertex;
       if (regular) {  // the corners are one cell's: all within one step, one of the two cell shapes
         int64_t si = 0, sj = 0, mini = INT64_MAX, minj = INT64_MAX;
         for (u32 v : tri) {
@@ -427,10 +461,12 @@ class Resampler {
     }
   }
 
-  std::span<const Triangle> triangles_in_;
   const int relief_;
   const HexLattice lattice_;
-  std::span<const uint8_t> fixed_in_;
+  std::vector<Triangle> triangles_in_;  // local vertex ids
+  std::vector<Vec3d> positions_;        // the used input vertices, then the added ones
+  std::vector<u32> input_vertex_;       // per used input vertex: its input index
+  std::vector<uint8_t> fixed_in_;       // per used input vertex
   ResampledRelief out_;
   std::vector<SliceVertex> verts_;
   std::unordered_map<CrossingKey, u32, CrossingHash> crossings_;
@@ -439,6 +475,7 @@ class Resampler {
   std::vector<uint8_t> dead_, fixed_;
   std::vector<std::vector<u32>> incident_;
   std::vector<std::vector<u64>> cells_;
+  std::vector<u32> opposite_, neighbours_u_;  // tryCollapse's scratch
 };
 
 }  // namespace

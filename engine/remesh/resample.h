@@ -44,7 +44,9 @@ enum ResampledVertex : uint8_t {
 };
 
 struct ResampledRelief {
-  std::vector<Vec3d> positions;  // the input's vertices first (same indices), then the added ones
+  // The vertices the resampled triangles use: input vertices and added ones, in order of first use.
+  std::vector<Vec3d> positions;
+  std::vector<uint32_t> input_vertex;  // per vertex: its index in the input, or UINT32_MAX for an added one
   std::vector<Triangle> triangles;
   std::vector<uint8_t> regular;                    // per triangle: 1 if it projects onto a grid triangle
   std::vector<uint8_t> kind;                       // per vertex: ResampledVertex, kFixedVertex or'ed in
