@@ -124,13 +124,13 @@ double boundaryLength(const std::vector<Vec3d>& p, const std::vector<Triangle>& 
 TEST(Relief, RefusesTauOutsideItsRangeAndBadIndices) {
   const QuantizedMesh m = quantized(icosphere(1), 10);
   for (double tau : {0.0, -0.1, 0.5774, 1.0, std::nan("")}) {
-    auto r = buildReliefs(m, {.tau = tau});
+    auto r = buildReliefs(m, {}, {.tau = tau});
     ASSERT_FALSE(r.isOk()) << tau;
     EXPECT_EQ(r.status().code(), ErrorCode::kInvalidArgument);
   }
   QuantizedMesh bad = m;
   bad.triangles[3][1] = uint32_t(bad.positions.size());
-  auto r = buildReliefs(bad, {});
+  auto r = buildReliefs(bad, {}, {});
   ASSERT_FALSE(r.isOk());
   EXPECT_NE(r.status().message().find("triangle 3"), std::string::npos) << r.status().toString();
 }
@@ -139,7 +139,7 @@ TEST(Relief, SphereSplitsIntoSixConnectedHeightFieldsAroundItsPoles) {
   const QuantizedMesh m = quantized(icosphere(5), 16);
   for (double tau : {0.1, 0.2, 0.3, 0.5}) {
     SCOPED_TRACE("tau " + std::to_string(tau));
-    auto r = buildReliefs(m, {.tau = tau});
+    auto r = buildReliefs(m, {}, {.tau = tau});
     ASSERT_TRUE(r.isOk()) << r.status().toString();
     expectValidLayout(m, *r, tau);
     expectClosedManifold(r->triangles);
@@ -166,7 +166,7 @@ TEST(Relief, SphereSplitsIntoSixConnectedHeightFieldsAroundItsPoles) {
 
 TEST(Relief, TorusReliefsAreHeightFieldsOnAClosedManifold) {
   const QuantizedMesh m = quantized(torus(96, 48, 1.0, 0.35), 14);
-  auto r = buildReliefs(m, {});
+  auto r = buildReliefs(m, {}, {});
   ASSERT_TRUE(r.isOk()) << r.status().toString();
   expectValidLayout(m, *r, 0.2);
   expectClosedManifold(r->triangles);
@@ -205,7 +205,7 @@ TEST(Relief, SmootherAndFewerThanTheNaiveChoiceOnARoughSphere) {
 
   double previous_length = 0;
   for (double tau : {0.1, 0.2, 0.3, 0.5}) {
-    auto r = buildReliefs(m, {.tau = tau});
+    auto r = buildReliefs(m, {}, {.tau = tau});
     ASSERT_TRUE(r.isOk());
     expectValidLayout(m, *r, tau);
     expectClosedManifold(r->triangles);
@@ -239,7 +239,7 @@ TEST(Relief, TiesGoToTheVectorTheSurfaceFaces) {
       m.triangles.push_back({a, a + 8, a + 9});
       m.triangles.push_back({a, a + 9, a + 1});
     }
-  auto r = buildReliefs(m, {});
+  auto r = buildReliefs(m, {}, {});
   ASSERT_TRUE(r.isOk());
   expectValidLayout(m, *r, 0.2);
   EXPECT_EQ(r->split_triangles, 0u);
@@ -247,15 +247,61 @@ TEST(Relief, TiesGoToTheVectorTheSurfaceFaces) {
   for (uint8_t relief : r->relief) EXPECT_EQ(relief, r->relief[0]);
 }
 
+// A tile's border: the rim of a hemisphere (edges used by one triangle) with its vertices locked. The rim crosses
+// several reliefs' boundaries, yet every rim edge stays an edge of the refinement (a boundary meets the rim at a
+// vertex).
+TEST(Relief, TileBorderEdgesAreNeverCut) {
+  const QuantizedMesh sphere = quantized(icosphere(4), 14);
+  QuantizedMesh half;
+  half.positions = sphere.positions;
+  for (const Triangle& t : sphere.triangles) {
+    const double z = double(sphere.positions[t[0]][2]) + sphere.positions[t[1]][2] + sphere.positions[t[2]][2];
+    if (z > 3 * 8191.5 + 300)
+      half.triangles.push_back(t);  // the cap above a horizontal plane; its rim runs through the four side reliefs
+  }
+  std::map<std::pair<uint32_t, uint32_t>, int> uses;
+  for (const Triangle& t : half.triangles)
+    for (int k = 0; k < 3; ++k) ++uses[std::minmax(t[size_t(k)], t[size_t((k + 1) % 3)])];
+  std::vector<uint8_t> locked(half.positions.size(), 0);
+  size_t rim = 0;
+  for (const auto& [e, n] : uses)
+    if (n == 1) {
+      locked[e.first] = locked[e.second] = 1;
+      ++rim;
+    }
+  ASSERT_GT(rim, 20u);
+  auto wrong = buildReliefs(half, std::vector<uint8_t>(3, 1), {});
+  ASSERT_FALSE(wrong.isOk());
+  EXPECT_EQ(wrong.status().code(), ErrorCode::kInvalidArgument);
+  for (bool lock : {false, true}) {
+    auto r = buildReliefs(half, lock ? std::span<const uint8_t>(locked) : std::span<const uint8_t>(), {.tau = 0.2});
+    ASSERT_TRUE(r.isOk()) << r.status().toString();
+    expectValidLayout(half, *r, 0.2);
+    std::set<std::pair<uint32_t, uint32_t>> edges;
+    for (const Triangle& t : r->triangles)
+      for (int k = 0; k < 3; ++k) edges.insert(std::minmax(t[size_t(k)], t[size_t((k + 1) % 3)]));
+    size_t kept = 0;
+    for (const auto& [e, n] : uses)
+      if (n == 1) kept += edges.count(e);
+    if (lock) {
+      EXPECT_EQ(kept, rim);
+    } else {
+      EXPECT_LT(kept, rim);  // unlocked, the rim is cut where reliefs meet it
+    }
+    std::set<int> reliefs(r->relief.begin(), r->relief.end());
+    EXPECT_GE(reliefs.size(), 5u);
+  }
+}
+
 TEST(Relief, UglyInputsComeThrough) {
   {  // empty, and stray vertices only
     QuantizedMesh empty;
-    auto r = buildReliefs(empty, {});
+    auto r = buildReliefs(empty, {}, {});
     ASSERT_TRUE(r.isOk());
     EXPECT_TRUE(r->triangles.empty());
     QuantizedMesh stray;
     stray.positions = {{1, 2, 3}, {4, 5, 6}};
-    r = buildReliefs(stray, {});
+    r = buildReliefs(stray, {}, {});
     ASSERT_TRUE(r.isOk());
     EXPECT_EQ(r->positions.size(), 2u);
   }
@@ -282,7 +328,7 @@ TEST(Relief, UglyInputsComeThrough) {
     m.positions.push_back({far[0] - 1000 * k - 800, far[1], far[2] + 1000 * k + 300});
     m.triangles.push_back({s, s + 1, s + 2});
   }
-  auto r = buildReliefs(m, {});
+  auto r = buildReliefs(m, {}, {});
   ASSERT_TRUE(r.isOk()) << r.status().toString();
   expectValidLayout(m, *r, 0.2);
 }

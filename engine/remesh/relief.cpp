@@ -23,6 +23,9 @@
 // - Zero-area triangles are never in an A_v (they have no normal) and are cut like the others, so that the
 //   refinement stays conforming; their pieces have zero area. Triangles that repeat a vertex are kept whole, with
 //   their first corner's relief.
+// - Tiles (beyond the paper): an edge between two locked vertices that is on the tile's border (one triangle, or
+//   more than two) is never cut; a relief boundary that meets it goes through its nearer end instead, and the
+//   empty piece that leaves is dropped. So the tile's border edges stay edges (engine/tile.h's contract).
 #include "engine/remesh/relief.h"
 
 #include <algorithm>
@@ -32,6 +35,7 @@
 #include <queue>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <utility>
 
 #include "engine/geometry.h"
@@ -111,7 +115,18 @@ uint8_t mostFaced(const Vec3d& n) {
 
 class Builder {
  public:
-  Builder(const QuantizedMesh& mesh, double tau) : in_(mesh), tau_(tau) {}
+  Builder(const QuantizedMesh& mesh, std::span<const uint8_t> locked, double tau) : in_(mesh), tau_(tau) {
+    if (locked.empty()) return;
+    // Tile border edges: both ends locked, used by one triangle or by more than two.
+    std::unordered_map<u64, int> uses;
+    for (const Triangle& t : mesh.triangles)
+      for (int k = 0; k < 3; ++k) {
+        const u32 a = t[size_t(k)], b = t[size_t((k + 1) % 3)];
+        if (a != b && locked[a] && locked[b]) ++uses[(u64(std::min(a, b)) << 32) | std::max(a, b)];
+      }
+    for (const auto& [key, n] : uses)
+      if (n != 2) border_.insert(key);
+  }
 
   ReliefLayout run() {
     const size_t n = in_.positions.size();
@@ -182,6 +197,11 @@ class Builder {
     const double f0 = d(lo, la) - d(lo, lb), f1 = d(hi, la) - d(hi, lb);
     double t = 0.5;
     if (std::isfinite(f0) && std::isfinite(f1) && f0 - f1 > 0) t = f0 / (f0 - f1);
+    if (border_.count(key)) {  // a tile border edge is not cut: the boundary goes through its nearer end
+      const u32 end = t <= 0.5 ? lo : hi;
+      cuts_.emplace(key, end);
+      return end;
+    }
     t = std::clamp(t, kMinCut, kMaxCut);
     const Vec3d& pa = out_.positions[lo];
     const Vec3d& pb = out_.positions[hi];
@@ -233,7 +253,9 @@ class Builder {
     return u32(out_.positions.size() - 1);
   }
 
+  // A piece with a repeated corner (a cut moved to the end of a tile border edge) is empty and dropped.
   void emit(u32 a, u32 b, u32 c, int label, u32 source) {
+    if (a == b || b == c || a == c) return;
     out_.triangles.push_back({a, b, c});
     out_.relief.push_back(uint8_t(label));
     out_.source.push_back(source);
@@ -243,7 +265,9 @@ class Builder {
     const Triangle& c = in_.triangles[t];
     const int l[3] = {label_[c[0]], label_[c[1]], label_[c[2]]};
     if (c[0] == c[1] || c[1] == c[2] || c[0] == c[2] || (l[0] == l[1] && l[1] == l[2])) {
-      emit(c[0], c[1], c[2], l[0], t);
+      out_.triangles.push_back(c);  // whole (also when it repeats a vertex)
+      out_.relief.push_back(uint8_t(l[0]));
+      out_.source.push_back(t);
       return;
     }
     ++out_.split_triangles;
@@ -290,11 +314,17 @@ class Builder {
   std::vector<double> distance_;      // per input vertex and relief
   std::vector<uint8_t> label_;        // per input vertex
   std::unordered_map<u64, u32> cuts_;
+  std::unordered_set<u64> border_;  // tile border edges (never cut)
 };
 
 }  // namespace
 
-Result<ReliefLayout> buildReliefs(const QuantizedMesh& mesh, const ReliefOptions& options) {
+Result<ReliefLayout> buildReliefs(const QuantizedMesh& mesh, std::span<const uint8_t> locked,
+                                  const ReliefOptions& options) {
+  if (!locked.empty() && locked.size() != mesh.positions.size())
+    return makeError(ErrorCode::kInvalidArgument, "relief construction: " + std::to_string(locked.size()) +
+                                                      " lock flags for " + std::to_string(mesh.positions.size()) +
+                                                      " vertices");
   if (!(options.tau > 0 && options.tau < 1 / std::sqrt(3.0)))
     return makeError(ErrorCode::kInvalidArgument,
                      "relief tau " + std::to_string(options.tau) + " is outside (0, 1/sqrt(3) = 0.577)");
@@ -304,7 +334,7 @@ Result<ReliefLayout> buildReliefs(const QuantizedMesh& mesh, const ReliefOptions
         return makeError(ErrorCode::kInvalidArgument, "relief construction: triangle " + std::to_string(t) +
                                                           " uses vertex " + std::to_string(v) + " of " +
                                                           std::to_string(mesh.positions.size()));
-  return Builder(mesh, options.tau).run();
+  return Builder(mesh, locked, options.tau).run();
 }
 
 std::vector<uint32_t> reliefComponents(const ReliefLayout& layout, uint32_t* count) {

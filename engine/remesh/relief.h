@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "engine/mesh.h"
@@ -45,10 +46,14 @@ struct ReliefLayout {
   uint64_t refaced_triangles = 0;
 };
 
-// Splits `mesh` (triangles on the integer grid; normals and colors ignored) into reliefs. Zero-area triangles
-// take the relief of their corners and are never split. Isolated vertices are kept (in `positions`, unused), an
-// empty mesh gives an empty layout. kInvalidArgument for tau outside (0, 1/sqrt(3)) or indices out of range.
-Result<ReliefLayout> buildReliefs(const QuantizedMesh& mesh, const ReliefOptions& options);
+// Splits `mesh` (triangles on the integer grid; normals and colors ignored) into reliefs. `locked` is empty or has
+// one flag per vertex: an edge between two locked vertices on the tile's border (used by one triangle or by more
+// than two) is never cut, so it stays an edge. Zero-area triangles are cut like the others (their pieces have zero
+// area); triangles that repeat a vertex are kept whole. Isolated vertices are kept (in `positions`, unused); an
+// empty mesh gives an empty layout. kInvalidArgument for tau outside (0, 1/sqrt(3)), indices out of range or lock
+// flags of the wrong size.
+Result<ReliefLayout> buildReliefs(const QuantizedMesh& mesh, std::span<const uint8_t> locked,
+                                  const ReliefOptions& options);
 
 // The connected components of each relief: triangles of one relief joined across shared edges (an edge used by
 // more than two triangles joins them all). One id per refined triangle, numbered from 0 in triangle order.

@@ -47,6 +47,8 @@ constexpr double kMinArea = 1e-9;
 struct SliceVertex {
   double f[3];     // lattice coordinates s, t and u = s + t
   uint8_t on = 0;  // bit F: exactly on a line of family F (f[F] is an integer)
+  // An added vertex on an input edge: that edge's two (local) input vertices, lower first; else none.
+  uint32_t edge[2] = {UINT32_MAX, UINT32_MAX};
 };
 
 struct CrossingKey {
@@ -118,6 +120,7 @@ class Resampler {
     }
     findFixed();
     collapseAll();
+    collapseBoundaryChains();
     finish();
     return std::move(out_);
   }
@@ -165,6 +168,22 @@ class Resampler {
       }
     }
     completeLattice(x);
+    // The input edge the point is on, if any: both ends input vertices (a side of an input triangle), or one end
+    // on an input edge that has the other end (or both ends on one input edge).
+    const u32 n_in = u32(input_vertex_.size());
+    const auto carries = [&](u32 v, u32 a0, u32 a1) {
+      return v == a0 || v == a1 || (verts_[v].edge[0] == a0 && verts_[v].edge[1] == a1);
+    };
+    if (lo < n_in && hi < n_in) {
+      x.edge[0] = lo;
+      x.edge[1] = hi;
+    } else {
+      const SliceVertex& e = lo < n_in ? q : p;  // an added end
+      if (e.edge[0] != kNone && carries(lo, e.edge[0], e.edge[1]) && carries(hi, e.edge[0], e.edge[1])) {
+        x.edge[0] = e.edge[0];
+        x.edge[1] = e.edge[1];
+      }
+    }
     const Vec3d& pa = positions_[lo];
     const Vec3d& pb = positions_[hi];
     const u32 id = u32(positions_.size());
@@ -323,8 +342,9 @@ class Resampler {
   bool removable(u32 v) const { return !fixed_[v] && verts_[v].on != 7; }
 
   // Collapses u onto w if allowed.
-  // Collapses u onto w if allowed. incident_ lists hold live triangles only.
-  bool tryCollapse(u32 u, u32 w) {
+  // Collapses u onto w if allowed. incident_ lists hold live triangles only. `along_boundary`: u and w are
+  // neighbours on the relief's boundary (one triangle on their edge), and the cells are not kept.
+  bool tryCollapse(u32 u, u32 w, bool along_boundary = false) {
     // Every moved triangle stays counterclockwise in projection and inside one cell.
     opposite_.clear();
     for (u32 t : incident_[u]) {
@@ -340,10 +360,11 @@ class Resampler {
         continue;
       }
       if (!(cross2(verts_[tri[0]].f, verts_[tri[1]].f, verts_[tri[2]].f) > kMinArea)) return false;
-      if (!shareCell(tri[0], tri[1], tri[2])) return false;
+      if (!along_boundary && !shareCell(tri[0], tri[1], tri[2])) return false;
     }
-    // The link condition: u and w share exactly the two vertices opposite their edge.
-    if (opposite_.size() != 2 || opposite_[0] == opposite_[1]) return false;
+    // The link condition: u and w share exactly the vertices opposite their edge (two inside, one on the boundary).
+    if (opposite_.size() != (along_boundary ? 1u : 2u) || (opposite_.size() == 2 && opposite_[0] == opposite_[1]))
+      return false;
     neighbours_u_.clear();
     for (u32 t : incident_[u])
       for (u32 x : tris_[t])
@@ -353,7 +374,7 @@ class Resampler {
     for (u32 t : incident_[w])
       for (u32 x : tris_[t])
         if (x != w && x != u && std::binary_search(neighbours_u_.begin(), neighbours_u_.end(), x) &&
-            x != opposite_[0] && x != opposite_[1])
+            std::find(opposite_.begin(), opposite_.end(), x) == opposite_.end())
           return false;
     // Collapse: u's triangles on the edge die, the others take w for u.
     for (u32 t : incident_[u]) {
@@ -419,6 +440,39 @@ class Resampler {
     }
   }
 
+  // Points added on the relief's boundary (where a grid line crosses a boundary edge) are collapsed along that
+  // edge onto its neighbours there, where no triangle flips: the boundary then has the input's vertices only, and
+  // neighbouring reliefs (and tiles) meet along the same edges. Points that cannot go stay (ResampledRelief's
+  // input_edge names their edge).
+  void collapseBoundaryChains() {
+    const u32 n_in = u32(input_vertex_.size());
+    std::vector<std::pair<double, u32>> candidates;
+    for (int pass = 0; pass < 4; ++pass) {
+      bool any = false;
+      for (u32 c = n_in; c < positions_.size(); ++c) {
+        if (incident_[c].empty() || verts_[c].edge[0] == kNone) continue;
+        const u32 e0 = verts_[c].edge[0], e1 = verts_[c].edge[1];
+        // Its neighbours along the same input edge, on a boundary edge (used by one triangle).
+        candidates.clear();
+        for (u32 t : incident_[c])
+          for (u32 w : tris_[t]) {
+            if (w == c || !(w == e0 || w == e1 || (verts_[w].edge[0] == e0 && verts_[w].edge[1] == e1))) continue;
+            int uses = 0;
+            for (u32 t2 : incident_[c])
+              for (u32 x : tris_[t2]) uses += x == w;
+            if (uses == 1) candidates.push_back({vlen(vsub(positions_[w], positions_[c])), w});
+          }
+        std::sort(candidates.begin(), candidates.end());
+        for (const auto& cand : candidates)
+          if (tryCollapse(c, cand.second, true)) {
+            any = true;
+            break;
+          }
+      }
+      if (!any) break;
+    }
+  }
+
   void finish() {
     // Only the vertices live triangles use, in order of first use.
     std::vector<u32> id(positions_.size(), kNone);
@@ -431,6 +485,9 @@ class Resampler {
           const SliceVertex& s = verts_[v];
           out_.positions.push_back(positions_[v]);
           out_.input_vertex.push_back(v < input_vertex_.size() ? input_vertex_[v] : kNone);
+          out_.input_edge.push_back(s.edge[0] == kNone
+                                        ? std::array<u32, 2>{kNone, kNone}
+                                        : std::array<u32, 2>{input_vertex_[s.edge[0]], input_vertex_[s.edge[1]]});
           out_.kind.push_back(uint8_t((s.on == 7 ? kLatticeVertex
                                        : s.on    ? kOnGridLine
                                                  : kFreeVertex) |

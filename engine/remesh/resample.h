@@ -5,7 +5,8 @@
 // its defining vector, engine/remesh/relief.h) is sliced by the three line families of a hexagonal grid in that
 // plane, then every vertex that is not a grid vertex is removed by edge collapses that keep the relief's boundary,
 // never cross a grid edge and never flip a triangle. Interior triangles end up projecting onto grid triangles
-// (regular triangles); irregular ones remain along the boundary. Departures from the paper are written at the top of
+// (regular triangles); irregular ones remain along the boundary. Points the grid lines added on the boundary are
+// then collapsed along it where they can, so that neighbouring reliefs meet along the input's boundary edges. Departures from the paper are written at the top of
 // resample.cpp.
 #pragma once
 
@@ -47,6 +48,9 @@ struct ResampledRelief {
   // The vertices the resampled triangles use: input vertices and added ones, in order of first use.
   std::vector<Vec3d> positions;
   std::vector<uint32_t> input_vertex;  // per vertex: its index in the input, or UINT32_MAX for an added one
+  // Per vertex: for an added vertex on an input edge, that edge's input vertices; else UINT32_MAX twice. Points
+  // added on the relief's boundary are collapsed along it where no triangle flips; those left are named here.
+  std::vector<std::array<uint32_t, 2>> input_edge;
   std::vector<Triangle> triangles;
   std::vector<uint8_t> regular;                    // per triangle: 1 if it projects onto a grid triangle
   std::vector<uint8_t> kind;                       // per vertex: ResampledVertex, kFixedVertex or'ed in
