@@ -89,7 +89,7 @@ class Resampler {
         if (added) {
           positions_.push_back(positions[t[k]]);
           input_vertex_.push_back(t[k]);
-          fixed_in_.push_back(!fixed.empty() && fixed[t[k]] ? 1 : 0);
+          fixed_in_.push_back(fixed.empty() ? 0 : fixed[t[k]]);
         }
         l[k] = it->second;
       }
@@ -289,7 +289,15 @@ class Resampler {
   void findFixed() {
     const size_t n = positions_.size();
     fixed_.assign(n, 0);
-    std::copy(fixed_in_.begin(), fixed_in_.end(), fixed_.begin());
+    shared_.assign(n, 0);
+    for (size_t v = 0; v < fixed_in_.size(); ++v) {
+      fixed_[v] = (fixed_in_[v] & kFixedByCaller) ? 1 : 0;
+      shared_[v] = (fixed_in_[v] & kSharedBoundary) ? 1 : 0;
+    }
+    for (size_t v = fixed_in_.size(); v < n; ++v) {  // added on an edge between two shared boundary vertices
+      const u32 e0 = verts_[v].edge[0], e1 = verts_[v].edge[1];
+      shared_[v] = e0 != kNone && shared_[e0] && shared_[e1];
+    }
     incident_.assign(n, {});
     dead_.assign(tris_.size(), 0);
     for (u32 t = 0; t < tris_.size(); ++t)
@@ -376,6 +384,18 @@ class Resampler {
         if (x != w && x != u && std::binary_search(neighbours_u_.begin(), neighbours_u_.end(), x) &&
             std::find(opposite_.begin(), opposite_.end(), x) == opposite_.end())
           return false;
+    // No chord between two vertices of a boundary shared with another relief: u's other neighbours become w's, and
+    // when w is on such a boundary none of them may be (except, along the boundary, the next point on the same
+    // input edge). A chord across a relief's boundary
+    // path can lie over the neighbouring relief in space (each relief only checks its own projection), and two
+    // reliefs would then overlap where they meet.
+    if (fixed_[w] && shared_[w])
+      for (u32 x : neighbours_u_) {
+        if (x == w || !fixed_[x] || !shared_[x] || std::find(opposite_.begin(), opposite_.end(), x) != opposite_.end())
+          continue;
+        if (along_boundary && sameInputEdge(u, x)) continue;
+        return false;
+      }
     // Collapse: u's triangles on the edge die, the others take w for u.
     for (u32 t : incident_[u]) {
       Triangle& tri = tris_[t];
@@ -438,6 +458,12 @@ class Resampler {
         head = size_t(-1);
       }
     }
+  }
+
+  // x is on u's input edge (an end of it, or another point added on it).
+  bool sameInputEdge(u32 u, u32 x) const {
+    const u32 e0 = verts_[u].edge[0], e1 = verts_[u].edge[1];
+    return e0 != kNone && (x == e0 || x == e1 || (verts_[x].edge[0] == e0 && verts_[x].edge[1] == e1));
   }
 
   // Points added on the relief's boundary (where a grid line crosses a boundary edge) are collapsed along that
@@ -523,7 +549,8 @@ class Resampler {
   std::vector<Triangle> triangles_in_;  // local vertex ids
   std::vector<Vec3d> positions_;        // the used input vertices, then the added ones
   std::vector<u32> input_vertex_;       // per used input vertex: its input index
-  std::vector<uint8_t> fixed_in_;       // per used input vertex
+  std::vector<uint8_t> fixed_in_;       // per used input vertex: the caller's flags
+  std::vector<uint8_t> shared_;         // per vertex: on a boundary shared with another relief
   ResampledRelief out_;
   std::vector<SliceVertex> verts_;
   std::unordered_map<CrossingKey, u32, CrossingHash> crossings_;

@@ -58,10 +58,16 @@ struct ResampledRelief {
   uint64_t collapses = 0;
 };
 
+// Flags per input position (resampleRelief's `fixed`).
+enum ResampleFlag : uint8_t {
+  kFixedByCaller = 1,   // never moved or removed (a tile's locked vertex)
+  kSharedBoundary = 2,  // on a boundary shared with another relief: no new edge joins two such vertices
+};
+
 // Resamples one relief: `triangles` over `positions` (grid units, as relief.h's layout gives them), all facing
-// `relief` (projected area >= 0; zero-area triangles are kept as they are). A vertex is fixed when `fixed` says
-// so (empty, or one flag per position) or when it is on the relief's boundary: an edge used by one triangle or by
-// more than two, or a vertex whose triangles do not form one fan. kInvalidArgument for a spacing that is odd or
+// `relief` (projected area >= 0; zero-area triangles are kept as they are). `fixed` is empty or has ResampleFlags
+// per position. A vertex is fixed when the flags say so or when it is on the relief's boundary: an edge used by
+// one triangle or by more than two, or a vertex whose triangles do not form one fan. kInvalidArgument for a spacing that is odd or
 // below 2, a relief id outside 0..5, indices out of range, or a triangle facing away from the relief.
 Result<ResampledRelief> resampleRelief(std::span<const Vec3d> positions, std::span<const Triangle> triangles,
                                        int relief, const HexLattice& lattice, std::span<const uint8_t> fixed);

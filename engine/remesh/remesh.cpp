@@ -1,0 +1,224 @@
+// Piecewise regular remeshing (see remesh.h): relief construction, resampling of each relief's connected parts,
+// and merging, after sections 2.1 to 2.3 of Szymczak, Rossignac, King, "Piecewise Regular Meshes: Construction
+// and Compression" (../shared/papers/prm-piecewise-regular-meshes.md).
+//
+// Merging departs from the paper. The paper fills the loop between two reliefs' resampled boundaries with
+// zero-area triangles, then collapses boundary vertices onto grid vertices and flips edges to reduce area. Here the
+// points grid lines add on a relief's boundary are first collapsed along their boundary edge within the relief
+// (resample.cpp), so two reliefs meet along the input's own edges with the same vertices, and merging is joining
+// vertices by identity. A point that could not be collapsed (a triangle would flip) is inserted into the other
+// reliefs' triangles on that edge, by splitting them at it: the mesh is then conforming, with no zero-area
+// triangle. On a tile's border edge (which must stay an edge) such points get the paper's fan of zero-area
+// triangles instead. Resampling never joins two boundary vertices by a new edge (resample.cpp), so two reliefs'
+// triangles never overlap where they meet. Not done yet: the paper's collapse of relief boundary vertices onto grid
+// vertices after merging and its area-reducing edge flips.
+#include "engine/remesh/remesh.h"
+
+#include <algorithm>
+#include <map>
+#include <string>
+#include <unordered_map>
+#include <unordered_set>
+
+#include "engine/geometry.h"
+#include "engine/remesh/relief.h"
+#include "engine/remesh/resample.h"
+
+namespace scanpress {
+namespace {
+
+using u32 = uint32_t;
+using u64 = uint64_t;
+constexpr u32 kNone = UINT32_MAX;
+
+// A point added on an input edge that stays on a relief's boundary: where along the edge, which merged vertex, and
+// which relief part it came from.
+struct EdgePoint {
+  double t;
+  u32 vertex;
+  u32 part;
+};
+
+// A tile border edge (a, b) that a relief part left subdivided by `points`: for each part, a fan from the chain's
+// start over its points and the edge's other end, so that the edge (a, b) is an edge again, oriented as the part's
+// boundary runs. The fan's triangles have zero area (their corners are on one segment).
+void closeBorderEdge(Remeshed& out, std::vector<u32>& triangle_part, u32 a, u32 b,
+                     const std::vector<EdgePoint>& points) {
+  std::map<u32, std::vector<u32>> chain_of_part;  // points in order from a to b
+  for (const EdgePoint& p : points) chain_of_part[p.part].push_back(p.vertex);
+  for (const auto& [part, inner] : chain_of_part) {
+    std::vector<u32> chain = {a};
+    chain.insert(chain.end(), inner.begin(), inner.end());
+    chain.push_back(b);
+    // The part's boundary runs a -> b when its triangle on (a, chain[1]) has that directed edge.
+    bool forward = true;
+    for (size_t t = 0; t < out.triangles.size(); ++t) {
+      if (triangle_part[t] != part) continue;
+      const Triangle& tri = out.triangles[t];
+      for (int k = 0; k < 3; ++k) {
+        const u32 x = tri[size_t(k)], y = tri[size_t((k + 1) % 3)];
+        if (x == chain[0] && y == chain[1]) forward = true;
+        if (x == chain[1] && y == chain[0]) forward = false;
+      }
+    }
+    if (!forward) std::reverse(chain.begin(), chain.end());
+    // Boundary edges chain[i] -> chain[i+1]; fill triangles use them reversed, and the new edge chain[0] -> end.
+    const u32 apex = chain.front();
+    uint8_t relief = 0;
+    for (size_t t = 0; t < out.triangles.size(); ++t)
+      if (triangle_part[t] == part) relief = out.relief[t];
+    for (size_t i = 1; i + 1 < chain.size(); ++i) {  // (apex, c[i+1], c[i]); the last is (apex, end, c[k])
+      out.triangles.push_back({apex, chain[i + 1], chain[i]});
+      out.relief.push_back(relief);
+      out.regular.push_back(0);
+      triangle_part.push_back(part);
+    }
+    ++out.border_fans;
+  }
+}
+
+}  // namespace
+
+Result<Remeshed> remeshPiecewiseRegular(const QuantizedMesh& mesh, std::span<const uint8_t> locked,
+                                        const RemeshOptions& options) {
+  if (options.spacing < 2 || options.spacing % 2 != 0)
+    return makeError(ErrorCode::kInvalidArgument,
+                     "remesh: grid spacing " + std::to_string(options.spacing) + " is not an even number >= 2");
+  SP_ASSIGN_OR_RETURN(const ReliefLayout layout, buildReliefs(mesh, locked, ReliefOptions{.tau = options.tau}));
+  u32 parts = 0;
+  const std::vector<u32> part_of = reliefComponents(layout, &parts);
+  std::vector<std::vector<Triangle>> part_triangles(parts);
+  std::vector<int> part_relief(parts, 0);
+  for (size_t i = 0; i < layout.triangles.size(); ++i) {
+    part_triangles[part_of[i]].push_back(layout.triangles[i]);
+    part_relief[part_of[i]] = layout.relief[i];
+  }
+  // Layout vertices: the input's first (locked ones stay fixed), then the relief boundaries' cut points.
+  std::vector<uint8_t> fixed(layout.positions.size(), 0);
+  for (size_t v = 0; v < locked.size(); ++v) fixed[v] = locked[v] ? kFixedByCaller : 0;
+  {                                          // vertices of edges between two parts
+    std::vector<std::pair<u64, u32>> edges;  // (edge, part)
+    for (size_t i = 0; i < layout.triangles.size(); ++i)
+      for (int k = 0; k < 3; ++k) {
+        const u32 a = layout.triangles[i][size_t(k)], b = layout.triangles[i][size_t((k + 1) % 3)];
+        edges.push_back({(u64(std::min(a, b)) << 32) | std::max(a, b), part_of[i]});
+      }
+    std::sort(edges.begin(), edges.end());
+    for (size_t i = 0; i + 1 < edges.size(); ++i)
+      if (edges[i].first == edges[i + 1].first && edges[i].second != edges[i + 1].second) {
+        fixed[edges[i].first >> 32] |= kSharedBoundary;
+        fixed[edges[i].first & 0xffffffffu] |= kSharedBoundary;
+      }
+  }
+  const HexLattice lattice = HexLattice::withSpacing(options.spacing);
+
+  Remeshed out;
+  out.reliefs = parts;
+  std::vector<u32> merged_of_layout(layout.positions.size(), kNone);
+  std::vector<u32> triangle_part;
+  std::map<std::pair<u32, u32>, std::vector<EdgePoint>> left;  // by layout edge (lower index first)
+  for (u32 part = 0; part < parts; ++part) {
+    SP_ASSIGN_OR_RETURN(ResampledRelief r,
+                        resampleRelief(layout.positions, part_triangles[part], part_relief[part], lattice, fixed));
+    std::vector<u32> merged(r.positions.size());
+    for (size_t v = 0; v < r.positions.size(); ++v) {
+      const u32 lv = r.input_vertex[v];
+      u32& id = lv != kNone ? merged_of_layout[lv] : merged[v];
+      if (lv == kNone || id == kNone) {
+        id = u32(out.positions.size());
+        out.positions.push_back(r.positions[v]);
+        out.input_vertex.push_back(lv != kNone && lv < mesh.positions.size() ? lv : kNone);
+      }
+      merged[v] = id;
+      if (lv == kNone && r.input_edge[v][0] != kNone && (r.kind[v] & kFixedVertex)) {
+        const u32 a = std::min(r.input_edge[v][0], r.input_edge[v][1]);
+        const u32 b = std::max(r.input_edge[v][0], r.input_edge[v][1]);
+        const Vec3d ab = vsub(layout.positions[b], layout.positions[a]);
+        const double t = vdot(vsub(r.positions[v], layout.positions[a]), ab) / vdot(ab, ab);
+        left[{a, b}].push_back({t, id, part});
+      }
+    }
+    for (size_t t = 0; t < r.triangles.size(); ++t) {
+      const Triangle& tri = r.triangles[t];
+      out.triangles.push_back({merged[tri[0]], merged[tri[1]], merged[tri[2]]});
+      out.relief.push_back(uint8_t(part_relief[part]));
+      out.regular.push_back(r.regular[t]);
+      triangle_part.push_back(part);
+    }
+  }
+
+  // Tile border edges (both ends locked; one triangle, or more than two).
+  std::unordered_set<u64> border;
+  if (!locked.empty() && !left.empty()) {
+    std::unordered_map<u64, int> uses;
+    for (const Triangle& t : mesh.triangles)
+      for (int k = 0; k < 3; ++k) {
+        const u32 x = t[size_t(k)], y = t[size_t((k + 1) % 3)];
+        if (x != y && locked[x] && locked[y]) ++uses[(u64(std::min(x, y)) << 32) | std::max(x, y)];
+      }
+    for (const auto& [key, n] : uses)
+      if (n != 2) border.insert(key);
+  }
+  // Points left on a boundary edge between reliefs: every other part on that edge gets them too, by splitting its
+  // triangle on the sub-edge that holds each point. Points left on a tile border edge: the edge is restored by a
+  // fan of zero-area triangles over them (the paper's loop filling).
+  if (!left.empty()) {
+    std::vector<std::vector<u32>> incident(out.positions.size());
+    for (u32 t = 0; t < out.triangles.size(); ++t)
+      for (u32 v : out.triangles[t]) incident[v].push_back(t);
+    for (auto& [edge, points] : left) {
+      std::sort(points.begin(), points.end(), [](const EdgePoint& x, const EdgePoint& y) { return x.t < y.t; });
+      const u32 a = merged_of_layout[edge.first], b = merged_of_layout[edge.second];
+      if (a == kNone || b == kNone) continue;
+      if (border.count((u64(edge.first) << 32) | edge.second)) {
+        closeBorderEdge(out, triangle_part, a, b, points);
+        continue;
+      }
+      // Where each vertex on the edge is along it.
+      std::unordered_map<u32, double> along = {{a, 0.0}, {b, 1.0}};
+      for (const EdgePoint& p : points) along[p.vertex] = p.t;
+      for (const EdgePoint& p : points) {
+        // Triangles of other parts with a side on this edge that strictly contains p.
+        bool again = true;
+        while (again) {
+          again = false;
+          std::vector<u32> candidates;
+          for (const auto& [v, tv] : along)
+            for (u32 t : incident[v]) candidates.push_back(t);
+          std::sort(candidates.begin(), candidates.end());
+          candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+          for (u32 t : candidates) {
+            if (triangle_part[t] == p.part) continue;
+            const Triangle tri = out.triangles[t];
+            for (int k = 0; k < 3 && !again; ++k) {
+              const u32 x = tri[size_t(k)], y = tri[size_t((k + 1) % 3)], z = tri[size_t((k + 2) % 3)];
+              const auto ix = along.find(x), iy = along.find(y);
+              if (ix == along.end() || iy == along.end()) continue;
+              const double lo = std::min(ix->second, iy->second), hi = std::max(ix->second, iy->second);
+              if (!(p.t > lo && p.t < hi)) continue;
+              // (x, y, z) -> (x, p, z) and (p, y, z).
+              out.triangles[t] = {x, p.vertex, z};
+              const u32 added = u32(out.triangles.size());
+              out.triangles.push_back({p.vertex, y, z});
+              out.relief.push_back(out.relief[t]);
+              out.regular[t] = 0;
+              out.regular.push_back(0);
+              triangle_part.push_back(triangle_part[t]);
+              auto& iy_list = incident[y];
+              std::replace(iy_list.begin(), iy_list.end(), t, added);
+              incident[z].push_back(added);
+              incident[p.vertex].push_back(t);
+              incident[p.vertex].push_back(added);
+              ++out.merge_splits;
+              again = true;
+            }
+            if (again) break;
+          }
+        }
+      }
+    }
+  }
+  return out;
+}
+
+}  // namespace scanpress
