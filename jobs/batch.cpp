@@ -278,6 +278,11 @@ std::string settingsFingerprint(const EncodeSettings& s) {
       std::snprintf(buf, sizeof buf, ",%d,%.17g,%.17g", st.smooth.iterations, st.smooth.lambda, st.smooth.mu);
       key += buf;
     }
+    if (st.kind == StageKind::kRemesh) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, ",%.17g,%.17g", st.remesh.grid, st.remesh.tau);
+      key += buf;
+    }
   }
   const MeasureSettings& m = s.measure;  // changes the report, not the container
   if (m.enabled)

@@ -168,6 +168,10 @@ void readStage(const json& j, const std::string& pointer, const std::string& fil
       r.number("lambda", -1e9, 1e9, spec.smooth.lambda);
       r.number("mu", -1e9, 1e9, spec.smooth.mu);
       break;
+    case StageKind::kRemesh:
+      r.number("grid", -1e9, 1e9, spec.remesh.grid);
+      r.number("tau", -1e9, 1e9, spec.remesh.tau);
+      break;
   }
   r.finish();
   if (!error.isOk()) return;

@@ -16,12 +16,12 @@ namespace scanpress {
 namespace {
 
 // Bumped whenever a message's layout changes.
-constexpr uint32_t kWireVersion = 2;  // 2: the layout's color bits
+constexpr uint32_t kWireVersion = 3;  // 2: the layout's color bits; 3: the remesh stage's options
 
 // The wire spells out every field of these structs: a new field must be added to the messages below too (this
 // fails to compile until its size is updated here).
 static_assert(sizeof(CodecOptions) == 32, "CodecOptions changed: update scanMessage and TileServer::scan");
-static_assert(sizeof(StageSpec) == 32, "StageSpec changed: update scanMessage and TileServer::scan");
+static_assert(sizeof(StageSpec) == 48, "StageSpec changed: update scanMessage and TileServer::scan");
 static_assert(sizeof(CodecLevel) == 48, "CodecLevel changed: update resultMessage, readResult and kLevelBytes");
 // A level's bytes in a kResult message (resultMessage).
 constexpr size_t kLevelBytes = 4 + 8 + 1 + 1 + 4 + 8 + 8 + 8;
@@ -136,6 +136,8 @@ Status readScan(std::span<const uint8_t> message, EncodeSettings& s, TileScanFac
     st.smooth.iterations = static_cast<int>(iterations);
     SP_RETURN_IF_ERROR(r.f64(st.smooth.lambda));
     SP_RETURN_IF_ERROR(r.f64(st.smooth.mu));
+    SP_RETURN_IF_ERROR(r.f64(st.remesh.grid));
+    SP_RETURN_IF_ERROR(r.f64(st.remesh.tau));
   }
   uint8_t weights = 0, metric = 0;
   SP_RETURN_IF_ERROR(toBool(r, s.codec_options.octree.contexts));
@@ -196,6 +198,8 @@ std::vector<uint8_t> scanMessage(const EncodeSettings& s, const TileScanFacts& f
     w.u32(static_cast<uint32_t>(st.smooth.iterations));
     w.f64(st.smooth.lambda);
     w.f64(st.smooth.mu);
+    w.f64(st.remesh.grid);
+    w.f64(st.remesh.tau);
   }
   w.u8(s.codec_options.octree.contexts);
   w.u8(static_cast<uint8_t>(s.codec_options.pm.weights));

@@ -82,7 +82,7 @@ TEST(JobConfig, InvalidFilesNameThePointerExitOneWriteNothing) {
       {"escaped_key", "{" + in + ", \"a/b\": 1}", "/a~1b: unknown key"},
       {"stages_not_array", "{" + in + ", \"stages\": {\"name\": \"smooth\"}}", "/stages: must be an array"},
       {"stage_unknown", "{" + in + ", \"stages\": [{\"name\": \"sharpen\"}]}",
-       "/stages/0/name: unknown stage 'sharpen' (available: smooth)"},
+       "/stages/0/name: unknown stage 'sharpen' (available: smooth, remesh)"},
       {"stage_without_name", "{" + in + ", \"stages\": [{\"iterations\": 3}]}", "/stages/0/name"},
       {"stage_unknown_key", "{" + in + ", \"stages\": [{\"name\": \"smooth\", \"sigma\": 3}]}",
        "/stages/0/sigma: unknown key"},
@@ -160,6 +160,18 @@ TEST(JobConfig, StagesFromJobFilesAndTheCommandLine) {
   EXPECT_NE(parseStagesOption("smooth:lambda=2", "--stages").status().message().find("--stages: /stages/0/lambda"),
             std::string::npos);
   EXPECT_NE(parseStagesOption("blur", "--stages").status().message().find("unknown stage 'blur'"), std::string::npos);
+  auto remesh = parseStagesOption("remesh:grid=0.01:tau=0.15,remesh", "--stages");
+  ASSERT_TRUE(remesh.isOk()) << remesh.status().toString();
+  EXPECT_EQ((*remesh)[0].kind, StageKind::kRemesh);
+  EXPECT_EQ((*remesh)[0].remesh.grid, 0.01);
+  EXPECT_EQ((*remesh)[0].remesh.tau, 0.15);
+  EXPECT_EQ((*remesh)[1].remesh.grid, RemeshStageOptions{}.grid);
+  EXPECT_NE(parseStagesOption("remesh:grid=0", "--stages").status().message().find("/stages/0/grid"),
+            std::string::npos);
+  EXPECT_NE(parseStagesOption("remesh:tau=0.6", "--stages").status().message().find("/stages/0/tau"),
+            std::string::npos);
+  EXPECT_NE(parseStagesOption("remesh:lambda=0.5", "--stages").status().message().find("unknown key"),
+            std::string::npos);
 }
 
 TEST(JobConfig, RelativePathsAreRelativeToTheJobFile) {

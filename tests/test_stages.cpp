@@ -4,8 +4,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <map>
 #include <random>
 
+#include "engine/geometry.h"
+#include "engine/octahedral.h"
 #include "engine/quantize.h"
 #include "engine/shapes.h"
 #include "engine/stages/stage.h"
@@ -130,6 +133,78 @@ TEST(SmoothStage, DenoisesASphereAndKeepsTheContract) {
   EXPECT_EQ(free->mesh.triangles, q.triangles);
   EXPECT_EQ(runStage(ctx, TileView{q, {}}, spec, true)->mesh.positions, free->mesh.positions);
   EXPECT_LT(rmsOffSphere(free->mesh, false), 0.6 * rmsOffSphere(q, false));
+}
+
+// The remesh stage on a tile (a cap of a sphere with its rim locked): the border contract holds (runStage checks
+// it, thoroughly), the result is on the grid with no two corners in one cell, mostly fewer vertices at a coarse
+// grid, kept input vertices keep their normals and new ones point along the sphere's radius; the same at every
+// call. Colors are refused, bad options named.
+TEST(RemeshStage, KeepsTheTileBorderAndGivesNormals) {
+  Mesh sphere = icosphere(5);
+  for (auto& p : sphere.positions) p = vadd(vmul(p, 0.45), {0.5, 0.5, 0.5});
+  Mesh cap;
+  cap.positions = sphere.positions;
+  for (const Triangle& t : sphere.triangles)
+    if (sphere.positions[t[0]][2] + sphere.positions[t[1]][2] + sphere.positions[t[2]][2] > 3 * 0.6)
+      cap.triangles.push_back(t);
+  for (const Vec3d& p : cap.positions) cap.normals.push_back({float(p[0] - .5), float(p[1] - .5), float(p[2] - .5)});
+  BoundingBox box;
+  box.lo = {0, 0, 0};
+  box.hi = {1, 1, 1};
+  const Grid grid = *makeGrid(box, 14);
+  const AttributeLayout layout{12, 0};
+  QuantizedMesh q = *quantizeMesh(cap, grid, layout, nullptr);
+  std::map<std::pair<uint32_t, uint32_t>, int> uses;
+  for (const auto& t : q.triangles)
+    for (int k = 0; k < 3; ++k) ++uses[std::minmax(t[k], t[(k + 1) % 3])];
+  std::vector<uint8_t> locked(q.positions.size(), 0);
+  for (const auto& [e, n] : uses)
+    if (n == 1) locked[e.first] = locked[e.second] = 1;
+  StageSpec spec;
+  spec.kind = StageKind::kRemesh;
+  spec.remesh.grid = 0.02;  // 328 cells at 14 bits (the input's edges are about 240)
+  EXPECT_EQ(remeshSpacing(spec.remesh, 14), 328u);
+  const TileContext ctx{14, layout};
+  auto out = runStage(ctx, TileView{q, locked}, spec, true);
+  ASSERT_TRUE(out.isOk()) << out.status().toString();
+  const QuantizedMesh& m = out->mesh;
+  ASSERT_EQ(m.normals.size(), m.positions.size());
+  EXPECT_LT(m.positions.size(), q.positions.size());
+  std::map<Vec3u, size_t> input_at;
+  for (size_t v = 0; v < q.positions.size(); ++v) input_at[q.positions[v]] = v;
+  size_t kept = 0;
+  for (size_t v = 0; v < m.positions.size(); ++v) {
+    const auto it = input_at.find(m.positions[v]);
+    if (it != input_at.end()) {
+      EXPECT_EQ(m.normals[v], q.normals[it->second]);
+      EXPECT_EQ(out->locked[v], locked[it->second]);
+      ++kept;
+      continue;
+    }
+    const Vec3d p = grid.dequantize(m.positions[v]);
+    const Vec3d radial = vmul(vsub(p, {.5, .5, .5}), 1 / vlen(vsub(p, {.5, .5, .5})));
+    const Vec3f n = decodeOctahedral(m.normals[v], 12);
+    EXPECT_GT(radial[0] * n[0] + radial[1] * n[1] + radial[2] * n[2], std::cos(20 * 3.14159265 / 180)) << v;
+  }
+  EXPECT_GT(kept, 0u);
+  for (const auto& t : m.triangles)
+    EXPECT_TRUE(m.positions[t[0]] != m.positions[t[1]] && m.positions[t[1]] != m.positions[t[2]] &&
+                m.positions[t[0]] != m.positions[t[2]]);
+  auto again = runStage(ctx, TileView{q, locked}, spec, true);
+  ASSERT_TRUE(again.isOk());
+  EXPECT_EQ(again->mesh.positions, m.positions);
+  EXPECT_EQ(again->mesh.triangles, m.triangles);
+
+  const TileContext with_colors{14, AttributeLayout{12, 3}};
+  auto colors = runStage(with_colors, TileView{q, locked}, spec, true);
+  ASSERT_FALSE(colors.isOk());
+  EXPECT_NE(colors.status().message().find("colors"), std::string::npos);
+  StageSpec bad = spec;
+  bad.remesh.grid = 0;
+  EXPECT_NE(validateStage(bad).message().find("grid"), std::string::npos);
+  bad = spec;
+  bad.remesh.tau = 0.6;
+  EXPECT_NE(validateStage(bad).message().find("tau"), std::string::npos);
 }
 
 }  // namespace

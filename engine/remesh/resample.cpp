@@ -116,7 +116,7 @@ class Resampler {
       if (a < -kMinArea)
         return makeError(ErrorCode::kInvalidArgument, "resampling relief " + std::to_string(relief_) + ": triangle " +
                                                           std::to_string(t) + " faces away from it");
-      slice(tri, a <= kMinArea);  // (near) zero area: kept whole
+      slice(tri, a <= kMinArea);  // (near) zero area: its pieces are fanned as they come
     }
     findFixed();
     collapseAll();
@@ -194,45 +194,45 @@ class Resampler {
   }
 
   void slice(const Triangle& tri, bool degenerate) {
+    // Zero-area triangles are sliced too: their neighbours' edges get the same crossings, so no crack opens.
     std::vector<std::vector<u32>> pieces = {{tri[0], tri[1], tri[2]}}, next;
-    if (!degenerate)
-      for (int family = 0; family < 3; ++family) {
-        next.clear();
-        for (std::vector<u32>& poly : pieces) {
-          double lo = INFINITY, hi = -INFINITY;
-          for (u32 v : poly) {
-            lo = std::min(lo, verts_[v].f[family]);
-            hi = std::max(hi, verts_[v].f[family]);
-          }
-          std::vector<u32> current = std::move(poly);
-          for (int64_t k = int64_t(std::floor(lo)) + 1; double(k) < hi; ++k) {
-            if (!(double(k) > lo)) continue;
-            std::vector<u32> below, above;
-            bool any_below = false, any_above = false;
-            for (size_t i = 0; i < current.size(); ++i) {
-              const u32 p = current[i], q = current[(i + 1) % current.size()];
-              const int sp = side(p, family, double(k)), sq = side(q, family, double(k));
-              if (sp <= 0) below.push_back(p);
-              if (sp >= 0) above.push_back(p);
-              any_below = any_below || sp < 0;
-              any_above = any_above || sp > 0;
-              if (sp * sq < 0) {
-                const u32 x = crossing(p, q, family, k);
-                below.push_back(x);
-                above.push_back(x);
-              }
-            }
-            if (any_below && below.size() >= 3) next.push_back(std::move(below));
-            if (!any_above) {
-              current.clear();
-              break;
-            }
-            current = std::move(above);
-          }
-          if (current.size() >= 3) next.push_back(std::move(current));
+    for (int family = 0; family < 3; ++family) {
+      next.clear();
+      for (std::vector<u32>& poly : pieces) {
+        double lo = INFINITY, hi = -INFINITY;
+        for (u32 v : poly) {
+          lo = std::min(lo, verts_[v].f[family]);
+          hi = std::max(hi, verts_[v].f[family]);
         }
-        pieces.swap(next);
+        std::vector<u32> current = std::move(poly);
+        for (int64_t k = int64_t(std::floor(lo)) + 1; double(k) < hi; ++k) {
+          if (!(double(k) > lo)) continue;
+          std::vector<u32> below, above;
+          bool any_below = false, any_above = false;
+          for (size_t i = 0; i < current.size(); ++i) {
+            const u32 p = current[i], q = current[(i + 1) % current.size()];
+            const int sp = side(p, family, double(k)), sq = side(q, family, double(k));
+            if (sp <= 0) below.push_back(p);
+            if (sp >= 0) above.push_back(p);
+            any_below = any_below || sp < 0;
+            any_above = any_above || sp > 0;
+            if (sp * sq < 0) {
+              const u32 x = crossing(p, q, family, k);
+              below.push_back(x);
+              above.push_back(x);
+            }
+          }
+          if (any_below && below.size() >= 3) next.push_back(std::move(below));
+          if (!any_above) {
+            current.clear();
+            break;
+          }
+          current = std::move(above);
+        }
+        if (current.size() >= 3) next.push_back(std::move(current));
       }
+      pieces.swap(next);
+    }
     for (const std::vector<u32>& poly : pieces) emitPiece(poly, degenerate);
   }
 

@@ -8,8 +8,9 @@
 namespace scanpress {
 namespace {
 
-constexpr std::array<StageInfo, 1> kStages = {{
+constexpr std::array<StageInfo, 2> kStages = {{
     {StageKind::kSmooth, "smooth", &smoothStage},
+    {StageKind::kRemesh, "remesh", &remeshStage},
 }};
 
 // Unordered edges over positions, with how many triangles of the mesh use each.
@@ -70,6 +71,13 @@ Status validateStage(const StageSpec& spec) {
       if (!(o.lambda > 0 && o.lambda < 1)) return makeError(ErrorCode::kInvalidArgument, "lambda: must be in (0, 1)");
       if (!(o.mu > -1 && o.mu < -o.lambda))
         return makeError(ErrorCode::kInvalidArgument, "mu: must be in (-1, -lambda)");
+      return Status::ok();
+    }
+    case StageKind::kRemesh: {
+      const RemeshStageOptions& o = spec.remesh;
+      if (!(o.grid > 0 && o.grid <= 1)) return makeError(ErrorCode::kInvalidArgument, "grid: must be in (0, 1]");
+      if (!(o.tau > 0 && o.tau < 0.5773))
+        return makeError(ErrorCode::kInvalidArgument, "tau: must be in (0, 0.5773) (below 1/sqrt(3))");
       return Status::ok();
     }
   }

@@ -32,6 +32,7 @@ struct StagedTile {
 
 enum class StageKind : uint8_t {
   kSmooth = 1,
+  kRemesh = 2,
 };
 
 // Taubin's lambda|mu smoothing (Taubin, "A signal processing approach to fair surface design", SIGGRAPH 1995):
@@ -44,9 +45,18 @@ struct SmoothOptions {
   double mu = -0.34;     // in (-1, -lambda)
 };
 
+// Piecewise regular remeshing (engine/remesh/remesh.h; Szymczak, Rossignac, King, "Piecewise Regular Meshes"):
+// the tile is split into six axis reliefs and resampled on hexagonal grids of spacing `grid`, a fraction of the
+// quantization grid's extent (2^bits cells, the scan's longest side), at least 2 cells.
+struct RemeshStageOptions {
+  double grid = 0.005;  // in (0, 1]
+  double tau = 0.2;     // relief regularisation, in (0, 1/sqrt(3))
+};
+
 struct StageSpec {
   StageKind kind = StageKind::kSmooth;
   SmoothOptions smooth;
+  RemeshStageOptions remesh;
 };
 
 using StageFunction = Result<StagedTile> (*)(const TileContext& ctx, const TileView& tile, const StageSpec& spec);
@@ -83,5 +93,9 @@ void undoDegenerateMoves(const QuantizedMesh& before, QuantizedMesh& after);
 
 // `smooth` (smooth.cpp).
 Result<StagedTile> smoothStage(const TileContext& ctx, const TileView& tile, const StageSpec& spec);
+// `remesh` (remesh_stage.cpp).
+Result<StagedTile> remeshStage(const TileContext& ctx, const TileView& tile, const StageSpec& spec);
+// The remesh stage's grid spacing in grid cells: `grid` times 2^bits, rounded to an even number, at least 2.
+uint32_t remeshSpacing(const RemeshStageOptions& options, int bits);
 
 }  // namespace scanpress
