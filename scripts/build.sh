@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Configures and builds scanpress. Release in build/ by default; SANITIZE=1 builds Debug with ASan+UBSan in
+# Configures and builds scanpress. Release in build/ by default; SANITIZE=1 builds Debug (at -O1) with ASan+UBSan in
 # build-asan/. Extra arguments go to cmake's configure step, whose output (what was found, what is not built) is
 # shown.
 set -euo pipefail
