@@ -1,5 +1,5 @@
-// Codec and I/O throughput on real scans: mesh reading (MB/s, Mtri/s) and each codec's encode and decode
-// (Mtri/s, bits per vertex). Scans come from ../shared/data (the bundled bunny when it is missing).
+// Codec and I/O throughput on real scans: mesh reading (MB/s, Mtri/s), each codec's encode and decode (Mtri/s,
+// bits per vertex), simplification and remeshing. Scans come from ../shared/data (the bundled bunny when it is missing).
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
@@ -10,6 +10,7 @@
 
 #include "engine/codecs/codec.h"
 #include "engine/quantize.h"
+#include "engine/remesh/remesh.h"
 #include "engine/simplify/simplify.h"
 #include "jobs/measure.h"
 #include "jobs/mesh_io/mesh_reader.h"
@@ -168,6 +169,32 @@ void BM_Simplify(benchmark::State& state, std::string scan, SimplifyWeights weig
   state.counters["peak_B/tri"] = 1024.0 * double(after.ru_maxrss - before.ru_maxrss) / double(p.mesh.triangles.size());
 }
 
+// Piecewise regular remeshing (engine/remesh/remesh.h) of a whole scan at 12 bits, spacing `range(0)` cells:
+// input triangles per second (the target: 0.5 Mtri/s per core), the output's size and regular share, and
+// the peak memory growth per input triangle (target: at most 300 bytes).
+void BM_Remesh(benchmark::State& state, std::string scan) {
+  const Prepared& p = prepared(scan, 12);
+  const RemeshOptions o{.tau = 0.2, .spacing = uint32_t(state.range(0))};
+  size_t faces = 0, regular = 0;
+  rusage before{};
+  getrusage(RUSAGE_SELF, &before);
+  for (auto _ : state) {
+    auto r = remeshPiecewiseRegular(p.mesh, {}, o);
+    if (!r.isOk()) return state.SkipWithError(r.status().message().c_str());
+    faces = r->triangles.size();
+    regular = 0;
+    for (uint8_t g : r->regular) regular += g;
+    benchmark::DoNotOptimize(r);
+  }
+  state.counters["Mtri/s"] =
+      benchmark::Counter(double(p.mesh.triangles.size()) * state.iterations() / 1e6, benchmark::Counter::kIsRate);
+  state.counters["out_faces_%"] = 100.0 * double(faces) / double(p.mesh.triangles.size());
+  state.counters["regular_%"] = faces ? 100.0 * double(regular) / double(faces) : 0;
+  rusage after{};
+  getrusage(RUSAGE_SELF, &after);
+  state.counters["peak_B/tri"] = 1024.0 * double(after.ru_maxrss - before.ru_maxrss) / double(p.mesh.triangles.size());
+}
+
 // The paper's Table 1 analogue: symmetric Hausdorff distance (relative to the diagonal) at `percent` of the faces,
 // with the paper's weights and with plain QEM, on the same 16-bit grid.
 void BM_SimplifyHausdorff(benchmark::State& state, std::string scan) {
@@ -309,6 +336,11 @@ int registerAll() {
     benchmark::RegisterBenchmark((std::string("SimplifyHausdorff/") + scan).c_str(), BM_SimplifyHausdorff,
                                  std::string(scan))
         ->Arg(10)
+        ->Iterations(1)
+        ->Unit(benchmark::kMillisecond);
+  for (const char* scan : {"horse.ply.zst", "bun_zipper.ply.zst", "igea.ply.zst"})
+    benchmark::RegisterBenchmark((std::string("Remesh/") + scan).c_str(), BM_Remesh, std::string(scan))
+        ->Arg(24)
         ->Iterations(1)
         ->Unit(benchmark::kMillisecond);
   for (const char* scan : {"igea.ply.zst", "bun_zipper.ply.zst"})
