@@ -136,10 +136,10 @@ TEST(SmoothStage, DenoisesASphereAndKeepsTheContract) {
 }
 
 // The remesh stage on a tile (a cap of a sphere with its rim locked): the border contract holds (runStage checks
-// it, thoroughly), the result is on the grid with no two corners in one cell, mostly fewer vertices at a coarse
+// it, thoroughly), the result is on the grid with no two corners in one cell, fewer vertices at a coarse
 // grid, kept input vertices keep their normals and new ones point along the sphere's radius; the same at every
-// call. Colors are refused, bad options named.
-TEST(RemeshStage, KeepsTheTileBorderAndGivesNormals) {
+// call; colors are interpolated onto their levels; bad options are named.
+TEST(RemeshStage, KeepsTheTileBorderAndCarriesNormalsAndColors) {
   Mesh sphere = icosphere(5);
   for (auto& p : sphere.positions) p = vadd(vmul(p, 0.45), {0.5, 0.5, 0.5});
   Mesh cap;
@@ -195,10 +195,29 @@ TEST(RemeshStage, KeepsTheTileBorderAndGivesNormals) {
   EXPECT_EQ(again->mesh.positions, m.positions);
   EXPECT_EQ(again->mesh.triangles, m.triangles);
 
-  const TileContext with_colors{14, AttributeLayout{12, 3}};
-  auto colors = runStage(with_colors, TileView{q, locked}, spec, true);
-  ASSERT_FALSE(colors.isOk());
-  EXPECT_NE(colors.status().message().find("colors"), std::string::npos);
+  // Colors, a gradient along x at 6 bits: kept vertices keep theirs, new ones get the gradient (the
+  // interpolation of their input triangle's corners) on the 6-bit levels.
+  AttributeLayout colored{12, 3};
+  colored.color_bits = 6;
+  QuantizedMesh qc = q;
+  const auto gradient = [&](const Vec3u& p) {
+    return quantizeColor(Rgba8{uint8_t(std::lround(255.0 * p[0] / 16383)), 100, 200, 255}, colored);
+  };
+  for (const Vec3u& p : qc.positions) qc.colors.push_back(gradient(p));
+  auto colors = runStage(TileContext{14, colored}, TileView{qc, locked}, spec, true);
+  ASSERT_TRUE(colors.isOk()) << colors.status().toString();
+  ASSERT_EQ(colors->mesh.colors.size(), colors->mesh.positions.size());
+  for (size_t v = 0; v < colors->mesh.positions.size(); ++v) {
+    const Rgba8 c = colors->mesh.colors[v];
+    EXPECT_EQ(quantizeColor(c, colored), c) << "off the 6-bit levels";
+    const auto it = input_at.find(colors->mesh.positions[v]);
+    if (it != input_at.end()) {
+      EXPECT_EQ(c, qc.colors[it->second]);
+    } else {
+      EXPECT_NEAR(int(c[0]), int(gradient(colors->mesh.positions[v])[0]), 12);  // a triangle spans about 4 levels
+      EXPECT_EQ(c[1], gradient({0, 0, 0})[1]);
+    }
+  }
   StageSpec bad = spec;
   bad.remesh.grid = 0;
   EXPECT_NE(validateStage(bad).message().find("grid"), std::string::npos);

@@ -88,10 +88,15 @@ Result<Remeshed> remeshPiecewiseRegular(const QuantizedMesh& mesh, std::span<con
   u32 parts = 0;
   const std::vector<u32> part_of = reliefComponents(layout, &parts);
   std::vector<std::vector<Triangle>> part_triangles(parts);
+  std::vector<std::vector<u32>> part_sources(parts);  // per part triangle: its input triangle
   std::vector<int> part_relief(parts, 0);
+  std::vector<u32> source_of_layout(layout.positions.size(), kNone);  // an input triangle holding the vertex
   for (size_t i = 0; i < layout.triangles.size(); ++i) {
     part_triangles[part_of[i]].push_back(layout.triangles[i]);
+    part_sources[part_of[i]].push_back(layout.source[i]);
     part_relief[part_of[i]] = layout.relief[i];
+    for (u32 v : layout.triangles[i])
+      if (source_of_layout[v] == kNone) source_of_layout[v] = layout.source[i];
   }
   // Layout vertices: the input's first (locked ones stay fixed), then the relief boundaries' cut points.
   std::vector<uint8_t> fixed(layout.positions.size(), 0);
@@ -127,7 +132,11 @@ Result<Remeshed> remeshPiecewiseRegular(const QuantizedMesh& mesh, std::span<con
       if (lv == kNone || id == kNone) {
         id = u32(out.positions.size());
         out.positions.push_back(r.positions[v]);
-        out.input_vertex.push_back(lv != kNone && lv < mesh.positions.size() ? lv : kNone);
+        const bool input = lv != kNone && lv < mesh.positions.size();
+        out.input_vertex.push_back(input ? lv : kNone);
+        out.source_triangle.push_back(input         ? kNone
+                                      : lv != kNone ? source_of_layout[lv]
+                                                    : part_sources[part][r.source_triangle[v]]);
       }
       merged[v] = id;
       if (lv == kNone && r.input_edge[v][0] != kNone && (r.kind[v] & kFixedVertex)) {

@@ -26,9 +26,11 @@ struct Remeshed {
   std::vector<uint8_t> relief;         // per triangle: the relief (0..5) it was resampled in
   std::vector<uint8_t> regular;        // per triangle: 1 if it projects onto a triangle of its relief's grid
   std::vector<uint32_t> input_vertex;  // per vertex: its index in the input mesh, or UINT32_MAX
-  uint32_t reliefs = 0;                // relief components resampled
-  uint64_t merge_splits = 0;           // triangles split so that two reliefs meet vertex to vertex
-  uint64_t border_fans = 0;            // tile border edges closed by a fan of zero-area triangles
+  // Per vertex that is not an input vertex: an input triangle it lies on (to carry attributes); else UINT32_MAX.
+  std::vector<uint32_t> source_triangle;
+  uint32_t reliefs = 0;       // relief components resampled
+  uint64_t merge_splits = 0;  // triangles split so that two reliefs meet vertex to vertex
+  uint64_t border_fans = 0;   // tile border edges closed by a fan of zero-area triangles
 };
 
 // Remeshes `mesh` (a tile: triangles on the integer grid; `locked` empty or one flag per vertex). Locked vertices

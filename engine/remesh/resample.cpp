@@ -116,6 +116,7 @@ class Resampler {
       if (a < -kMinArea)
         return makeError(ErrorCode::kInvalidArgument, "resampling relief " + std::to_string(relief_) + ": triangle " +
                                                           std::to_string(t) + " faces away from it");
+      current_triangle_ = u32(t);
       slice(tri, a <= kMinArea);  // (near) zero area: its pieces are fanned as they come
     }
     findFixed();
@@ -189,6 +190,7 @@ class Resampler {
     const u32 id = u32(positions_.size());
     positions_.push_back(vadd(pa, vmul(vsub(pb, pa), lambda)));
     verts_.push_back(x);
+    origin_.push_back(current_triangle_);
     crossings_.emplace(key, id);
     return id;
   }
@@ -276,6 +278,7 @@ class Resampler {
     const u32 centre = u32(positions_.size());
     positions_.push_back(vmul(c, 1.0 / double(m)));
     verts_.push_back(cv);
+    origin_.push_back(current_triangle_);
     for (size_t i = 0; i < m; ++i) addTriangle({centre, poly[i], poly[(i + 1) % m]}, cell);
   }
 
@@ -511,6 +514,7 @@ class Resampler {
           const SliceVertex& s = verts_[v];
           out_.positions.push_back(positions_[v]);
           out_.input_vertex.push_back(v < input_vertex_.size() ? input_vertex_[v] : kNone);
+          out_.source_triangle.push_back(v < input_vertex_.size() ? kNone : origin_[v - input_vertex_.size()]);
           out_.input_edge.push_back(s.edge[0] == kNone
                                         ? std::array<u32, 2>{kNone, kNone}
                                         : std::array<u32, 2>{input_vertex_[s.edge[0]], input_vertex_[s.edge[1]]});
@@ -551,6 +555,8 @@ class Resampler {
   std::vector<u32> input_vertex_;       // per used input vertex: its input index
   std::vector<uint8_t> fixed_in_;       // per used input vertex: the caller's flags
   std::vector<uint8_t> shared_;         // per vertex: on a boundary shared with another relief
+  std::vector<u32> origin_;             // per added vertex: the input triangle it was made in
+  u32 current_triangle_ = 0;            // the input triangle being sliced
   ResampledRelief out_;
   std::vector<SliceVertex> verts_;
   std::unordered_map<CrossingKey, u32, CrossingHash> crossings_;

@@ -51,6 +51,8 @@ struct ResampledRelief {
   // Per vertex: for an added vertex on an input edge, that edge's input vertices; else UINT32_MAX twice. Points
   // added on the relief's boundary are collapsed along it where no triangle flips; those left are named here.
   std::vector<std::array<uint32_t, 2>> input_edge;
+  // Per vertex: for an added vertex, the input triangle (index into `triangles`) it lies in; else UINT32_MAX.
+  std::vector<uint32_t> source_triangle;
   std::vector<Triangle> triangles;
   std::vector<uint8_t> regular;                    // per triangle: 1 if it projects onto a grid triangle
   std::vector<uint8_t> kind;                       // per vertex: ResampledVertex, kFixedVertex or'ed in

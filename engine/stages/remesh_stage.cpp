@@ -7,9 +7,9 @@
 // (the coders refuse two corners in one cell, and welding would change the topology); only if all 27 are taken
 // is it welded, and triangles that then repeat a vertex are dropped. Input vertices keep their points and
 // identity, so locked vertices stay.
-// Normals: an input vertex that is kept keeps its normal; other vertices get the area-weighted normal of the
-// remeshed surface, turned to the input's convention (the input's normals mostly agree with its triangles'
-// orientation, or mostly oppose it). Colors are not carried through remeshing yet: a tile with colors is refused.
+// Normals and colors: an input vertex that is kept keeps its own; any other vertex lies on an input triangle and
+// takes the barycentric interpolation of that triangle's corners (normals normalised, colors rounded and snapped to
+// the layout's levels).
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -17,6 +17,7 @@
 
 #include "engine/geometry.h"
 #include "engine/octahedral.h"
+#include "engine/quantize.h"
 #include "engine/remesh/remesh.h"
 #include "engine/stages/stage.h"
 
@@ -26,21 +27,29 @@ namespace {
 using u32 = uint32_t;
 constexpr u32 kNone = UINT32_MAX;
 
-// Area-weighted vertex normals (unnormalised sums of the triangles' cross products).
-std::vector<Vec3d> vertexNormalSums(const std::vector<Vec3d>& p, const std::vector<Triangle>& triangles) {
-  std::vector<Vec3d> n(p.size(), Vec3d{0, 0, 0});
-  for (const Triangle& t : triangles) {
-    const Vec3d c = vcross(vsub(p[t[1]], p[t[0]]), vsub(p[t[2]], p[t[0]]));
-    for (u32 v : t) n[v] = vadd(n[v], c);
-  }
-  return n;
+Vec3d toDouble(const Vec3u& q) { return {double(q[0]), double(q[1]), double(q[2])}; }
+
+Vec3d decodeVec(const OctNormal& code, int bits) {
+  const Vec3f c = decodeOctahedral(code, bits);
+  return {c[0], c[1], c[2]};
 }
 
-std::vector<Vec3d> doubles(const std::vector<Vec3u>& q) {
-  std::vector<Vec3d> p;
-  p.reserve(q.size());
-  for (const Vec3u& v : q) p.push_back({double(v[0]), double(v[1]), double(v[2])});
-  return p;
+// Barycentric coordinates of p's projection onto the plane of (a, b, c), clamped to the triangle (weights >= 0,
+// summing to 1); a zero-area triangle gives its first corner.
+std::array<double, 3> barycentric(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+  const Vec3d ab = vsub(b, a), ac = vsub(c, a), ap = vsub(p, a);
+  const double d00 = vdot(ab, ab), d01 = vdot(ab, ac), d11 = vdot(ac, ac), d20 = vdot(ap, ab), d21 = vdot(ap, ac);
+  const double den = d00 * d11 - d01 * d01;
+  if (!(den > 0)) return {1, 0, 0};
+  double v = (d11 * d20 - d01 * d21) / den, w = (d00 * d21 - d01 * d20) / den;
+  v = std::clamp(v, 0.0, 1.0);
+  w = std::clamp(w, 0.0, 1.0);
+  if (v + w > 1) {
+    const double sum = v + w;
+    v /= sum;
+    w /= sum;
+  }
+  return {1 - v - w, v, w};
 }
 
 }  // namespace
@@ -54,9 +63,6 @@ uint32_t remeshSpacing(const RemeshStageOptions& options, int bits) {
 Result<StagedTile> remeshStage(const TileContext& ctx, const TileView& tile, const StageSpec& spec) {
   SP_RETURN_IF_ERROR(validateStage(spec).withContext("remesh"));
   const QuantizedMesh& in = tile.mesh;
-  if (ctx.layout.hasColors())
-    return makeError(ErrorCode::kInvalidArgument,
-                     "remesh: colors are not carried through remeshing yet (encode without them, --no-colors)");
   const bool has_flags = tile.locked.size() == in.positions.size();
   SP_ASSIGN_OR_RETURN(Remeshed r,
                       remeshPiecewiseRegular(in, has_flags ? tile.locked : std::span<const uint8_t>(),
@@ -118,26 +124,46 @@ Result<StagedTile> remeshStage(const TileContext& ctx, const TileView& tile, con
   for (size_t v = 0; v < source.size(); ++v)
     if (source[v] != kNone && has_flags) out.locked[v] = tile.locked[source[v]];
 
-  if (ctx.layout.hasNormals() && in.normals.size() == in.positions.size()) {
-    // The input's convention: its normals along or against its triangles' orientation.
-    const std::vector<Vec3d> in_sums = vertexNormalSums(doubles(in.positions), in.triangles);
-    int64_t agree = 0;
-    for (size_t v = 0; v < in.positions.size(); ++v) {
-      const Vec3f n = decodeOctahedral(in.normals[v], ctx.layout.normal_bits);
-      const double d = in_sums[v][0] * n[0] + in_sums[v][1] * n[1] + in_sums[v][2] * n[2];
-      agree += d > 0 ? 1 : d < 0 ? -1 : 0;
+  // Attributes: a kept input vertex keeps its own; another takes the interpolation, at its exact (unrounded)
+  // position, of the input triangle it lies on.
+  const bool normals = ctx.layout.hasNormals() && in.normals.size() == in.positions.size();
+  const bool colors = ctx.layout.hasColors() && in.colors.size() == in.positions.size();
+  if (normals) out.mesh.normals.resize(out.mesh.positions.size());
+  if (colors) out.mesh.colors.resize(out.mesh.positions.size());
+  std::vector<u32> first(out.mesh.positions.size(), kNone);  // a remeshed vertex that became each output vertex
+  for (u32 v = 0; v < id.size(); ++v)
+    if (first[id[v]] == kNone) first[id[v]] = v;
+  for (size_t o = 0; o < out.mesh.positions.size() && (normals || colors); ++o) {
+    if (source[o] != kNone) {
+      if (normals) out.mesh.normals[o] = in.normals[source[o]];
+      if (colors) out.mesh.colors[o] = in.colors[source[o]];
+      continue;
     }
-    const double sign = agree >= 0 ? 1.0 : -1.0;
-    const std::vector<Vec3d> sums = vertexNormalSums(doubles(out.mesh.positions), out.mesh.triangles);
-    out.mesh.normals.resize(out.mesh.positions.size());
-    for (size_t v = 0; v < out.mesh.positions.size(); ++v) {
-      if (source[v] != kNone) {
-        out.mesh.normals[v] = in.normals[source[v]];
-        continue;
+    const u32 v = first[o];
+    if (r.source_triangle[v] >= in.triangles.size())
+      return makeError(ErrorCode::kInternal, "remesh: an added vertex without its input triangle");
+    const Triangle& t = in.triangles[r.source_triangle[v]];
+    const std::array<double, 3> w = barycentric(r.positions[v], toDouble(in.positions[t[0]]),
+                                                toDouble(in.positions[t[1]]), toDouble(in.positions[t[2]]));
+    if (normals) {
+      Vec3d n{0, 0, 0};
+      for (int k = 0; k < 3; ++k) {
+        const Vec3f c = decodeOctahedral(in.normals[t[size_t(k)]], ctx.layout.normal_bits);
+        n = vadd(n, vmul(Vec3d{c[0], c[1], c[2]}, w[size_t(k)]));
       }
-      const double len = vlen(sums[v]);
-      const Vec3d n = len > 0 ? vmul(sums[v], sign / len) : Vec3d{0, 0, 1};
-      out.mesh.normals[v] = encodeOctahedral({float(n[0]), float(n[1]), float(n[2])}, ctx.layout.normal_bits);
+      const double len = vlen(n);
+      if (len > 1e-9) n = vmul(n, 1 / len);
+      else n = decodeVec(in.normals[t[0]], ctx.layout.normal_bits);  // opposite normals cancel: take a corner's
+      out.mesh.normals[o] = encodeOctahedral({float(n[0]), float(n[1]), float(n[2])}, ctx.layout.normal_bits);
+    }
+    if (colors) {
+      Rgba8 c{};
+      for (int ch = 0; ch < 4; ++ch) {
+        double sum = 0;
+        for (int k = 0; k < 3; ++k) sum += w[size_t(k)] * in.colors[t[size_t(k)]][size_t(ch)];
+        c[size_t(ch)] = uint8_t(std::clamp(std::lround(sum), 0l, 255l));
+      }
+      out.mesh.colors[o] = quantizeColor(c, ctx.layout);
     }
   }
   return out;
