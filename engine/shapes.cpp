@@ -38,4 +38,22 @@ Mesh icosphere(int levels) {
   return m;
 }
 
+Mesh torus(int rings, int sides, double major, double minor) {
+  Mesh m;
+  const double pi = 3.14159265358979323846;
+  for (int i = 0; i < rings; ++i)
+    for (int j = 0; j < sides; ++j) {
+      const double u = 2 * pi * i / rings, v = 2 * pi * j / sides;
+      m.positions.push_back({(major + minor * std::cos(v)) * std::cos(u), (major + minor * std::cos(v)) * std::sin(u),
+                             minor * std::sin(v)});
+    }
+  const auto at = [&](int i, int j) { return uint32_t(((i + rings) % rings) * sides + (j + sides) % sides); };
+  for (int i = 0; i < rings; ++i)
+    for (int j = 0; j < sides; ++j) {
+      m.triangles.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
+      m.triangles.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+    }
+  return m;
+}
+
 }  // namespace scanpress

@@ -310,7 +310,9 @@ TEST_P(AttributeRoundTrip, CorruptedAttributesFailCleanly) {
     std::vector<uint8_t> bad = enc->payload;
     for (int k = 0; k < 1 + trial % 4; ++k) bad[n - 1 - rng() % tail] ^= uint8_t(1 + rng() % 255);
     auto d = codec().decode(ctx, codec().version, bad, limitsOf(enc->decoded));
-    if (d.isOk()) EXPECT_TRUE(validateTile(ctx, *d).isOk());
+    if (d.isOk()) {
+      EXPECT_TRUE(validateTile(ctx, *d).isOk());
+    }
   }
 }
 

@@ -7,7 +7,6 @@
 
 #include <cmath>
 #include <map>
-#include <numbers>
 #include <random>
 #include <set>
 
@@ -22,23 +21,6 @@ namespace {
 QuantizedMesh quantized(const Mesh& m, int bits) {
   const Grid grid = *makeGrid(boundingBox(m), bits);
   return *quantizeMesh(m, grid, {}, nullptr);
-}
-
-Mesh torus(int rings, int sides, double big, double small) {
-  Mesh m;
-  for (int i = 0; i < rings; ++i)
-    for (int j = 0; j < sides; ++j) {
-      const double u = 2 * std::numbers::pi * i / rings, v = 2 * std::numbers::pi * j / sides;
-      m.positions.push_back({(big + small * std::cos(v)) * std::cos(u), (big + small * std::cos(v)) * std::sin(u),
-                             small * std::sin(v)});
-    }
-  const auto at = [&](int i, int j) { return uint32_t(((i + rings) % rings) * sides + (j + sides) % sides); };
-  for (int i = 0; i < rings; ++i)
-    for (int j = 0; j < sides; ++j) {
-      m.triangles.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
-      m.triangles.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
-    }
-  return m;
 }
 
 Vec3d normalOf(const std::vector<Vec3d>& p, const Triangle& t) {

@@ -115,18 +115,8 @@ uint8_t mostFaced(const Vec3d& n) {
 
 class Builder {
  public:
-  Builder(const QuantizedMesh& mesh, std::span<const uint8_t> locked, double tau) : in_(mesh), tau_(tau) {
-    if (locked.empty()) return;
-    // Tile border edges: both ends locked, used by one triangle or by more than two.
-    std::unordered_map<u64, int> uses;
-    for (const Triangle& t : mesh.triangles)
-      for (int k = 0; k < 3; ++k) {
-        const u32 a = t[size_t(k)], b = t[size_t((k + 1) % 3)];
-        if (a != b && locked[a] && locked[b]) ++uses[(u64(std::min(a, b)) << 32) | std::max(a, b)];
-      }
-    for (const auto& [key, n] : uses)
-      if (n != 2) border_.insert(key);
-  }
+  Builder(const QuantizedMesh& mesh, std::span<const uint8_t> locked, double tau)
+      : in_(mesh), tau_(tau), border_(tileBorderEdges(mesh, locked)) {}
 
   ReliefLayout run() {
     const size_t n = in_.positions.size();
@@ -314,7 +304,7 @@ class Builder {
   std::vector<double> distance_;      // per input vertex and relief
   std::vector<uint8_t> label_;        // per input vertex
   std::unordered_map<u64, u32> cuts_;
-  std::unordered_set<u64> border_;  // tile border edges (never cut)
+  const std::unordered_set<u64> border_;  // tile border edges (never cut)
 };
 
 }  // namespace
@@ -335,6 +325,20 @@ Result<ReliefLayout> buildReliefs(const QuantizedMesh& mesh, std::span<const uin
                                                           " uses vertex " + std::to_string(v) + " of " +
                                                           std::to_string(mesh.positions.size()));
   return Builder(mesh, locked, options.tau).run();
+}
+
+std::unordered_set<uint64_t> tileBorderEdges(const QuantizedMesh& mesh, std::span<const uint8_t> locked) {
+  std::unordered_set<u64> border;
+  if (locked.size() != mesh.positions.size()) return border;
+  std::unordered_map<u64, int> uses;
+  for (const Triangle& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k) {
+      const u32 a = t[size_t(k)], b = t[size_t((k + 1) % 3)];
+      if (a != b && locked[a] && locked[b]) ++uses[(u64(std::min(a, b)) << 32) | std::max(a, b)];
+    }
+  for (const auto& [key, n] : uses)
+    if (n != 2) border.insert(key);
+  return border;
 }
 
 std::vector<uint32_t> reliefComponents(const ReliefLayout& layout, uint32_t* count) {

@@ -11,6 +11,7 @@
 #include <array>
 #include <cstdint>
 #include <span>
+#include <unordered_set>
 #include <vector>
 
 #include "engine/mesh.h"
@@ -54,6 +55,10 @@ struct ReliefLayout {
 // flags of the wrong size.
 Result<ReliefLayout> buildReliefs(const QuantizedMesh& mesh, std::span<const uint8_t> locked,
                                   const ReliefOptions& options);
+
+// The tile border edges of `mesh`: edges between two locked vertices used by one triangle or by more than two, as
+// (lower index << 32 | higher index). Empty when `locked` does not have one flag per vertex.
+std::unordered_set<uint64_t> tileBorderEdges(const QuantizedMesh& mesh, std::span<const uint8_t> locked);
 
 // The connected components of each relief: triangles of one relief joined across shared edges (an edge used by
 // more than two triangles joins them all). One id per refined triangle, numbered from 0 in triangle order.

@@ -156,18 +156,7 @@ Result<Remeshed> remeshPiecewiseRegular(const QuantizedMesh& mesh, std::span<con
     }
   }
 
-  // Tile border edges (both ends locked; one triangle, or more than two).
-  std::unordered_set<u64> border;
-  if (!locked.empty() && !left.empty()) {
-    std::unordered_map<u64, int> uses;
-    for (const Triangle& t : mesh.triangles)
-      for (int k = 0; k < 3; ++k) {
-        const u32 x = t[size_t(k)], y = t[size_t((k + 1) % 3)];
-        if (x != y && locked[x] && locked[y]) ++uses[(u64(std::min(x, y)) << 32) | std::max(x, y)];
-      }
-    for (const auto& [key, n] : uses)
-      if (n != 2) border.insert(key);
-  }
+  const std::unordered_set<u64> border = left.empty() ? std::unordered_set<u64>() : tileBorderEdges(mesh, locked);
   // Points left on a boundary edge between reliefs: every other part on that edge gets them too, by splitting its
   // triangle on the sub-edge that holds each point. Points left on a tile border edge: the edge is restored by a
   // fan of zero-area triangles over them (the paper's loop filling).
