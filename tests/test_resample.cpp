@@ -233,7 +233,7 @@ TEST(Resample, FixedVerticesStayAndVerticesOnGridLinesAndPointsAreHandled) {
   auto r = resampleRelief(in.positions, in.triangles, 4, lattice, fixed);
   ASSERT_TRUE(r.isOk()) << r.status().toString();
   expectValid(in, *r, 4, lattice, fixed);
-  // A zero-area triangle (a fin on three collinear points) is kept and does not stop the rest.
+  // A zero-area triangle (a fin on three collinear points) does not stop the rest, and the projected area stays.
   Patch fin = heightField(
       4, 10, 0, 400, [](double x, double) { return 0.2 * x; }, 0.2, 5);
   const uint32_t a = fin.triangles[40][0], b = fin.triangles[40][1];

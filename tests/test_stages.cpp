@@ -218,6 +218,12 @@ TEST(RemeshStage, KeepsTheTileBorderAndCarriesNormalsAndColors) {
       EXPECT_EQ(c[1], gradient({0, 0, 0})[1]);
     }
   }
+  // Lock flags of the wrong size are refused; a grid too fine for the tile is a clean error, not an explosion.
+  EXPECT_EQ(runStage(ctx, TileView{q, std::vector<uint8_t>(3, 1)}, spec, true).status().code(),
+            ErrorCode::kInvalidArgument);
+  StageSpec tiny = spec;
+  tiny.remesh.grid = 1e-9;
+  EXPECT_EQ(runStage(ctx, TileView{q, locked}, tiny, true).status().code(), ErrorCode::kLimitExceeded);
   StageSpec bad = spec;
   bad.remesh.grid = 0;
   EXPECT_NE(validateStage(bad).message().find("grid"), std::string::npos);

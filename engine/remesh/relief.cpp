@@ -138,7 +138,7 @@ class Builder {
     vertex_normal_.assign(p.size(), Vec3d{0, 0, 0});
     for (size_t t = 0; t < in_.triangles.size(); ++t) {
       const Triangle& tri = in_.triangles[t];
-      // Integer corners below 2^26: the cross product is exact, so zero area is decided exactly.
+      // Integer corners below 2^25 (checked): the cross product is exact, so zero area is decided exactly.
       const Vec3d c = vcross(vsub(p[tri[1]], p[tri[0]]), vsub(p[tri[2]], p[tri[0]]));
       const double len = vlen(c);
       unit_normal_[t] = len > 0 ? vmul(c, 1 / len) : Vec3d{0, 0, 0};
@@ -318,6 +318,9 @@ Result<ReliefLayout> buildReliefs(const QuantizedMesh& mesh, std::span<const uin
   if (!(options.tau > 0 && options.tau < 1 / std::sqrt(3.0)))
     return makeError(ErrorCode::kInvalidArgument,
                      "relief tau " + std::to_string(options.tau) + " is outside (0, 1/sqrt(3) = 0.577)");
+  for (const Vec3u& p : mesh.positions)
+    if (p[0] >= (1u << 25) || p[1] >= (1u << 25) || p[2] >= (1u << 25))
+      return makeError(ErrorCode::kInvalidArgument, "relief construction: a vertex beyond 2^25 grid units");
   for (size_t t = 0; t < mesh.triangles.size(); ++t)
     for (u32 v : mesh.triangles[t])
       if (v >= mesh.positions.size())

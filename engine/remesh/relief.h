@@ -51,8 +51,8 @@ struct ReliefLayout {
 // one flag per vertex: an edge between two locked vertices on the tile's border (used by one triangle or by more
 // than two) is never cut, so it stays an edge. Zero-area triangles are cut like the others (their pieces have zero
 // area); triangles that repeat a vertex are kept whole. Isolated vertices are kept (in `positions`, unused); an
-// empty mesh gives an empty layout. kInvalidArgument for tau outside (0, 1/sqrt(3)), indices out of range or lock
-// flags of the wrong size.
+// empty mesh gives an empty layout. kInvalidArgument for tau outside (0, 1/sqrt(3)), indices out of range, lock
+// flags of the wrong size or coordinates beyond 2^25.
 Result<ReliefLayout> buildReliefs(const QuantizedMesh& mesh, std::span<const uint8_t> locked,
                                   const ReliefOptions& options);
 

@@ -15,6 +15,7 @@
 #include "engine/remesh/remesh.h"
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <string>
 #include <unordered_map>
@@ -30,6 +31,8 @@ namespace {
 using u32 = uint32_t;
 using u64 = uint64_t;
 constexpr u32 kNone = UINT32_MAX;
+// Resampling makes at most about this many pieces per input triangle (plus a million per tile), or refuses.
+constexpr double kMaxPiecesPerTriangle = 64;
 
 // A point added on an input edge that stays on a relief's boundary: where along the edge, which merged vertex, and
 // which relief part it came from.
@@ -97,6 +100,30 @@ Result<Remeshed> remeshPiecewiseRegular(const QuantizedMesh& mesh, std::span<con
     part_relief[part_of[i]] = layout.relief[i];
     for (u32 v : layout.triangles[i])
       if (source_of_layout[v] == kNone) source_of_layout[v] = layout.source[i];
+  }
+  // The output grows with the area over the grid's cell: refuse a grid so fine that a tile would explode (each
+  // piece costs about 100 bytes while resampling).
+  {
+    const HexLattice l = HexLattice::withSpacing(options.spacing);
+    const double cell = 0.5 * double(l.spacing) * double(l.row);
+    double pieces = 0;
+    for (size_t i = 0; i < layout.triangles.size(); ++i) {
+      const Triangle& t = layout.triangles[i];
+      const auto a = reliefBase(layout.positions[t[0]], layout.relief[i]);
+      const auto b = reliefBase(layout.positions[t[1]], layout.relief[i]);
+      const auto c = reliefBase(layout.positions[t[2]], layout.relief[i]);
+      const double area = 0.5 * std::abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]));
+      const double perimeter = std::hypot(b[0] - a[0], b[1] - a[1]) + std::hypot(c[0] - b[0], c[1] - b[1]) +
+                               std::hypot(a[0] - c[0], a[1] - c[1]);
+      pieces += 2 * area / cell + 3 * perimeter / double(l.row) + 1;
+    }
+    const double limit = kMaxPiecesPerTriangle * double(mesh.triangles.size()) + double(1 << 20);
+    if (pieces > limit)
+      return makeError(ErrorCode::kLimitExceeded,
+                       "remesh: grid spacing " + std::to_string(options.spacing) +
+                           " cells is too fine for this tile (" + std::to_string(mesh.triangles.size()) +
+                           " triangles would make about " + std::to_string(uint64_t(pieces)) + " pieces; at most " +
+                           std::to_string(uint64_t(kMaxPiecesPerTriangle)) + " per triangle): use a coarser grid");
   }
   // Layout vertices: the input's first (locked ones stay fixed), then the relief boundaries' cut points.
   std::vector<uint8_t> fixed(layout.positions.size(), 0);
@@ -172,46 +199,53 @@ Result<Remeshed> remeshPiecewiseRegular(const QuantizedMesh& mesh, std::span<con
         closeBorderEdge(out, triangle_part, a, b, points);
         continue;
       }
-      // Where each vertex on the edge is along it.
-      std::unordered_map<u32, double> along = {{a, 0.0}, {b, 1.0}};
-      for (const EdgePoint& p : points) along[p.vertex] = p.t;
-      for (const EdgePoint& p : points) {
-        // Triangles of other parts with a side on this edge that strictly contains p.
-        bool again = true;
-        while (again) {
-          again = false;
-          std::vector<u32> candidates;
-          for (const auto& [v, tv] : along)
-            for (u32 t : incident[v]) candidates.push_back(t);
-          std::sort(candidates.begin(), candidates.end());
-          candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
-          for (u32 t : candidates) {
-            if (triangle_part[t] == p.part) continue;
-            const Triangle tri = out.triangles[t];
-            for (int k = 0; k < 3 && !again; ++k) {
-              const u32 x = tri[size_t(k)], y = tri[size_t((k + 1) % 3)], z = tri[size_t((k + 2) % 3)];
-              const auto ix = along.find(x), iy = along.find(y);
-              if (ix == along.end() || iy == along.end()) continue;
-              const double lo = std::min(ix->second, iy->second), hi = std::max(ix->second, iy->second);
-              if (!(p.t > lo && p.t < hi)) continue;
-              // (x, y, z) -> (x, p, z) and (p, y, z).
-              out.triangles[t] = {x, p.vertex, z};
-              const u32 added = u32(out.triangles.size());
-              out.triangles.push_back({p.vertex, y, z});
-              out.relief.push_back(out.relief[t]);
+      // Where each vertex on the edge is along it, and which part made it (kNone: the edge's ends).
+      std::unordered_map<u32, std::pair<double, u32>> along = {{a, {0.0, kNone}}, {b, {1.0, kNone}}};
+      for (const EdgePoint& p : points) along[p.vertex] = {p.t, p.part};
+      // Every triangle with a side on this edge, once: the other parts' points strictly inside that side become
+      // a fan from the opposite corner, in order along the side.
+      std::vector<u32> on_edge;
+      for (const auto& [v, where] : along)
+        for (u32 t : incident[v]) on_edge.push_back(t);
+      std::sort(on_edge.begin(), on_edge.end());
+      on_edge.erase(std::unique(on_edge.begin(), on_edge.end()), on_edge.end());
+      std::vector<u32> inside;
+      for (u32 t : on_edge) {
+        const Triangle tri = out.triangles[t];
+        for (int k = 0; k < 3; ++k) {
+          const u32 x = tri[size_t(k)], y = tri[size_t((k + 1) % 3)], z = tri[size_t((k + 2) % 3)];
+          const auto ix = along.find(x), iy = along.find(y);
+          if (ix == along.end() || iy == along.end()) continue;
+          if (along.count(z)) break;  // a zero-area triangle along the edge: left as it is
+          const double tx = ix->second.first, ty = iy->second.first;
+          inside.clear();
+          for (const EdgePoint& p : points)  // sorted by t
+            if (p.part != triangle_part[t] && p.t > std::min(tx, ty) && p.t < std::max(tx, ty))
+              inside.push_back(p.vertex);
+          if (inside.empty()) continue;
+          if (tx > ty) std::reverse(inside.begin(), inside.end());  // in order from x to y
+          // (x, y, z) -> (x, p1, z), (p1, p2, z), ..., (pk, y, z).
+          u32 from = x;
+          for (size_t q = 0; q <= inside.size(); ++q) {
+            const u32 to = q < inside.size() ? inside[q] : y;
+            if (q == 0) {
+              out.triangles[t] = {from, to, z};
               out.regular[t] = 0;
+              auto& list = incident[y];  // y leaves t (the last new triangle takes it)
+              list.erase(std::remove(list.begin(), list.end(), t), list.end());
+              incident[to].push_back(t);
+            } else {
+              const u32 added = u32(out.triangles.size());
+              out.triangles.push_back({from, to, z});
+              out.relief.push_back(out.relief[t]);
               out.regular.push_back(0);
               triangle_part.push_back(triangle_part[t]);
-              auto& iy_list = incident[y];
-              std::replace(iy_list.begin(), iy_list.end(), t, added);
-              incident[z].push_back(added);
-              incident[p.vertex].push_back(t);
-              incident[p.vertex].push_back(added);
-              ++out.merge_splits;
-              again = true;
+              for (u32 v : {from, to, z}) incident[v].push_back(added);
             }
-            if (again) break;
+            from = to;
           }
+          out.merge_splits += inside.size();
+          break;  // its other sides reach z, off the edge
         }
       }
     }

@@ -37,7 +37,8 @@ struct Remeshed {
 // keep their positions and the tile's border edges (between locked vertices, used by one triangle or more than
 // two) stay edges. The result covers the same surface up to the resampling (grid vertices lie on the input
 // surface; boundaries between reliefs and the mesh's own boundaries are the input's polylines). Where the input is
-// a manifold the result is one. kInvalidArgument for bad options, indices or lock flags.
+// a manifold the result is one. kInvalidArgument for bad options, indices or lock flags; kLimitExceeded when the
+// grid is so fine that resampling would make more than about 64 pieces per input triangle (plus 2^20 per call).
 Result<Remeshed> remeshPiecewiseRegular(const QuantizedMesh& mesh, std::span<const uint8_t> locked,
                                         const RemeshOptions& options);
 

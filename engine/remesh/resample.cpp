@@ -26,6 +26,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 #include <unordered_map>
 
@@ -37,11 +38,12 @@ namespace {
 using u32 = uint32_t;
 using u64 = uint64_t;
 // Lattice coordinates this close to an integer are on that line: far above the rounding noise of coordinates up
-// to 2^32 grid units, far below any spacing.
+// to 2^25 grid units (resampleRelief refuses more; the tool's grids have at most 2^24), far below any spacing.
 constexpr double kSnap = 1e-7;
 constexpr u32 kNone = UINT32_MAX;
-// Twice the smallest area, in lattice units (a cell has 1/2), of a triangle the slicing makes or a collapse leaves:
-// collinear corners give rounding noise around 1e-14.
+constexpr double kMaxCoordinate = double(1 << 25);
+// Twice the smallest area, in lattice units (a cell has 1/2), of a triangle the slicing makes or a collapse leaves
+// (the pieces of one cell, whose coordinates differ by less than a few units, have rounding noise far below it).
 constexpr double kMinArea = 1e-9;
 
 struct SliceVertex {
@@ -65,9 +67,11 @@ struct CrossingHash {
 
 // Cell ids: up cell (i, j) has lattice corners (i, j), (i+1, j), (i, j+1); down cell (i, j) has (i+1, j),
 // (i, j+1), (i+1, j+1).
+// |i|, |j| < 2^30 (coordinates below 2^25 grid units: resampleRelief checks).
 u64 cellId(int64_t i, int64_t j, bool up) {
-  return (u64(i + (int64_t(1) << 31)) << 33) | (u64(j + (int64_t(1) << 31)) << 1) | (up ? 1u : 0u);
+  return (u64(i + (int64_t(1) << 30)) << 33) | (u64(j + (int64_t(1) << 30)) << 1) | (up ? 1u : 0u);
 }
+constexpr u64 kNoCell = ~u64(0);  // a triangle that repeats a vertex (never sliced or collapsed)
 
 double cross2(const double* a, const double* b, const double* c) {
   return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
@@ -112,12 +116,25 @@ class Resampler {
     }
     for (size_t t = 0; t < triangles_in_.size(); ++t) {
       const Triangle& tri = triangles_in_[t];
+      if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]) {  // repeats a vertex: kept as it is
+        addTriangle(tri, kNoCell);
+        continue;
+      }
+      // Rounding noise of the orientation grows with the coordinates' size and the triangle's extent (lattice
+      // coordinates are quotients): below it a triangle counts as zero-area, and only beyond it as facing away.
+      double scale = 0, extent = 0;
+      for (int k = 0; k < 3; ++k)
+        for (int c = 0; c < 2; ++c) {
+          scale = std::max(scale, std::abs(verts_[tri[size_t(k)]].f[c]));
+          extent = std::max(extent, std::abs(verts_[tri[size_t(k)]].f[c] - verts_[tri[size_t((k + 1) % 3)]].f[c]));
+        }
+      const double noise = kMinArea + 64 * std::numeric_limits<double>::epsilon() * (scale + 1) * (extent + 1);
       const double a = cross2(verts_[tri[0]].f, verts_[tri[1]].f, verts_[tri[2]].f);
-      if (a < -kMinArea)
+      if (a < -noise)
         return makeError(ErrorCode::kInvalidArgument, "resampling relief " + std::to_string(relief_) + ": triangle " +
                                                           std::to_string(t) + " faces away from it");
       current_triangle_ = u32(t);
-      slice(tri, a <= kMinArea);  // (near) zero area: its pieces are fanned as they come
+      slice(tri, a <= noise);  // (near) zero area: its pieces are fanned as they come
     }
     findFixed();
     collapseAll();
@@ -312,7 +329,8 @@ class Resampler {
     for (u32 t = 0; t < tris_.size(); ++t)
       for (u32 v : tris_[t]) {
         auto& c = cells_[v];
-        if (std::find(c.begin(), c.end(), tri_cell_[t]) == c.end()) c.push_back(tri_cell_[t]);
+        if (tri_cell_[t] != kNoCell && std::find(c.begin(), c.end(), tri_cell_[t]) == c.end())
+          c.push_back(tri_cell_[t]);
       }
   }
 
@@ -355,8 +373,12 @@ class Resampler {
   // Collapses u onto w if allowed.
   // Collapses u onto w if allowed. incident_ lists hold live triangles only. `along_boundary`: u and w are
   // neighbours on the relief's boundary (one triangle on their edge), and the cells are not kept.
-  bool tryCollapse(u32 u, u32 w, bool along_boundary = false) {
-    // Every moved triangle stays counterclockwise in projection and inside one cell.
+  // How a collapse along the boundary checks geometry: the projection (as inside), the normals in space, nothing.
+  enum class Check { kProjection, kSpace, kTopologyOnly };
+
+  bool tryCollapse(u32 u, u32 w, bool along_boundary = false, Check check = Check::kProjection) {
+    // Every moved triangle stays counterclockwise in projection and inside one cell (kSpace: its normal in space
+    // stays within 90 degrees of its old one; kTopologyOnly: no geometric test).
     opposite_.clear();
     for (u32 t : incident_[u]) {
       Triangle tri = tris_[t];
@@ -370,7 +392,18 @@ class Resampler {
           if (x != w) opposite_.push_back(x);
         continue;
       }
-      if (!(cross2(verts_[tri[0]].f, verts_[tri[1]].f, verts_[tri[2]].f) > kMinArea)) return false;
+      if (check == Check::kTopologyOnly) {
+        // only the link condition below
+      } else if (check == Check::kSpace) {
+        const Triangle& old = tris_[t];
+        const auto normal = [&](const Triangle& x) {
+          return vcross(vsub(positions_[x[1]], positions_[x[0]]), vsub(positions_[x[2]], positions_[x[0]]));
+        };
+        const Vec3d before = normal(old), after = normal(tri);
+        if (!(vdot(before, after) > 0)) return false;
+      } else if (!(cross2(verts_[tri[0]].f, verts_[tri[1]].f, verts_[tri[2]].f) > kMinArea)) {
+        return false;
+      }
       if (!along_boundary && !shareCell(tri[0], tri[1], tri[2])) return false;
     }
     // The link condition: u and w share exactly the vertices opposite their edge (two inside, one on the boundary).
@@ -473,32 +506,40 @@ class Resampler {
   // edge onto its neighbours there, where no triangle flips: the boundary then has the input's vertices only, and
   // neighbouring reliefs (and tiles) meet along the same edges. Points that cannot go stay (ResampledRelief's
   // input_edge names their edge).
+  // On a tile's border (an input edge between two vertices the caller fixed) a point that cannot go so is tried
+  // again with normals in space, then with the topology alone: a border edge must come back whole (the triangle a
+  // point left could fold, by at most the point's move along the edge, less than a cell; a subdivided border edge
+  // would make the tile fall back to its input in the remesh stage).
   void collapseBoundaryChains() {
     const u32 n_in = u32(input_vertex_.size());
     std::vector<std::pair<double, u32>> candidates;
-    for (int pass = 0; pass < 4; ++pass) {
-      bool any = false;
-      for (u32 c = n_in; c < positions_.size(); ++c) {
-        if (incident_[c].empty() || verts_[c].edge[0] == kNone) continue;
-        const u32 e0 = verts_[c].edge[0], e1 = verts_[c].edge[1];
-        // Its neighbours along the same input edge, on a boundary edge (used by one triangle).
-        candidates.clear();
-        for (u32 t : incident_[c])
-          for (u32 w : tris_[t]) {
-            if (w == c || !(w == e0 || w == e1 || (verts_[w].edge[0] == e0 && verts_[w].edge[1] == e1))) continue;
-            int uses = 0;
-            for (u32 t2 : incident_[c])
-              for (u32 x : tris_[t2]) uses += x == w;
-            if (uses == 1) candidates.push_back({vlen(vsub(positions_[w], positions_[c])), w});
-          }
-        std::sort(candidates.begin(), candidates.end());
-        for (const auto& cand : candidates)
-          if (tryCollapse(c, cand.second, true)) {
-            any = true;
-            break;
-          }
+    for (int round = 0; round < 3; ++round) {
+      const Check check = round == 0 ? Check::kProjection : round == 1 ? Check::kSpace : Check::kTopologyOnly;
+      for (int pass = 0; pass < 4; ++pass) {
+        bool any = false;
+        for (u32 c = n_in; c < positions_.size(); ++c) {
+          if (incident_[c].empty() || verts_[c].edge[0] == kNone) continue;
+          const u32 e0 = verts_[c].edge[0], e1 = verts_[c].edge[1];
+          if (round > 0 && !((fixed_in_[e0] & kFixedByCaller) && (fixed_in_[e1] & kFixedByCaller))) continue;
+          // Its neighbours along the same input edge, on a boundary edge (used by one triangle).
+          candidates.clear();
+          for (u32 t : incident_[c])
+            for (u32 w : tris_[t]) {
+              if (w == c || !(w == e0 || w == e1 || (verts_[w].edge[0] == e0 && verts_[w].edge[1] == e1))) continue;
+              int uses = 0;
+              for (u32 t2 : incident_[c])
+                for (u32 x : tris_[t2]) uses += x == w;
+              if (uses == 1) candidates.push_back({vlen(vsub(positions_[w], positions_[c])), w});
+            }
+          std::sort(candidates.begin(), candidates.end());
+          for (const auto& cand : candidates)
+            if (tryCollapse(c, cand.second, true, check)) {
+              any = true;
+              break;
+            }
+        }
+        if (!any) break;
       }
-      if (!any) break;
     }
   }
 
@@ -602,10 +643,15 @@ Result<ResampledRelief> resampleRelief(std::span<const Vec3d> positions, std::sp
   if (!fixed.empty() && fixed.size() != positions.size())
     return makeError(ErrorCode::kInvalidArgument, "resampling: fixed flags do not match the vertices");
   for (size_t t = 0; t < triangles.size(); ++t)
-    for (uint32_t v : triangles[t])
+    for (uint32_t v : triangles[t]) {
       if (v >= positions.size())
         return makeError(ErrorCode::kInvalidArgument,
                          "resampling: triangle " + std::to_string(t) + " uses vertex " + std::to_string(v));
+      for (double c : positions[v])
+        if (!(std::abs(c) < kMaxCoordinate))
+          return makeError(ErrorCode::kInvalidArgument,
+                           "resampling: triangle " + std::to_string(t) + " has a corner beyond 2^25 grid units");
+    }
   return Resampler(positions, triangles, relief, lattice, fixed).run();
 }
 

@@ -69,8 +69,9 @@ enum ResampleFlag : uint8_t {
 // Resamples one relief: `triangles` over `positions` (grid units, as relief.h's layout gives them), all facing
 // `relief` (projected area >= 0; zero-area triangles are sliced, their pieces never collapsed). `fixed` is empty or has ResampleFlags
 // per position. A vertex is fixed when the flags say so or when it is on the relief's boundary: an edge used by
-// one triangle or by more than two, or a vertex whose triangles do not form one fan. kInvalidArgument for a spacing that is odd or
-// below 2, a relief id outside 0..5, indices out of range, or a triangle facing away from the relief.
+// one triangle or by more than two, or a vertex whose triangles do not form one fan. Triangles that repeat a vertex are kept as they are.
+// kInvalidArgument for a spacing that is odd or below 2, a relief id outside 0..5, indices out of range, corners
+// beyond 2^25 grid units, or a triangle facing away from the relief (beyond the rounding noise of its orientation).
 Result<ResampledRelief> resampleRelief(std::span<const Vec3d> positions, std::span<const Triangle> triangles,
                                        int relief, const HexLattice& lattice, std::span<const uint8_t> fixed);
 

@@ -1,6 +1,9 @@
 // Stage `remesh`: piecewise regular remeshing of a tile (engine/remesh/remesh.h), rounded back to the scan's
 // integer grid.
 //
+// A tile whose border could not be kept without the zero-area fans of remesh.cpp is returned as it is (the fans of
+// two neighbouring tiles would be welded into one non-manifold seam).
+//
 // After remeshing, positions are rounded (grid vertices' base coordinates are integers already; heights and the
 // points on relief boundaries move by at most half a cell per axis). An added vertex whose grid point is taken
 // goes to the nearest free one of the 27 around it (at most 1.5 cells away), so no two vertices share a point
@@ -63,11 +66,18 @@ uint32_t remeshSpacing(const RemeshStageOptions& options, int bits) {
 Result<StagedTile> remeshStage(const TileContext& ctx, const TileView& tile, const StageSpec& spec) {
   SP_RETURN_IF_ERROR(validateStage(spec).withContext("remesh"));
   const QuantizedMesh& in = tile.mesh;
-  const bool has_flags = tile.locked.size() == in.positions.size();
+  if (!tile.locked.empty() && tile.locked.size() != in.positions.size())
+    return makeError(ErrorCode::kInvalidArgument, "remesh: " + std::to_string(tile.locked.size()) + " lock flags for " +
+                                                      std::to_string(in.positions.size()) + " vertices");
+  const bool has_flags = !tile.locked.empty();
   SP_ASSIGN_OR_RETURN(Remeshed r,
                       remeshPiecewiseRegular(in, has_flags ? tile.locked : std::span<const uint8_t>(),
                                              RemeshOptions{.tau = spec.remesh.tau,
                                                            .spacing = remeshSpacing(spec.remesh, ctx.bits)}));
+  // A tile border edge closed by a fan of zero-area triangles would meet the neighbouring tile's fan on the same
+  // grid points (the grid is the scan's), and the decoder would weld four triangles onto one edge: such a tile is
+  // kept as it is.
+  if (r.border_fans > 0) return StagedTile{in, std::vector<uint8_t>(tile.locked.begin(), tile.locked.end())};
   // Round, and weld added vertices onto vertices already at their cell (input vertices first).
   const double top = std::ldexp(1.0, ctx.bits) - 1;
   std::vector<u32> order(r.positions.size());
