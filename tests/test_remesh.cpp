@@ -259,6 +259,13 @@ TEST(RemeshScans, TiledIgeaThroughTheRemeshStageWeldsCrackFree) {
   const double cell = r->diagonal / (std::sqrt(3.0) * 4096);  // about: the diagonal spans up to sqrt(3) extents
   EXPECT_LT(error.rms, 0.25 * 20 * std::sqrt(3.0) * cell);
   EXPECT_LT(r->bytes, lossless->bytes);
+  // The same bytes on one thread (tiles in another order).
+  const std::string two_threads = s.output;
+  s.threads = 1;
+  s.measure.enabled = false;
+  s.output = dir.file("one_thread.spz");
+  ASSERT_TRUE(encodeFile(s).isOk());
+  EXPECT_TRUE(testing::readBytes(s.output) == testing::readBytes(two_threads)) << "not byte-identical";
   std::printf("igea: %zu tiles, %llu -> %zu triangles, %llu -> %llu bytes, RMS %.2e of the diagonal\n",
               r->tiles.size(), static_cast<unsigned long long>(lossless->faces), m->triangles.size(),
               static_cast<unsigned long long>(lossless->bytes), static_cast<unsigned long long>(r->bytes),
