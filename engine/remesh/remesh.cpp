@@ -115,7 +115,7 @@ Result<Remeshed> remeshPiecewiseRegular(const QuantizedMesh& mesh, std::span<con
       const double area = 0.5 * std::abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]));
       const double perimeter = std::hypot(b[0] - a[0], b[1] - a[1]) + std::hypot(c[0] - b[0], c[1] - b[1]) +
                                std::hypot(a[0] - c[0], a[1] - c[1]);
-      pieces += 2 * area / cell + 3 * perimeter / double(l.row) + 1;
+      pieces += area / cell + 2 * perimeter / double(l.row) + 1;  // about what slicing makes (within 2x)
     }
     const double limit = kMaxPiecesPerTriangle * double(mesh.triangles.size()) + double(1 << 20);
     if (pieces > limit)
