@@ -14,6 +14,7 @@
 #include "engine/quantize.h"
 #include "engine/remesh/relief.h"
 #include "engine/shapes.h"
+#include "test_util.h"
 
 namespace scanpress {
 namespace {
@@ -233,24 +234,11 @@ TEST(Relief, TiesGoToTheVectorTheSurfaceFaces) {
 // several reliefs' boundaries, yet every rim edge stays an edge of the refinement (a boundary meets the rim at a
 // vertex).
 TEST(Relief, TileBorderEdgesAreNeverCut) {
-  const QuantizedMesh sphere = quantized(icosphere(4), 14);
-  QuantizedMesh half;
-  half.positions = sphere.positions;
-  for (const Triangle& t : sphere.triangles) {
-    const double z = double(sphere.positions[t[0]][2]) + sphere.positions[t[1]][2] + sphere.positions[t[2]][2];
-    if (z > 3 * 8191.5 + 300)
-      half.triangles.push_back(t);  // the cap above a horizontal plane; its rim runs through the four side reliefs
-  }
-  std::map<std::pair<uint32_t, uint32_t>, int> uses;
-  for (const Triangle& t : half.triangles)
-    for (int k = 0; k < 3; ++k) ++uses[std::minmax(t[size_t(k)], t[size_t((k + 1) % 3)])];
-  std::vector<uint8_t> locked(half.positions.size(), 0);
-  size_t rim = 0;
-  for (const auto& [e, n] : uses)
-    if (n == 1) {
-      locked[e.first] = locked[e.second] = 1;
-      ++rim;
-    }
+  // The cap above a horizontal plane: its rim runs through the four side reliefs.
+  const testing::LockedCap cap = testing::lockedCap(quantized(icosphere(4), 14), 14, 100);
+  const QuantizedMesh& half = cap.mesh;
+  const std::vector<uint8_t>& locked = cap.locked;
+  const size_t rim = cap.rim.size();
   ASSERT_GT(rim, 20u);
   auto wrong = buildReliefs(half, std::vector<uint8_t>(3, 1), {});
   ASSERT_FALSE(wrong.isOk());
@@ -263,8 +251,7 @@ TEST(Relief, TileBorderEdgesAreNeverCut) {
     for (const Triangle& t : r->triangles)
       for (int k = 0; k < 3; ++k) edges.insert(std::minmax(t[size_t(k)], t[size_t((k + 1) % 3)]));
     size_t kept = 0;
-    for (const auto& [e, n] : uses)
-      if (n == 1) kept += edges.count(e);
+    for (const auto& e : cap.rim) kept += edges.count(e);
     if (lock) {
       EXPECT_EQ(kept, rim);
     } else {

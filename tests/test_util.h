@@ -12,6 +12,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -130,6 +131,33 @@ inline Mesh octahedron(double s = 1.0) {
   m.positions = {{s, 0, 0}, {-s, 0, 0}, {0, s, 0}, {0, -s, 0}, {0, 0, s}, {0, 0, -s}};
   m.triangles = {{0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4}, {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
   return m;
+}
+
+// A tile with a locked border: the triangles of `sphere` (on a grid of 2^bits cells, centred) whose corners' z
+// sum exceeds 3 * (centre + lift), and lock flags on the vertices of its rim (the edges one triangle uses), which
+// are listed in `rim` (lower index first).
+struct LockedCap {
+  QuantizedMesh mesh;
+  std::vector<uint8_t> locked;
+  std::vector<std::pair<uint32_t, uint32_t>> rim;
+};
+inline LockedCap lockedCap(const QuantizedMesh& sphere, int bits, double lift) {
+  LockedCap c;
+  c.mesh.positions = sphere.positions;
+  const double centre = (std::ldexp(1.0, bits) - 1) / 2;
+  for (const Triangle& t : sphere.triangles)
+    if (double(sphere.positions[t[0]][2]) + sphere.positions[t[1]][2] + sphere.positions[t[2]][2] > 3 * (centre + lift))
+      c.mesh.triangles.push_back(t);
+  std::map<std::pair<uint32_t, uint32_t>, int> uses;
+  for (const Triangle& t : c.mesh.triangles)
+    for (int k = 0; k < 3; ++k) ++uses[std::minmax(t[size_t(k)], t[size_t((k + 1) % 3)])];
+  c.locked.assign(c.mesh.positions.size(), 0);
+  for (const auto& [e, n] : uses)
+    if (n == 1) {
+      c.locked[e.first] = c.locked[e.second] = 1;
+      c.rim.push_back(e);
+    }
+  return c;
 }
 
 }  // namespace scanpress::testing
