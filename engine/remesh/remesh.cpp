@@ -45,7 +45,7 @@ struct EdgePoint {
 // A tile border edge (a, b) that a relief part left subdivided by `points`: for each part, a fan from the chain's
 // start over its points and the edge's other end, so that the edge (a, b) is an edge again, oriented as the part's
 // boundary runs. The fan's triangles have zero area (their corners are on one segment).
-void closeBorderEdge(Remeshed& out, std::vector<u32>& triangle_part, u32 a, u32 b,
+void closeBorderEdge(Remeshed& out, std::vector<u32>& triangle_part, const std::vector<int>& part_relief, u32 a, u32 b,
                      const std::vector<EdgePoint>& points) {
   std::map<u32, std::vector<u32>> chain_of_part;  // points in order from a to b
   for (const EdgePoint& p : points) chain_of_part[p.part].push_back(p.vertex);
@@ -67,9 +67,7 @@ void closeBorderEdge(Remeshed& out, std::vector<u32>& triangle_part, u32 a, u32 
     if (!forward) std::reverse(chain.begin(), chain.end());
     // Boundary edges chain[i] -> chain[i+1]; fill triangles use them reversed, and the new edge chain[0] -> end.
     const u32 apex = chain.front();
-    uint8_t relief = 0;
-    for (size_t t = 0; t < out.triangles.size(); ++t)
-      if (triangle_part[t] == part) relief = out.relief[t];
+    const uint8_t relief = uint8_t(part_relief[part]);
     for (size_t i = 1; i + 1 < chain.size(); ++i) {  // (apex, c[i+1], c[i]); the last is (apex, end, c[k])
       out.triangles.push_back({apex, chain[i + 1], chain[i]});
       out.relief.push_back(relief);
@@ -196,12 +194,12 @@ Result<Remeshed> remeshPiecewiseRegular(const QuantizedMesh& mesh, std::span<con
       const u32 a = merged_of_layout[edge.first], b = merged_of_layout[edge.second];
       if (a == kNone || b == kNone) continue;
       if (border.count((u64(edge.first) << 32) | edge.second)) {
-        closeBorderEdge(out, triangle_part, a, b, points);
+        closeBorderEdge(out, triangle_part, part_relief, a, b, points);
         continue;
       }
-      // Where each vertex on the edge is along it, and which part made it (kNone: the edge's ends).
-      std::unordered_map<u32, std::pair<double, u32>> along = {{a, {0.0, kNone}}, {b, {1.0, kNone}}};
-      for (const EdgePoint& p : points) along[p.vertex] = {p.t, p.part};
+      // Where each vertex on the edge is along it.
+      std::unordered_map<u32, double> along = {{a, 0.0}, {b, 1.0}};
+      for (const EdgePoint& p : points) along[p.vertex] = p.t;
       // Every triangle with a side on this edge, once: the other parts' points strictly inside that side become
       // a fan from the opposite corner, in order along the side.
       std::vector<u32> on_edge;
@@ -217,7 +215,7 @@ Result<Remeshed> remeshPiecewiseRegular(const QuantizedMesh& mesh, std::span<con
           const auto ix = along.find(x), iy = along.find(y);
           if (ix == along.end() || iy == along.end()) continue;
           if (along.count(z)) break;  // a zero-area triangle along the edge: left as it is
-          const double tx = ix->second.first, ty = iy->second.first;
+          const double tx = ix->second, ty = iy->second;
           inside.clear();
           for (const EdgePoint& p : points)  // sorted by t
             if (p.part != triangle_part[t] && p.t > std::min(tx, ty) && p.t < std::max(tx, ty))
