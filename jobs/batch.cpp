@@ -264,6 +264,11 @@ std::string settingsFingerprint(const EncodeSettings& s) {
   // earlier runs stay valid.
   if (s.allow_degenerate) key += "|allow_degenerate=1";
   if (s.strict) key += "|strict";
+  if (s.codec == "prm") {  // prm's remeshing options change the bytes
+    char buf[96];
+    std::snprintf(buf, sizeof buf, "|prm=%.17g,%.17g", s.codec_options.prm.grid, s.codec_options.prm.tau);
+    key += buf;
+  }
   if (s.target.active()) {  // a target decides the bits (and a lossy codec's knob); written only when set
     char buf[128];
     std::snprintf(buf, sizeof buf, "|target=%s,%.17g,%s,%llu,%.17g,%d", targetKindName(s.target.kind),

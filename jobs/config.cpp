@@ -257,6 +257,8 @@ std::vector<std::string> knownConfigKeys() {
           "/codec/normals",
           "/codec/colors",
           "/codec/allow_degenerate",
+          "/codec/grid",
+          "/codec/tau",
           "/codec/target/max_error",
           "/codec/target/error",
           "/codec/target/max_bytes",
@@ -344,6 +346,9 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     c.boolean("normals", s.encode.keep_normals);
     c.boolean("colors", s.encode.keep_colors);
     c.boolean("allow_degenerate", s.encode.allow_degenerate);
+    // prm's remeshing (engine/codecs/codec.h PrmOptions): the lattice spacing, a fraction of 2^bits, and tau.
+    c.number("grid", 1e-6, 1, s.encode.codec_options.prm.grid);
+    c.number("tau", 1e-3, 0.577, s.encode.codec_options.prm.tau);
     if (const json* target = c.object("target")) readTarget(*target, config_path, error, s.encode.target);
     // A target chooses the bits unless they are given.
     s.encode.target.fixed_bits = codec->is_object() && codec->contains("bits");
@@ -351,6 +356,9 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     if (error.isOk() && !knownCodecName(s.encode.codec)) {
       c.fail("/codec/name", "unknown codec '" + s.encode.codec + "' (available: " + codecNames() + ", auto)");
     }
+    for (const char* key : {"grid", "tau"})
+      if (error.isOk() && codec->is_object() && codec->contains(key) && s.encode.codec != "prm")
+        c.fail(std::string("/codec/") + key, "applies to codec prm only, not " + s.encode.codec);
   }
   if (const json* stages = top.object("stages")) readStages(*stages, config_path, error, s.encode.stages);
   if (const json* tiling = top.object("tiling")) {

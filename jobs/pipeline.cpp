@@ -690,6 +690,10 @@ const char* errorMetricName(ErrorMetric m) { return m == ErrorMetric::kMax ? "ma
 ErrorKnob errorKnobOf(CodecId id) {
   // pm's last level keeps collapses whose error estimate is at most max_error grid cells (engine/codecs/codec.h).
   if (id == CodecId::kPm) return [](CodecOptions& o, double cells) { o.pm.max_error = cells; };
+  // prm's lattice spacing: a coarser lattice departs further from the tile. Remeshed scans measure an RMS of about
+  // a fortieth of the spacing and a max of about a tenth (bench/RESULTS.md), so the spacing is 16 times the
+  // knob's cells; 0 keeps the tile as it is.
+  if (id == CodecId::kPrm) return [](CodecOptions& o, double cells) { o.prm.spacing = kPrmSpacingPerCell * cells; };
   return nullptr;
 }
 

@@ -101,6 +101,8 @@ bool knownCodecName(const std::string& name);
 // A lossy codec's error knob: sets how far the codec may depart from the tile, in grid cells (pm:
 // PmOptions::max_error). nullptr for a codec without one (every lossless codec).
 using ErrorKnob = void (*)(CodecOptions& options, double cells);
+// prm's knob: lattice spacing in grid cells per grid cell of allowed error.
+inline constexpr double kPrmSpacingPerCell = 16;
 ErrorKnob errorKnobOf(CodecId id);
 
 // The share of a mesh's triangles that quantization may make degenerate (two corners in one cell) and drop before

@@ -16,11 +16,11 @@ namespace scanpress {
 namespace {
 
 // Bumped whenever a message's layout changes.
-constexpr uint32_t kWireVersion = 3;  // 2: the layout's color bits; 3: the remesh stage's options
+constexpr uint32_t kWireVersion = 4;  // 2: the layout's color bits; 3: the remesh stage's options; 4: prm's
 
 // The wire spells out every field of these structs: a new field must be added to the messages below too (this
 // fails to compile until its size is updated here).
-static_assert(sizeof(CodecOptions) == 32, "CodecOptions changed: update scanMessage and TileServer::scan");
+static_assert(sizeof(CodecOptions) == 56, "CodecOptions changed: update scanMessage and TileServer::scan");
 static_assert(sizeof(StageSpec) == 48, "StageSpec changed: update scanMessage and TileServer::scan");
 static_assert(sizeof(CodecLevel) == 48, "CodecLevel changed: update resultMessage, readResult and kLevelBytes");
 // A level's bytes in a kResult message (resultMessage).
@@ -145,6 +145,9 @@ Status readScan(std::span<const uint8_t> message, EncodeSettings& s, TileScanFac
   s.codec_options.pm.weights = static_cast<SimplifyWeights>(weights);
   SP_RETURN_IF_ERROR(r.f64(s.codec_options.pm.max_error));
   SP_RETURN_IF_ERROR(r.f64(s.codec_options.pm.ratio));
+  SP_RETURN_IF_ERROR(r.f64(s.codec_options.prm.grid));
+  SP_RETURN_IF_ERROR(r.f64(s.codec_options.prm.tau));
+  SP_RETURN_IF_ERROR(r.f64(s.codec_options.prm.spacing));
   MeasureSettings& m = s.measure;
   SP_RETURN_IF_ERROR(toBool(r, m.enabled));
   SP_RETURN_IF_ERROR(r.f64(m.samples_per_triangle));
@@ -205,6 +208,9 @@ std::vector<uint8_t> scanMessage(const EncodeSettings& s, const TileScanFacts& f
   w.u8(static_cast<uint8_t>(s.codec_options.pm.weights));
   w.f64(s.codec_options.pm.max_error);
   w.f64(s.codec_options.pm.ratio);
+  w.f64(s.codec_options.prm.grid);
+  w.f64(s.codec_options.prm.tau);
+  w.f64(s.codec_options.prm.spacing);
   const MeasureSettings& m = s.measure;  // the picture's settings stay on rank 0, which renders
   w.u8(m.enabled);
   w.f64(m.samples_per_triangle);

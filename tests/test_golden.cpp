@@ -10,6 +10,7 @@
 #include "engine/container/container.h"
 #include "engine/quantize.h"
 #include "engine/shapes.h"
+#include "engine/stages/stage.h"
 #include "test_util.h"
 
 namespace scanpress {
@@ -53,6 +54,13 @@ const Golden& golden() {
   return g;
 }
 
+// prm remeshes the golden mesh on a lattice of 0.08 of the grid (328 cells): a few thousand triangles.
+CodecOptions goldenOptions() {
+  CodecOptions o;
+  o.prm.grid = 0.08;
+  return o;
+}
+
 std::string goldenPath(const CodecInfo& codec, int version) {
   return std::string(SCANPRESS_GOLDEN) + "/" + std::string(codec.name) + "-v" + std::to_string(version) + ".spz";
 }
@@ -82,6 +90,15 @@ void expectDecodesToGolden(const CodecInfo& codec, int version, const std::vecto
     };
     EXPECT_TRUE(positional(*decoded) == positional(g.mesh));
     EXPECT_EQ(decoded->normals.size(), decoded->positions.size());
+  } else if (codec.id == CodecId::kPrm) {
+    // prm decodes to the remesh stage's mesh of the golden mesh (normals and colors interpolated), as coded.
+    const CodecOptions o = goldenOptions();
+    auto remeshed = remeshTile(TileContext{g.grid.bits, g.layout}, TileView{g.mesh, {}}, o.prm.tau,
+                               prmSpacing(o.prm, g.grid.bits));
+    ASSERT_TRUE(remeshed.isOk()) << remeshed.status().toString();
+    EXPECT_GT(remeshed->mesh.triangles.size(), 2 * g.mesh.triangles.size()) << "the golden mesh was not remeshed";
+    EXPECT_TRUE(testing::cornerMultiset(*decoded, g.layout.normal_bits) ==
+                testing::cornerMultiset(remeshed->mesh, g.layout.normal_bits));
   } else {
     EXPECT_TRUE(testing::cornerMultiset(*decoded, g.layout.normal_bits) ==
                 testing::cornerMultiset(g.mesh, g.layout.normal_bits));
@@ -96,7 +113,7 @@ TEST_P(GoldenStream, DecodesToItsMeshAndTheEncoderStillWritesIt) {
   const CodecInfo& codec = *findCodec(GetParam());
   const Golden& g = golden();
   const QuantizedMesh tiles[] = {g.mesh};
-  auto now = encodeContainer(g.grid, g.layout, codec, tiles);
+  auto now = encodeContainer(g.grid, g.layout, codec, tiles, goldenOptions());
   ASSERT_TRUE(now.isOk()) << now.status().toString();
   const std::string path = goldenPath(codec, codec.version);
   if (!std::filesystem::exists(path)) {

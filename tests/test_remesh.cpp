@@ -297,5 +297,85 @@ TEST(RemeshScans, SmallTilesOfAnOpenScanWeldManifold) {
   EXPECT_NE(m->triangles.size(), lossless->triangles.size());  // remeshed, not tiles kept as they were
 }
 
+// `--codec prm` (remeshing and the PRM coder in one) on the bundled bunny in many tiles: the decoded scan is the
+// one the `remesh` stage plus `edgebreaker` decodes to (an independent coder of the same remeshed tiles), smaller,
+// welded as that one is; and on one and two threads the same bytes.
+TEST(PrmCodec, TiledBunnyDecodesToTheRemeshStagesScan) {
+  const std::string bunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
+  testing::TempDir dir;
+  EncodeSettings s;
+  s.input = bunny;
+  s.bits = 12;
+  s.tile_triangles = 8192;
+  s.threads = 2;
+  s.keep_colors = false;
+  s.codec = "edgebreaker";
+  StageSpec remesh;
+  remesh.kind = StageKind::kRemesh;
+  remesh.remesh.grid = 0.008;
+  s.stages = {remesh};
+  s.output = dir.file("stage.spz");
+  auto staged = encodeFile(s);
+  ASSERT_TRUE(staged.isOk()) << staged.status().toString();
+  s.stages.clear();
+  s.codec = "prm";
+  s.codec_options.prm.grid = 0.008;
+  s.output = dir.file("prm.spz");
+  auto coded = encodeFile(s);
+  ASSERT_TRUE(coded.isOk()) << coded.status().toString();
+  EXPECT_GE(coded->tiles.size(), 6u);
+  EXPECT_EQ(coded->failed_tiles, 0u);
+  auto a = decodeContainer(dir.file("stage.spz"), std::nullopt, nullptr);
+  auto b = decodeContainer(s.output, std::nullopt, nullptr);
+  ASSERT_TRUE(a.isOk() && b.isOk());
+  EXPECT_TRUE(testing::triangleMultiset(*a) == testing::triangleMultiset(*b));
+  EXPECT_LT(coded->bytes, 0.85 * double(staged->bytes));
+  std::set<Vec3u> positions(b->positions.begin(), b->positions.end());
+  EXPECT_EQ(positions.size(), b->positions.size()) << "duplicate positions on seams";
+  EXPECT_EQ(checkEdges(doubles(*b), b->triangles).non_manifold, 0u);
+  s.threads = 1;
+  s.output = dir.file("prm1.spz");
+  ASSERT_TRUE(encodeFile(s).isOk());
+  EXPECT_TRUE(testing::readBytes(s.output) == testing::readBytes(dir.file("prm.spz"))) << "not byte-identical";
+  std::printf("bunny: %zu tiles, remesh stage + edgebreaker %llu bytes, prm %llu bytes\n", coded->tiles.size(),
+              static_cast<unsigned long long>(staged->bytes), static_cast<unsigned long long>(coded->bytes));
+}
+
+// `--codec prm --max-error E`: each tile chooses its lattice spacing so that the measured error meets E.
+TEST(PrmCodec, ErrorTargetIsMetByChoosingTheSpacing) {
+  const std::string bunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
+  testing::TempDir dir;
+  EncodeSettings s;
+  s.input = bunny;
+  s.codec = "prm";
+  s.bits = 12;
+  s.tile_triangles = 32768;
+  s.keep_colors = false;
+  s.output = dir.file("prm.spz");
+  s.target.kind = TargetKind::kMaxError;
+  s.target.max_error = 2e-4;
+  s.target.fixed_bits = true;
+  s.measure.enabled = true;
+  auto r = encodeFile(s);
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  const ErrorStats error = symmetricOf(statsOf(r->forward), statsOf(r->backward));
+  EXPECT_LE(error.rms, 2e-4 * r->diagonal);
+  size_t remeshed = 0;
+  for (const auto& t : r->tiles) remeshed += t.knob_cells > 0;
+  EXPECT_GT(remeshed, 0u) << "no tile was remeshed";
+  // Smaller than the scan coded losslessly at those bits.
+  EncodeSettings lossless = s;
+  lossless.codec = "edgebreaker";
+  lossless.target = EncodeTarget{};
+  lossless.measure.enabled = false;
+  lossless.output = dir.file("lossless.spz");
+  auto l = encodeFile(lossless);
+  ASSERT_TRUE(l.isOk());
+  EXPECT_LT(r->bytes, l->bytes);
+  std::printf("bunny at RMS <= 2e-4: prm %llu bytes (RMS %.2e), lossless %llu bytes\n",
+              static_cast<unsigned long long>(r->bytes), error.rms / r->diagonal,
+              static_cast<unsigned long long>(l->bytes));
+}
+
 }  // namespace
 }  // namespace scanpress

@@ -33,12 +33,14 @@ constexpr PayloadFloor kEdgebreakerFloor{8.0 / 2048, 8.0 / 65536, 1024, false};
 // probabilities: half the hierarchy codecs' floor per vertex and face.
 constexpr PayloadFloor kPmFloor{4.0 / 1024, 4.0 / (1024 * 64), 1024, false};
 
-constexpr std::array<CodecInfo, 5> kCodecs = {{
+// prm: edgebreaker's coding, where a regular point codes one coordinate instead of three: the same floor.
+constexpr std::array<CodecInfo, 6> kCodecs = {{
     {CodecId::kStore, "store", 1, kStoreFloor, &storeEncode, &storeDecode},
     {CodecId::kKdtree, "kdtree", 2, kHierarchyFloor, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel},
     {CodecId::kOctree, "octree", 2, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel},
     {CodecId::kPm, "pm", 2, kPmFloor, &pmEncode, &pmDecode, &pmLevels, &pmDecodeLevel, false},
     {CodecId::kEdgebreaker, "edgebreaker", 2, kEdgebreakerFloor, &edgebreakerEncode, &edgebreakerDecode},
+    {CodecId::kPrm, "prm", 1, kEdgebreakerFloor, &prmEncode, &prmDecode},
 }};
 
 }  // namespace

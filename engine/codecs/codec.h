@@ -24,6 +24,7 @@ enum class CodecId : uint16_t {
   kOctree = 3,
   kPm = 4,           // engine/codecs/pm.cpp (issue 19)
   kEdgebreaker = 5,  // engine/codecs/edgebreaker.cpp (issue 20)
+  kPrm = 6,          // engine/codecs/prm.cpp (issue 21)
 };
 
 // What every tile of a container shares: the grid's bits and the attribute layout (from the container header).
@@ -59,9 +60,20 @@ struct PmOptions {
   double max_error = -1;
   double ratio = 1.0;
 };
+// `prm` (engine/codecs/prm.cpp): the tile is remeshed into a piecewise regular mesh (the `remesh` stage,
+// engine/stages/stage.h) on hexagonal grids of spacing `grid` (a fraction of 2^bits cells), or `spacing` grid cells
+// when that is >= 0 (the error targets of jobs/ set it per tile), and coded with the regular patches' lattice. A
+// tile whose remeshing would be too large (a lattice much finer than its triangles, kLimitExceeded), or with
+// spacing 0, is coded as it is.
+struct PrmOptions {
+  double grid = 0.005;  // in (0, 1]
+  double tau = 0.2;     // relief regularisation, in (0, 1/sqrt(3))
+  double spacing = -1;  // grid cells; >= 0 overrides grid (rounded to an even number, at least 2; 0: no remeshing)
+};
 struct CodecOptions {
   OctreeOptions octree;
   PmOptions pm;
+  PrmOptions prm;
 };
 
 // What a level means, as its codec states it (see CodecLevel).
@@ -231,13 +243,31 @@ struct CodecStats {
   double geometry_bits = 0;
   double connectivity_bits = 0;  // vertex splits, triangle orientation and multiplicity
   double attribute_bits = 0;
+  double regularity_bits = 0;  // prm: which faces are regular, and their reliefs (the paper's "irregular" part)
   uint64_t payload_bytes = 0;
+  uint64_t regular_faces = 0, patches = 0, lattice_points = 0;  // prm
 };
 Status kdtreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
                              CodecStats* stats);
 // edgebreaker: `splits` and `edge_expansions` stay zero.
 Status edgebreakerEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
                                   CodecStats* stats);
+// prm's coder: edgebreaker with the regular patches of a lattice of `spacing` grid cells (even, 2..
+// kMaxLatticeSpacing): which faces are regular and their reliefs, then heights only for points of anchored patches.
+constexpr uint32_t kMaxLatticeSpacing = uint32_t(1) << 24;
+Status edgebreakerEncodeOnLattice(const TileContext& ctx, const QuantizedMesh& mesh, uint32_t spacing,
+                                  std::vector<uint8_t>& out, CodecStats* stats, TileSummary* summary);
+Result<QuantizedMesh> edgebreakerDecodeOnLattice(const TileContext& ctx, std::span<const uint8_t> payload,
+                                                 const DecodeLimits& limits, uint32_t spacing);
+// `prm`: remeshing and the coder in one (prm.cpp); `stats` as edgebreaker's, with the regularity part.
+Result<EncodedTile> prmEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options);
+Result<QuantizedMesh> prmDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                const DecodeLimits& limits);
+Status prmEncodeWithStats(const TileContext& ctx, const TileView& tile, const CodecOptions& options,
+                          std::vector<uint8_t>& out, CodecStats* stats, TileSummary* summary);
+// The lattice spacing prm's options give at `bits`: an even number of grid cells, at least 2.
+uint32_t prmSpacing(const PrmOptions& options, int bits);
+
 Status octreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
                              CodecStats* stats, const OctreeOptions& options = {});
 

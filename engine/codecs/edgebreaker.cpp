@@ -46,12 +46,14 @@
 #include <array>
 #include <cstring>
 #include <string>
+#include <unordered_map>
 
 #include "engine/codecs/codec.h"
 #include "engine/codecs/attributes.h"
 #include "engine/codecs/hierarchy.h"
 #include "engine/entropy/range_coder.h"
 #include "engine/io/bytes.h"
+#include "engine/remesh/resample.h"
 
 namespace scanpress {
 namespace {
@@ -79,6 +81,74 @@ inline int bitLength(u64 v) {
   while (v >> n) ++n;
   return n;
 }
+
+// prm's lattice (FORMAT.md, "prm"): relief r (0..5: +x, -x, +y, -y, +z, -z) has height axis r / 2 and base
+// coordinates the other two axes (swapped for odd r, so that a triangle facing r is counterclockwise in its base);
+// lattice point (i, j) is base (i * G + j * G / 2, j * H), G even, H = round(G * sqrt(3) / 2) (engine/remesh/resample.h).
+constexpr int kLatticeKinds = 6;
+constexpr u8 kNoRelief = 0xFF;
+// The six unit steps of the lattice, counterclockwise; rot60 turns a step into the next one.
+constexpr int kStep[6][2] = {{1, 0}, {0, 1}, {-1, 1}, {-1, 0}, {0, -1}, {1, -1}};
+// The lattice offsets within two steps: the six steps (0-5), twice each step (6-11), each step plus the next one
+// (12-17, the far corner of the parallelogram on steps k and k + 1).
+constexpr int kRing2[18][2] = {{1, 0},  {0, 1},  {-1, 1}, {-1, 0}, {0, -1}, {1, -1}, {2, 0},   {0, 2},  {-2, 2},
+                               {-2, 0}, {0, -2}, {2, -2}, {1, 1},  {-1, 2}, {-2, 1}, {-1, -1}, {1, -2}, {2, -1}};
+inline std::array<i64, 2> rot60(std::array<i64, 2> v, int times) {
+  for (int k = 0; k < times; ++k) v = {-v[1], v[0] + v[1]};
+  return v;
+}
+inline int baseAxis(int relief, int which) {
+  const int a = relief / 2;
+  return (a + 1 + ((relief % 2) ^ which)) % 3;
+}
+// The lattice coordinates of a grid point in relief r's plane, if it is a lattice point.
+inline bool latticeOf(const Vec3u& p, int relief, i64 G, i64 H, std::array<i64, 2>& ij) {
+  const i64 b0 = p[size_t(baseAxis(relief, 0))], b1 = p[size_t(baseAxis(relief, 1))];
+  if (b1 % H != 0) return false;
+  const i64 j = b1 / H, x = b0 - j * (G / 2);
+  if (((x % G) + G) % G != 0) return false;
+  ij = {x >= 0 ? x / G : -((-x) / G), j};
+  return true;
+}
+// The relief codes in which triangle (a, b, c) (cut-face order) is a unit triangle of the lattice, as a mask: bit r
+// if it is counterclockwise in relief r's base, bit r + 6 if clockwise (the cut mesh orients each component as its
+// traversal needs, which may be against the input's orientation).
+u32 latticeReliefs(const Vec3u& a, const Vec3u& b, const Vec3u& c, i64 G, i64 H) {
+  u32 mask = 0;
+  for (int r = 0; r < 6; ++r) {
+    std::array<i64, 2> la, lb, lc;
+    if (!latticeOf(a, r, G, H, la) || !latticeOf(b, r, G, H, lb) || !latticeOf(c, r, G, H, lc)) continue;
+    const i64 d1[2] = {lb[0] - la[0], lb[1] - la[1]}, d2[2] = {lc[0] - la[0], lc[1] - la[1]};
+    const auto unit = [](i64 i, i64 j) { return std::abs(i) + std::abs(j) + std::abs(i + j) == 2; };
+    if (!unit(d1[0], d1[1]) || !unit(d2[0], d2[1]) || !unit(d2[0] - d1[0], d2[1] - d1[1])) continue;
+    const i64 cross = d1[0] * d2[1] - d1[1] * d2[0];
+    if (cross == 1) mask |= 1u << r;
+    if (cross == -1) mask |= 1u << (r + 6);
+  }
+  return mask;
+}
+struct LatticeKey {
+  u32 patch;
+  int32_t i, j;
+  bool operator==(const LatticeKey&) const = default;
+};
+// A regular patch, and a point's place in one.
+struct Patch {
+  u8 relief, anchored, rotation;
+  u32 first_face;
+  i64 oi, oj;  // lattice coordinates of relative (0, 0), once anchored
+};
+struct PointPatch {
+  u32 patch;
+  int32_t i, j;
+};
+struct LatticeKeyHash {
+  size_t operator()(const LatticeKey& k) const {
+    u64 h = (u64(k.patch) << 32) ^ (u64(u32(k.i)) * 0x9E3779B97F4A7C15ull) ^ (u64(u32(k.j)) * 0xC2B2AE3D27D4EB4Full);
+    h ^= h >> 29;
+    return size_t(h * 0xBF58476D1CE4E5B9ull);
+  }
+};
 
 // Sorts sorted-corner keys lexicographically; when the points fit 21 bits a key packs into one u64 whose order is
 // the same, and sorting those is about twice as fast as comparing arrays.
@@ -260,7 +330,14 @@ struct Models {
   std::vector<SymbolModel> residual;
   BitModel second_bit[kClasses];
   std::vector<SymbolModel> orient;
+  // prm
+  BitModel regular[12];  // by the face across the gate (none, irregular, regular), corners next to an irregular face
+  BitModel same_relief[2];  // as the face across the gate's, as the last regular face's
+  SymbolModel relief{12};
+  SymbolModel rotation{6};
+  std::vector<SymbolModel> height;
   Models() {
+    for (int i = 0; i < kLatticeKinds * kMagContexts; ++i) height.emplace_back(kDirect + kClasses - kDirectBits - 1);
     for (int i = 0; i < (int(kNumOps) + 1) * kValenceContexts; ++i) op.emplace_back(kNumOps);
     for (int i = 0; i < kPredKinds * kMagContexts * 3 * kAxisContexts; ++i)
       residual.emplace_back(kDirect + kClasses - kDirectBits - 1);
@@ -286,7 +363,10 @@ class Engine {
 
   AttributeLayout layout;
   uint16_t version = kPredictedAttributes;  // the payload's (attribute coding)
+  // prm: the lattice spacing G in grid cells (even, >= 2); 0 is plain edgebreaker.
+  u32 spacing = 0;
   u64 ops[kNumOps] = {};
+  u64 regular_faces = 0, patch_count = 0, lattice_points = 0;
 
   Status run() {
     hv_.assign(size_t(faces_) * 3, kNone);
@@ -301,6 +381,12 @@ class Engine {
     }
     io_.meter(&CodecStats::connectivity_bits);
     SP_RETURN_IF_ERROR(connectivity());
+    SP_RETURN_IF_ERROR(mapPoints());
+    if (spacing > 0) {
+      io_.meter(&CodecStats::regularity_bits);
+      SP_RETURN_IF_ERROR(regularity());
+      SP_RETURN_IF_ERROR(buildPatches());
+    }
     io_.meter(&CodecStats::geometry_bits);
     SP_RETURN_IF_ERROR(geometry());
     io_.meter(&CodecStats::connectivity_bits);
@@ -322,7 +408,7 @@ class Engine {
  private:
   Status malformed(const std::string& what) const {
     return makeError(truth_ ? ErrorCode::kInternal : ErrorCode::kMalformed,
-                     std::string(kName) + (truth_ ? " encoder: " : " payload: ") + what);
+                     std::string(spacing ? "prm" : kName) + (truth_ ? " encoder: " : " payload: ") + what);
   }
 
   // A cut vertex met for the first time: a new point, a dummy, or a copy of an earlier point.
@@ -593,11 +679,9 @@ class Engine {
   }
 
   // Positions of the points in decode order, then of the isolated points.
-  Status geometry() {
-    pos_.assign(n_, Vec3u{0, 0, 0});
-    known_.assign(n_, 0);
-    mag_.assign(n_, 0);
-    Vec3u last{0, 0, 0};
+  // Numbers the isolated points (after those the traversal met), and the encoder's maps between its points and the
+  // decode order.
+  Status mapPoints() {
     u32 isolated = 0;
     if (truth_) {
       for (u32 p = 0; p < truth_->pts->pos.size(); ++p)
@@ -606,47 +690,70 @@ class Engine {
       point_of_out_.assign(n_, kNone);
       for (u32 p = 0; p < n_; ++p) point_of_out_[truth_->out_of_point[p]] = p;
     }
+    return Status::ok();
+  }
+
+  // The prediction of a point from its first fan (around cut vertex v): the mean of every parallelogram whose three
+  // corners are known, else the mean of the known neighbours, else `last`.
+  void fanPrediction(u32 v, const Vec3u& last, i64* pred, int& kind, int& mctx) const {
+    i64 par[3] = {0, 0, 0}, nb[3] = {0, 0, 0};
+    u32 npar = 0, nnb = 0, mag_sum = 0;
     const u32 limit = 3 * faces_ + 3;
+    const u32 start = first_he_[v];
+    u32 h = start;
+    for (u32 steps = 0; steps < limit; ++steps) {
+      const u32 ab = nextIn(h);
+      const u32 a = cut_point_[hv_[ab]], b = cut_point_[hv_[prevIn(h)]];
+      if (a != kNone && known_[a]) {
+        ++nnb;
+        mag_sum += mag_[a];
+        for (int i = 0; i < 3; ++i) nb[i] += pos_[a][i];
+        const u32 o_he = twin_[ab];
+        const u32 o = o_he == kNone ? kNone : cut_point_[hv_[prevIn(o_he)]];
+        if (b != kNone && known_[b] && o != kNone && known_[o]) {
+          ++npar;
+          for (int i = 0; i < 3; ++i) par[i] += i64(pos_[a][i]) + pos_[b][i] - pos_[o][i];
+        }
+      }
+      const u32 back = twin_[prevIn(h)];
+      if (back == kNone) break;
+      h = back;
+      if (h == start) break;
+    }
+    if (npar > 0) {
+      kind = npar > 1 ? 0 : 1;
+      for (int i = 0; i < 3; ++i) pred[i] = floorDiv(2 * par[i] + npar, 2 * i64(npar));
+    } else if (nnb > 0) {
+      kind = 2;
+      for (int i = 0; i < 3; ++i) pred[i] = floorDiv(2 * nb[i] + nnb, 2 * i64(nnb));
+    } else {
+      kind = 3;
+      for (int i = 0; i < 3; ++i) pred[i] = last[i];
+    }
+    mctx = nnb ? int(std::min<u32>((mag_sum + nnb / 2) / nnb, kMagContexts - 1)) : 0;
+  }
+
+  Status geometry() {
+    pos_.assign(n_, Vec3u{0, 0, 0});
+    known_.assign(n_, 0);
+    mag_.assign(n_, 0);
+    Vec3u last{0, 0, 0};
     for (u32 v = 0; v < cut_point_.size(); ++v) {
       if (!is_first_[v]) continue;
       const u32 point = cut_point_[v];
-      i64 par[3] = {0, 0, 0}, nb[3] = {0, 0, 0};
-      u32 npar = 0, nnb = 0, mag_sum = 0;
-      const u32 start = first_he_[v];
-      u32 h = start;
-      for (u32 steps = 0; steps < limit; ++steps) {
-        const u32 ab = nextIn(h);
-        const u32 a = cut_point_[hv_[ab]], b = cut_point_[hv_[prevIn(h)]];
-        if (a != kNone && known_[a]) {
-          ++nnb;
-          mag_sum += mag_[a];
-          for (int i = 0; i < 3; ++i) nb[i] += pos_[a][i];
-          const u32 o_he = twin_[ab];
-          const u32 o = o_he == kNone ? kNone : cut_point_[hv_[prevIn(o_he)]];
-          if (b != kNone && known_[b] && o != kNone && known_[o]) {
-            ++npar;
-            for (int i = 0; i < 3; ++i) par[i] += i64(pos_[a][i]) + pos_[b][i] - pos_[o][i];
-          }
+      if (spacing > 0) {
+        bool done = false;
+        SP_RETURN_IF_ERROR(latticePoint(v, point, last, done));
+        if (done) {
+          last = pos_[point];
+          continue;
         }
-        const u32 back = twin_[prevIn(h)];
-        if (back == kNone) break;
-        h = back;
-        if (h == start) break;
       }
-      int kind;
+      int kind, mctx;
       i64 pred[3];
-      if (npar > 0) {
-        kind = npar > 1 ? 0 : 1;
-        for (int i = 0; i < 3; ++i) pred[i] = floorDiv(2 * par[i] + npar, 2 * i64(npar));
-      } else if (nnb > 0) {
-        kind = 2;
-        for (int i = 0; i < 3; ++i) pred[i] = floorDiv(2 * nb[i] + nnb, 2 * i64(nnb));
-      } else {
-        kind = 3;
-        for (int i = 0; i < 3; ++i) pred[i] = last[i];
-      }
-      const int mctx = nnb ? int(std::min<u32>((mag_sum + nnb / 2) / nnb, kMagContexts - 1)) : 0;
+      fanPrediction(v, last, pred, kind, mctx);
       SP_RETURN_IF_ERROR(codePosition(point, pred, kind, mctx));
+      if (spacing > 0) SP_RETURN_IF_ERROR(anchorPatches(point));
       last = pos_[point];
     }
     for (u32 point = points_; point < n_; ++point) {
@@ -657,12 +764,315 @@ class Engine {
     return Status::ok();
   }
 
+  // prm, §3.2: which faces are regular (a counterclockwise unit triangle of one relief's lattice, in cut-face order)
+  // and their relief, per face in decode order; faces with a dummy corner or a repeated point never are.
+  Status regularity() {
+    row = HexLattice::withSpacing(spacing).row;
+    face_relief_.assign(faces_, kNoRelief);
+    u8 last_relief = kNoRelief;
+    std::vector<u8> near_irregular(cut_point_.size(), 0);  // per cut vertex: on an irregular face decoded so far
+    for (u32 k = 0; k < faces_; ++k) {
+      u32 pt[3];
+      bool eligible = true;
+      for (int i = 0; i < 3; ++i) {
+        pt[i] = cut_point_[hv_[3 * k + i]];
+        eligible &= pt[i] != kNone;
+      }
+      if (!eligible || pt[0] == pt[1] || pt[1] == pt[2] || pt[0] == pt[2]) continue;
+      const u32 across = twin_[3 * k];
+      const u8 parent = across != kNone && across / 3 < k ? face_relief_[across / 3] : kNoRelief;
+      u8 truth_relief = kNoRelief;
+      if (truth_) {
+        // A face may be a unit triangle in several reliefs: the parent's code first (one patch, not two), then the
+        // last code sent, then the lowest.
+        const auto& tp = truth_->pts->pos;
+        const u32 mask =
+            latticeReliefs(tp[truthPoint(pt[0])], tp[truthPoint(pt[1])], tp[truthPoint(pt[2])], spacing, row);
+        if (mask != 0)
+          truth_relief = parent != kNoRelief && (mask >> parent & 1)             ? parent
+                         : last_relief != kNoRelief && (mask >> last_relief & 1) ? last_relief
+                                                                                 : u8(std::countr_zero(mask));
+      }
+      int irregular_corners = 0;
+      for (int i = 0; i < 3; ++i) irregular_corners += near_irregular[hv_[3 * k + i]];
+      const int ctx = (across == kNone || across / 3 >= k ? 0 : parent == kNoRelief ? 1 : 2) * 4 + irregular_corners;
+      if (!io_.bit(models_.regular[ctx], truth_relief != kNoRelief)) {
+        for (int i = 0; i < 3; ++i) near_irregular[hv_[3 * k + i]] = 1;
+        continue;
+      }
+      ++regular_faces;
+      if (parent != kNoRelief && io_.bit(models_.same_relief[0], truth_relief == parent)) {
+        face_relief_[k] = parent;
+        continue;
+      }
+      if (parent == kNoRelief && last_relief != kNoRelief &&
+          io_.bit(models_.same_relief[1], truth_relief == last_relief)) {
+        face_relief_[k] = last_relief;
+        continue;
+      }
+      const u32 r = io_.sym(models_.relief, truth_relief == kNoRelief ? 0 : truth_relief);
+      if (r >= 12) return malformed("relief id out of range");
+      face_relief_[k] = last_relief = u8(r);
+    }
+    return Status::ok();
+  }
+
+  // prm, §3.3: regular patches (regular faces of one relief joined across edges), each point's coordinates in its
+  // patches' lattices relative to the patch's first face (corners (0, 0), (1, 0), (0, 1)).
+  Status buildPatches() {
+    std::vector<u32> face_patch(faces_, kNone);
+    std::vector<u32> stamp(n_, kNone);
+    std::vector<std::array<i64, 2>> rel(n_);
+    struct Entry {
+      u32 point, patch;
+      int32_t i, j;
+    };
+    std::vector<Entry> entries;
+    std::vector<u32> queue;
+    constexpr i64 kMaxRel = i64(1) << 30;
+    for (u32 f0 = 0; f0 < faces_; ++f0) {
+      if (face_relief_[f0] == kNoRelief || face_patch[f0] != kNone) continue;
+      const u32 patch = u32(patches_.size());
+      patches_.push_back(Patch{u8(face_relief_[f0] % 6), 0, 0, f0, 0, 0});
+      const auto place = [&](u32 point, std::array<i64, 2> ij) -> Status {
+        if (std::abs(ij[0]) > kMaxRel || std::abs(ij[1]) > kMaxRel) return malformed("regular patch too large");
+        if (stamp[point] == patch) {
+          if (rel[point] != ij) return malformed("regular patch does not fit its lattice");
+          return Status::ok();
+        }
+        stamp[point] = patch;
+        rel[point] = ij;
+        entries.push_back({point, patch, int32_t(ij[0]), int32_t(ij[1])});
+        at_.emplace(LatticeKey{patch, int32_t(ij[0]), int32_t(ij[1])}, point);
+        return Status::ok();
+      };
+      // A clockwise face (relief code >= 6) starts a mirrored frame: its corners' lattice steps are then still a
+      // rotation of the relative ones.
+      const bool cw = face_relief_[f0] >= 6;
+      SP_RETURN_IF_ERROR(place(cut_point_[hv_[3 * f0]], {0, 0}));
+      SP_RETURN_IF_ERROR(place(cut_point_[hv_[3 * f0 + 1]], cw ? std::array<i64, 2>{0, 1} : std::array<i64, 2>{1, 0}));
+      SP_RETURN_IF_ERROR(place(cut_point_[hv_[3 * f0 + 2]], cw ? std::array<i64, 2>{1, 0} : std::array<i64, 2>{0, 1}));
+      face_patch[f0] = patch;
+      queue.assign(1, f0);
+      for (size_t head = 0; head < queue.size(); ++head) {
+        const u32 f = queue[head];
+        for (u32 h = 3 * f; h < 3 * f + 3; ++h) {
+          const u32 g = twin_[h];
+          if (g == kNone) continue;
+          const u32 fg = g / 3;
+          if (face_patch[fg] != kNone || face_relief_[fg] != face_relief_[f]) continue;
+          // Across edge x->y of f (third corner c), the face's third corner is x + y - c.
+          const u32 x = cut_point_[hv_[h]], y = cut_point_[hv_[nextIn(h)]], c = cut_point_[hv_[prevIn(h)]];
+          if (cut_point_[hv_[g]] != y || cut_point_[hv_[nextIn(g)]] != x)
+            return malformed("regular faces glued inconsistently");
+          const u32 c2 = cut_point_[hv_[prevIn(g)]];
+          SP_RETURN_IF_ERROR(place(c2, {rel[x][0] + rel[y][0] - rel[c][0], rel[x][1] + rel[y][1] - rel[c][1]}));
+          face_patch[fg] = patch;
+          queue.push_back(fg);
+        }
+      }
+    }
+    patch_count = patches_.size();
+    // Per point, its patches in patch order (entries are made patch by patch).
+    point_begin_.assign(size_t(n_) + 1, 0);
+    for (const Entry& e : entries) ++point_begin_[e.point + 1];
+    for (u32 p = 0; p < n_; ++p) point_begin_[p + 1] += point_begin_[p];
+    point_patches_.resize(entries.size());
+    std::vector<u32> fill(point_begin_.begin(), point_begin_.end() - 1);
+    for (const Entry& e : entries) point_patches_[fill[e.point]++] = PointPatch{e.patch, e.i, e.j};
+    return Status::ok();
+  }
+
+  // The lattice coordinates of relative coordinates in an anchored patch.
+  std::array<i64, 2> latticeCoords(const Patch& pa, i64 ri, i64 rj) const {
+    const auto r = rot60({ri, rj}, pa.rotation);
+    return {pa.oi + r[0], pa.oj + r[1]};
+  }
+
+  // A point of an anchored patch: its base coordinates follow from the lattice, its height is predicted from the
+  // lattice neighbours within two steps already decoded: the least-squares quadratic through them (fitQuadratic)
+  // when seven or more are known and one parallelogram around the point is, else the mean of the parallelograms,
+  // else of the lines through the point, else of the neighbours, else the fan's prediction. `done` is false when
+  // none of the point's patches is anchored.
+  Status latticePoint(u32 v, u32 point, const Vec3u& last, bool& done) {
+    done = false;
+    const PointPatch* pp = nullptr;
+    for (u32 e = point_begin_[point]; e < point_begin_[point + 1]; ++e)
+      if (patches_[point_patches_[e].patch].anchored) {
+        pp = &point_patches_[e];
+        break;
+      }
+    if (!pp) return Status::ok();
+    const Patch& pa = patches_[pp->patch];
+    const int relief = pa.relief, axis = relief / 2;
+    const auto ij = latticeCoords(pa, pp->i, pp->j);
+    const i64 base[2] = {ij[0] * i64(spacing) + ij[1] * i64(spacing / 2), ij[1] * i64(row)};
+    for (int w = 0; w < 2; ++w) {
+      if (base[w] < 0 || base[w] > i64(max_coord_)) return malformed("lattice point outside the grid");
+      pos_[point][size_t(baseAxis(relief, w))] = u32(base[w]);
+      if (truth_ && truth_->pts->pos[truthPoint(point)][size_t(baseAxis(relief, w))] != u32(base[w]))
+        return malformed("lattice point off its lattice");
+    }
+    // Heights of the known neighbours within two steps (kRing2 order), -1 for unknown.
+    i64 h[18];
+    u32 mask = 0, mag_sum = 0, nnb = 0;
+    for (int k = 0; k < 18; ++k) {
+      h[k] = -1;
+      const auto it = at_.find(LatticeKey{pp->patch, pp->i + kRing2[k][0], pp->j + kRing2[k][1]});
+      if (it == at_.end() || !known_[it->second]) continue;
+      h[k] = pos_[it->second][size_t(axis)];
+      mask |= 1u << k;
+      if (k < 6) ++nnb, mag_sum += mag_[it->second];
+    }
+    i64 par = 0, lin = 0, nb = 0;
+    u32 npar = 0, nlin = 0;
+    for (int k = 0; k < 6; ++k) {
+      if (h[k] < 0) continue;
+      nb += h[k];
+      const int next = (k + 1) % 6;
+      if (h[next] >= 0 && h[12 + k] >= 0) ++npar, par += h[k] + h[next] - h[12 + k];
+      if (h[6 + k] >= 0) ++nlin, lin += 2 * h[k] - h[6 + k];
+    }
+    int kind, mctx = nnb ? int(std::min<u32>((mag_sum + nnb / 2) / nnb, kMagContexts - 1)) : 0;
+    i64 pred;
+    const double* weights = npar > 0 && std::popcount(mask) >= 7 ? quadraticWeights(mask) : nullptr;
+    if (weights) {
+      kind = npar >= 3 ? 0 : npar == 2 ? 1 : 2;
+      double fit = 0;
+      for (int k = 0; k < 18; ++k)
+        if (mask >> k & 1) fit += weights[k] * double(h[k]);
+      pred = i64(std::floor(fit + 0.5));
+    } else if (npar > 0) {
+      kind = 3;
+      pred = floorDiv(2 * par + npar, 2 * i64(npar));
+    } else if (nlin > 0) {
+      kind = 4;
+      pred = floorDiv(2 * lin + nlin, 2 * i64(nlin));
+    } else if (nnb > 0) {
+      kind = 4;
+      pred = floorDiv(2 * nb + nnb, 2 * i64(nnb));
+    } else {
+      kind = 5;
+      i64 p3[3];
+      int fan_kind;
+      fanPrediction(v, last, p3, fan_kind, mctx);
+      pred = p3[axis];
+    }
+    int cls = 0;
+    SP_RETURN_IF_ERROR(codeCoordinate(point, axis, pred, models_.height[kind * kMagContexts + mctx], cls));
+    known_[point] = 1;
+    mag_[point] = u8(cls);
+    ++lattice_points;
+    done = true;
+    return Status::ok();
+  }
+
+  // The weights that give, from the heights at the offsets of `mask` (kRing2), the value at the centre of the
+  // least-squares quadratic through them (with a small ridge on the quadratic terms); nullptr when the fit is
+  // singular. Computed once per mask, in IEEE double without contraction (the file is built with
+  // -ffp-contract=off): encoder and decoder get the same bits.
+  const double* quadraticWeights(u32 mask) {
+    auto [it, fresh] = weights_.try_emplace(mask);
+    if (!fresh) return it->second.ok ? it->second.w.data() : nullptr;
+    Weights& wt = it->second;
+    constexpr double kRidge = 0.5, kHalfSqrt3 = 0.8660254037844386;
+    double A[6][6] = {}, F[18][6];
+    for (int k = 0; k < 18; ++k) {
+      const double x = kRing2[k][0] + 0.5 * kRing2[k][1], y = kHalfSqrt3 * kRing2[k][1];
+      const double f[6] = {1, x, y, x * x, x * y, y * y};
+      for (int c = 0; c < 6; ++c) F[k][c] = f[c];
+      if (!(mask >> k & 1)) continue;
+      for (int r = 0; r < 6; ++r)
+        for (int c = 0; c < 6; ++c) A[r][c] += f[r] * f[c];
+    }
+    for (int r = 3; r < 6; ++r) A[r][r] += kRidge;
+    // The first row of A^-1 (Gauss-Jordan on [A | e0]): the value at the centre is row0 . (F^T h).
+    double inv[6][6] = {};
+    for (int r = 0; r < 6; ++r) inv[r][r] = 1;
+    for (int c = 0; c < 6; ++c) {
+      int piv = c;
+      for (int r = c + 1; r < 6; ++r)
+        if (std::abs(A[r][c]) > std::abs(A[piv][c])) piv = r;
+      if (std::abs(A[piv][c]) < 1e-9) return nullptr;
+      std::swap(A[c], A[piv]);
+      std::swap(inv[c], inv[piv]);
+      const double d = A[c][c];
+      for (int k = 0; k < 6; ++k) A[c][k] /= d, inv[c][k] /= d;
+      for (int r = 0; r < 6; ++r) {
+        if (r == c) continue;
+        const double m = A[r][c];
+        for (int k = 0; k < 6; ++k) A[r][k] -= m * A[c][k], inv[r][k] -= m * inv[c][k];
+      }
+    }
+    for (int k = 0; k < 18; ++k) {
+      double w = 0;
+      if (mask >> k & 1)
+        for (int c = 0; c < 6; ++c) w += inv[0][c] * F[k][c];
+      wt.w[size_t(k)] = w;
+    }
+    wt.ok = true;
+    return wt.w.data();
+  }
+
+  // After a point is decoded in full: every patch of it not yet anchored is anchored at it (its lattice coordinates,
+  // from its position, and the rotation of the patch's relative coordinates, coded).
+  Status anchorPatches(u32 point) {
+    for (u32 e = point_begin_[point]; e < point_begin_[point + 1]; ++e) {
+      const PointPatch& pp = point_patches_[e];
+      Patch& pa = patches_[pp.patch];
+      if (pa.anchored) continue;
+      std::array<i64, 2> ij;
+      if (!latticeOf(pos_[point], pa.relief, spacing, row, ij))
+        return malformed("regular patch anchored off its lattice");
+      u32 rotation = 0;
+      if (truth_) {
+        // The patch's first face has relative corners (0, 0) and (1, 0) (counterclockwise) or (0, 1) (clockwise): the
+        // rotation turns that step into their lattice step.
+        const std::array<i64, 2> rel_step = face_relief_[pa.first_face] >= 6 ? std::array<i64, 2>{0, 1}
+                                                                             : std::array<i64, 2>{1, 0};
+        const auto& tp = truth_->pts->pos;
+        std::array<i64, 2> l0, l1;
+        const bool ok0 = latticeOf(tp[truthPoint(cut_point_[hv_[3 * pa.first_face]])], pa.relief, spacing, row, l0);
+        const bool ok1 = latticeOf(tp[truthPoint(cut_point_[hv_[3 * pa.first_face + 1]])], pa.relief, spacing, row, l1);
+        if (!ok0 || !ok1) return malformed("regular face off its lattice");
+        const std::array<i64, 2> step = {l1[0] - l0[0], l1[1] - l0[1]};
+        while (rotation < 6 && rot60(rel_step, int(rotation)) != step) ++rotation;
+        if (rotation == 6) return malformed("regular face is not a unit triangle");
+      }
+      rotation = io_.sym(models_.rotation, rotation);
+      if (rotation >= 6) return malformed("patch rotation out of range");
+      pa.rotation = u8(rotation);
+      const auto r = rot60({pp.i, pp.j}, pa.rotation);
+      pa.oi = ij[0] - r[0];
+      pa.oj = ij[1] - r[1];
+      pa.anchored = 1;
+    }
+    return Status::ok();
+  }
+
   static i64 floorDiv(i64 a, i64 b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
   Status codePosition(u32 point, const i64* pred, int kind, int mctx) {
     int max_cls = 0;
     for (int i = 0; i < 3; ++i) {
-      const i64 pr = std::clamp<i64>(pred[i], 0, i64(max_coord_));
+      SymbolModel& model =
+          models_.residual[((kind * kMagContexts + mctx) * 3 + i) * kAxisContexts + (max_cls <= 2   ? 0
+                                                                                     : max_cls <= 4 ? 1
+                                                                                                    : 2)];
+      int cls = 0;
+      SP_RETURN_IF_ERROR(codeCoordinate(point, i, pred[i], model, cls));
+      max_cls = std::max(max_cls, cls);
+    }
+    known_[point] = 1;
+    mag_[point] = u8(max_cls);
+    return Status::ok();
+  }
+
+  // Codes coordinate `axis` of `point` against its prediction; `cls` is the residual's bit-length class.
+  Status codeCoordinate(u32 point, int axis, i64 pred, SymbolModel& model, int& cls) {
+    {
+      const int i = axis;
+      const i64 pr = std::clamp<i64>(pred, 0, i64(max_coord_));
       u64 zig = 0;
       if (truth_) {
         const Vec3u& actual = truth_->pts->pos[truthPoint(point)];
@@ -671,13 +1081,8 @@ class Engine {
       }
       // Small residuals are symbols of their own; larger ones an escape by bit length, then the bits below the
       // leading one raw.
-      SymbolModel& model =
-          models_.residual[((kind * kMagContexts + mctx) * 3 + i) * kAxisContexts + (max_cls <= 2   ? 0
-                                                                                     : max_cls <= 4 ? 1
-                                                                                                    : 2)];
       const int true_cls = bitLength(zig);
       const u32 sym = io_.sym(model, true_cls < kDirectBits + 1 ? u32(zig) : u32(kDirect + true_cls - kDirectBits - 1));
-      int cls;
       u64 z = 0;
       if (sym < kDirect) {
         z = sym;
@@ -702,10 +1107,7 @@ class Engine {
       const i64 value = pr + r;
       if (value < 0 || value > i64(max_coord_)) return malformed("position outside the grid");
       pos_[point][i] = u32(value);
-      max_cls = std::max(max_cls, cls);
     }
-    known_[point] = 1;
-    mag_[point] = u8(max_cls);
     return Status::ok();
   }
 
@@ -786,6 +1188,19 @@ class Engine {
   std::vector<u8> is_first_;
   // Encoder's maps between its cut mesh and the decode order.
   std::vector<u32> enc_of_dec_, dec_of_enc_, dec_vertex_, point_of_out_;
+  // prm: per face its relief (kNoRelief: irregular); the patches; per point its patches and relative lattice
+  // coordinates (point_patches_[point_begin_[p] ..]); the points by patch and relative coordinates.
+  u32 row = 0;
+  std::vector<u8> face_relief_;
+  std::vector<Patch> patches_;
+  std::vector<u32> point_begin_;
+  std::vector<PointPatch> point_patches_;
+  std::unordered_map<LatticeKey, u32, LatticeKeyHash> at_;
+  struct Weights {
+    std::array<double, 18> w{};
+    bool ok = false;
+  };
+  std::unordered_map<u32, Weights> weights_;  // quadraticWeights, by mask
   // Per point.
   std::vector<Vec3u> pos_;
   std::vector<u8> known_, mag_;
@@ -794,8 +1209,8 @@ class Engine {
   std::vector<Rgba8> colors_;
 };
 
-Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<u8>& out, CodecStats* stats,
-                  TileSummary* summary) {
+Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, u32 spacing, std::vector<u8>& out,
+                  CodecStats* stats, TileSummary* summary) {
   Points pts;
   SP_RETURN_IF_ERROR(collectPoints(kName, ctx, mesh, {0, 1, 2}, pts));
   CutMesh cm;
@@ -821,8 +1236,14 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
     SP_RETURN_IF_ERROR(io.begin());
     Engine<EncodeIo> engine(io, ctx.bits, n, t, cm.faces, &truth);
     engine.layout = ctx.layout;
+    engine.spacing = spacing;
     SP_RETURN_IF_ERROR(engine.run());
     SP_RETURN_IF_ERROR(io.end());
+    if (stats) {
+      stats->regular_faces = engine.regular_faces;
+      stats->patches = engine.patch_count;
+      stats->lattice_points = engine.lattice_points;
+    }
     out.insert(out.end(), io.segments[0].begin(), io.segments[0].end());
   }
   if (stats) stats->payload_bytes = out.size() - start;
@@ -834,51 +1255,81 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
   return Status::ok();
 }
 
+Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                 const DecodeLimits& limits, u32 spacing);
+
 }  // namespace
 
 Result<EncodedTile> edgebreakerEncode(const TileContext& ctx, const TileView& tile, const CodecOptions&) {
   EncodedTile e;
-  SP_RETURN_IF_ERROR(encodeImpl(ctx, tile.mesh, e.payload, nullptr, &e.decoded));
+  SP_RETURN_IF_ERROR(encodeImpl(ctx, tile.mesh, 0, e.payload, nullptr, &e.decoded));
   return e;
 }
 
 Status edgebreakerEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
                                   CodecStats* stats) {
-  return encodeImpl(ctx, mesh, out, stats, nullptr);
+  return encodeImpl(ctx, mesh, 0, out, stats, nullptr);
+}
+
+Status edgebreakerEncodeOnLattice(const TileContext& ctx, const QuantizedMesh& mesh, uint32_t spacing,
+                                  std::vector<uint8_t>& out, CodecStats* stats, TileSummary* summary) {
+  if (spacing < 2 || spacing % 2 != 0 || spacing > kMaxLatticeSpacing)
+    return makeError(ErrorCode::kInvalidArgument, "prm: lattice spacing " + std::to_string(spacing) +
+                                                      " is not an even number in 2.." +
+                                                      std::to_string(kMaxLatticeSpacing));
+  return encodeImpl(ctx, mesh, spacing, out, stats, summary);
 }
 
 Result<QuantizedMesh> edgebreakerDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         const DecodeLimits& limits) {
   if (version < 1 || version > kPredictedAttributes)
     return makeError(ErrorCode::kUnknownVersion, "edgebreaker payload: unknown version " + std::to_string(version));
-  ByteReader r(payload, "edgebreaker payload");
+  return decodeImpl(ctx, version, payload, limits, 0);
+}
+
+Result<QuantizedMesh> edgebreakerDecodeOnLattice(const TileContext& ctx, std::span<const uint8_t> payload,
+                                                 const DecodeLimits& limits, uint32_t spacing) {
+  if (spacing < 2 || spacing % 2 != 0 || spacing > kMaxLatticeSpacing)
+    return makeError(ErrorCode::kMalformed, "prm payload: lattice spacing " + std::to_string(spacing) +
+                                                " is not an even number in 2.." + std::to_string(kMaxLatticeSpacing));
+  return decodeImpl(ctx, kPredictedAttributes, payload, limits, spacing);
+}
+
+namespace {
+
+Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                 const DecodeLimits& limits, u32 spacing) {
+  const std::string what = spacing ? "prm payload" : "edgebreaker payload";
+  ByteReader r(payload, what);
   u64 n = 0, t = 0, faces = 0;
   SP_RETURN_IF_ERROR(r.varint(n));
   SP_RETURN_IF_ERROR(r.varint(t));
   SP_RETURN_IF_ERROR(r.varint(faces));
-  SP_RETURN_IF_ERROR(checkLimits("edgebreaker payload", n, t, limits));
+  SP_RETURN_IF_ERROR(checkLimits(what, n, t, limits));
   // Every face of the cut mesh is an input triangle or a dummy face on one of their boundary edges.
   if (faces > 4 * t || faces > UINT32_MAX / 3 || (n == 0 && (t != 0 || faces != 0)) || (t > 0 && faces == 0))
-    return makeError(ErrorCode::kMalformed, "edgebreaker payload: inconsistent counts");
+    return makeError(ErrorCode::kMalformed, what + ": inconsistent counts");
   if (n == 0) {
-    if (r.remaining() != 0) return makeError(ErrorCode::kMalformed, "edgebreaker payload: bytes after an empty tile");
+    if (r.remaining() != 0) return makeError(ErrorCode::kMalformed, what + ": bytes after an empty tile");
     return QuantizedMesh{};
   }
   DecodeIo io;
-  io.codec = kName;
+  io.codec = spacing ? std::string_view("prm") : kName;
   io.segments.push_back(payload.subspan(r.position()));
   SP_RETURN_IF_ERROR(io.begin());
   Engine<DecodeIo> engine(io, ctx.bits, u32(n), t, u32(faces), nullptr);
   engine.layout = ctx.layout;
   engine.version = version;
+  engine.spacing = spacing;
   SP_RETURN_IF_ERROR(engine.run());
   SP_RETURN_IF_ERROR(io.end());
   QuantizedMesh mesh = engine.mesh();
   if (mesh.triangles.size() != t)
-    return makeError(ErrorCode::kMalformed, "edgebreaker payload: decoded " + std::to_string(mesh.triangles.size()) +
+    return makeError(ErrorCode::kMalformed, what + ": decoded " + std::to_string(mesh.triangles.size()) +
                                                 " triangles, header says " + std::to_string(t));
   SP_RETURN_IF_ERROR(validateTile(ctx, mesh));
   return mesh;
 }
 
+}  // namespace
 }  // namespace scanpress

@@ -384,14 +384,14 @@ Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const Til
 }
 
 Result<std::vector<uint8_t>> encodeContainer(const Grid& grid, const AttributeLayout& layout, const CodecInfo& codec,
-                                             std::span<const QuantizedMesh> tiles) {
+                                             std::span<const QuantizedMesh> tiles, const CodecOptions& options) {
   std::vector<uint8_t> out;
   VectorSink sink(out);
   ContainerWriter writer(sink, grid, layout);
   SP_RETURN_IF_ERROR(writer.begin());
   const TileContext ctx{grid.bits, layout};
   for (size_t i = 0; i < tiles.size(); ++i) {
-    SP_ASSIGN_OR_RETURN(EncodedTile tile, encodeMesh(codec, ctx, tiles[i]));
+    SP_ASSIGN_OR_RETURN(EncodedTile tile, encodeMesh(codec, ctx, tiles[i], options));
     SP_RETURN_IF_ERROR(writer.addTile(static_cast<uint32_t>(i), codec, tile.decoded, tile.payload));
   }
   SP_RETURN_IF_ERROR(writer.finish());

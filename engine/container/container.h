@@ -138,7 +138,7 @@ Result<std::vector<CodecLevel>> tilePayloadLevels(const ContainerHeader& header,
 
 // Whole-container helpers for in-memory buffers (tests, and small files).
 Result<std::vector<uint8_t>> encodeContainer(const Grid& grid, const AttributeLayout& layout, const CodecInfo& codec,
-                                             std::span<const QuantizedMesh> tiles);
+                                             std::span<const QuantizedMesh> tiles, const CodecOptions& options = {});
 struct ParsedContainer {
   ContainerHeader header;
   std::vector<TileEntry> tiles;

@@ -65,15 +65,17 @@ uint32_t remeshSpacing(const RemeshStageOptions& options, int bits) {
 
 Result<StagedTile> remeshStage(const TileContext& ctx, const TileView& tile, const StageSpec& spec) {
   SP_RETURN_IF_ERROR(validateStage(spec).withContext("remesh"));
+  return remeshTile(ctx, tile, spec.remesh.tau, remeshSpacing(spec.remesh, ctx.bits));
+}
+
+Result<StagedTile> remeshTile(const TileContext& ctx, const TileView& tile, double tau, uint32_t spacing) {
   const QuantizedMesh& in = tile.mesh;
   if (!tile.locked.empty() && tile.locked.size() != in.positions.size())
     return makeError(ErrorCode::kInvalidArgument, "remesh: " + std::to_string(tile.locked.size()) + " lock flags for " +
                                                       std::to_string(in.positions.size()) + " vertices");
   const bool has_flags = !tile.locked.empty();
-  SP_ASSIGN_OR_RETURN(Remeshed r,
-                      remeshPiecewiseRegular(in, has_flags ? tile.locked : std::span<const uint8_t>(),
-                                             RemeshOptions{.tau = spec.remesh.tau,
-                                                           .spacing = remeshSpacing(spec.remesh, ctx.bits)}));
+  SP_ASSIGN_OR_RETURN(Remeshed r, remeshPiecewiseRegular(in, has_flags ? tile.locked : std::span<const uint8_t>(),
+                                                         RemeshOptions{.tau = tau, .spacing = spacing}));
   // A tile border edge closed by a fan of zero-area triangles would meet the neighbouring tile's fan on the same
   // grid points (the grid is the scan's), and the decoder would weld four triangles onto one edge: such a tile is
   // kept as it is.

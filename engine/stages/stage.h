@@ -95,6 +95,8 @@ void undoDegenerateMoves(const QuantizedMesh& before, QuantizedMesh& after);
 Result<StagedTile> smoothStage(const TileContext& ctx, const TileView& tile, const StageSpec& spec);
 // `remesh` (remesh_stage.cpp).
 Result<StagedTile> remeshStage(const TileContext& ctx, const TileView& tile, const StageSpec& spec);
+// The remesh stage at a spacing of `spacing` grid cells (even, >= 2), as the `prm` codec runs it.
+Result<StagedTile> remeshTile(const TileContext& ctx, const TileView& tile, double tau, uint32_t spacing);
 // The remesh stage's grid spacing in grid cells: `grid` times 2^bits, rounded to an even number, at least 2.
 uint32_t remeshSpacing(const RemeshStageOptions& options, int bits);
 

@@ -72,6 +72,9 @@ folder is created; an OUT named like a mesh, glTF, image or JSON file is refused
 options:
   --codec NAME        tile codec (default edgebreaker; available: %s); auto: with a target, the
                       smaller result of pm and edgebreaker that meets it (else edgebreaker)
+  --grid G            prm: the hexagonal lattice spacing of the remeshing, a fraction of the largest extent
+                      (default 0.005); with --max-error each tile chooses its own
+  --tau T             prm: relief regularisation, 0.001..0.577 (default 0.2)
   --stages LIST       geometry stages every tile runs before the codec, in order: NAME[:KEY=VALUE...][,NAME...]
                       (available: %s); e.g. smooth:iterations=5 (configs/REFERENCE.md, "Stages")
   --bits N            quantization bits, 8..24 (default 16): the largest bounding-box extent is divided into 2^N
@@ -389,7 +392,7 @@ int runEncode(int argc, char** argv) {
   if (!parseArgs(argc, argv, 2,
                  {"--codec", "--stages", "--bits", "--normal-bits", "--color-bits", "--report", "--tile-triangles",
                   "--threads", "--memory-budget", "--scratch-dir", "--samples-per-triangle", "--format", "--max-error",
-                  "--error", "--max-bytes", "--bpv", "--subset"},
+                  "--error", "--max-bytes", "--bpv", "--subset", "--grid", "--tau"},
                  {"--no-normals", "--no-colors", "--allow-degenerate", "--strict", "--measure", "--quiet", "--help"},
                  args, error))
     return usage(error, "encode");
@@ -414,6 +417,11 @@ int runEncode(int argc, char** argv) {
       !integerOption(args, "--color-bits", 1, 8, s.color_bits, error))
     return usage(error, "encode");
   if (std::string target_error = targetOptions(args, s); !target_error.empty()) return usage(target_error, "encode");
+  for (const char* name : {"--grid", "--tau"})
+    if (args.has(name) && s.codec != "prm") return usage(std::string(name) + " applies to --codec prm only", "encode");
+  if (!numberOption(args, "--grid", 1e-6, 1, s.codec_options.prm.grid, error) ||
+      !numberOption(args, "--tau", 1e-3, 0.577, s.codec_options.prm.tau, error))
+    return usage(error, "encode");
   s.keep_normals = !args.has("--no-normals");
   s.keep_colors = !args.has("--no-colors");
   s.allow_degenerate = args.has("--allow-degenerate");

@@ -1,0 +1,96 @@
+// Codec `prm` (id 6): piecewise regular meshes, remeshing and coding in one.
+//
+// Paper: A. Szymczak, J. Rossignac, D. King, "Piecewise Regular Meshes: Construction and Compression"
+// (../shared/papers/prm-piecewise-regular-meshes.md). Section 2 (reliefs, resampling, merging) is the `remesh`
+// stage (engine/remesh/, engine/stages/remesh_stage.cpp), which this codec runs on the tile at its lattice spacing;
+// section 3 (the compressed format) is edgebreaker's engine on that lattice (edgebreaker.cpp, "prm"), which this file
+// frames.
+//
+// Where the coder departs from §3, and why:
+//  - §3.1, connectivity: edgebreaker's CLERS coding with the paper's contexts (previous symbol, faces already decoded
+//    around the gate's start), as the `edgebreaker` codec codes any mesh.
+//  - §3.2, irregular triangles: a bit per face in decode order (regular or not, by whether the face across its gate
+//    is none, irregular or regular), and its relief (the same as that face's, else one of six), instead of LERS
+//    traversals of the irregular triangles. Both are about one adaptive binary decision per face; ours needs no
+//    gate per traversal and costs 0.1-0.2 bit per face on scans.
+//  - Regular is a property of the quantized mesh the coder is given, not of the remesher's labels: a face is regular
+//    when its three corners are a counterclockwise unit triangle of one relief's lattice on the scan's grid
+//    (FORMAT.md). Any mesh can be coded; a remeshed one has most of its faces regular. So the coder is lossless on
+//    what it codes, as the paper's is ("no errors other than quantization").
+//  - §3.3, geometry: patches are found from the connectivity and the regular faces, as in the paper. A patch is
+//    anchored at the first of its points the decoder meets (decoded in full, as edgebreaker decodes any point) with
+//    one of six rotations; every later point of it gets its base coordinates from the lattice and only its height is
+//    coded. Heights are predicted from the lattice neighbours already decoded (the mean of every parallelogram
+//    around the point, else of the lines through it, else of the neighbours), in edgebreaker's decode order,
+//    instead of the paper's iterated differences over the three edge families with bridges. Every point is still
+//    decoded once, in one pass, and the predictor needs no second pass over the patch.
+//
+// Payload v1: varint G (the lattice spacing in grid cells, even, 2..2^24), then an edgebreaker payload (version 2
+// layout) coded on that lattice.
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "engine/codecs/codec.h"
+#include "engine/io/bytes.h"
+#include "engine/stages/stage.h"
+
+namespace scanpress {
+
+uint32_t prmSpacing(const PrmOptions& options, int bits) {
+  if (options.spacing >= 0) {
+    const double even = 2 * std::round(options.spacing / 2);
+    return uint32_t(std::clamp(even, 2.0, double(kMaxLatticeSpacing)));
+  }
+  return std::min(remeshSpacing(RemeshStageOptions{.grid = options.grid, .tau = options.tau}, bits),
+                  kMaxLatticeSpacing);
+}
+
+Status prmEncodeWithStats(const TileContext& ctx, const TileView& tile, const CodecOptions& options,
+                          std::vector<uint8_t>& out, CodecStats* stats, TileSummary* summary) {
+  StageSpec spec;
+  spec.kind = StageKind::kRemesh;
+  spec.remesh = RemeshStageOptions{.grid = options.prm.grid, .tau = options.prm.tau};
+  SP_RETURN_IF_ERROR(validateStage(spec).withContext("prm"));
+  if (std::isnan(options.prm.spacing) || std::isinf(options.prm.spacing))
+    return makeError(ErrorCode::kInvalidArgument, "prm: spacing must be a number of grid cells");
+  const uint32_t spacing = prmSpacing(options.prm, ctx.bits);
+  const QuantizedMesh* coded = &tile.mesh;
+  StagedTile staged;
+  if (options.prm.spacing != 0) {
+    auto remeshed = remeshTile(ctx, tile, options.prm.tau, spacing);
+    if (remeshed.isOk()) {
+      staged = std::move(remeshed).value();
+      coded = &staged.mesh;
+    } else if (remeshed.status().code() != ErrorCode::kLimitExceeded) {
+      return remeshed.status();
+    }
+  }
+  const size_t start = out.size();
+  ByteWriter w(out);
+  w.varint(spacing);
+  SP_RETURN_IF_ERROR(edgebreakerEncodeOnLattice(ctx, *coded, spacing, out, stats, summary));
+  if (stats) stats->payload_bytes = out.size() - start;
+  return Status::ok();
+}
+
+Result<EncodedTile> prmEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options) {
+  EncodedTile e;
+  SP_RETURN_IF_ERROR(prmEncodeWithStats(ctx, tile, options, e.payload, nullptr, &e.decoded));
+  return e;
+}
+
+Result<QuantizedMesh> prmDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
+                                const DecodeLimits& limits) {
+  if (version != 1)
+    return makeError(ErrorCode::kUnknownVersion, "prm payload: unknown version " + std::to_string(version));
+  ByteReader r(payload, "prm payload");
+  uint64_t spacing = 0;
+  SP_RETURN_IF_ERROR(r.varint(spacing));
+  if (spacing < 2 || spacing % 2 != 0 || spacing > kMaxLatticeSpacing)
+    return makeError(ErrorCode::kMalformed, "prm payload: lattice spacing " + std::to_string(spacing) +
+                                                " is not an even number in 2.." + std::to_string(kMaxLatticeSpacing));
+  return edgebreakerDecodeOnLattice(ctx, payload.subspan(r.position()), limits, uint32_t(spacing));
+}
+
+}  // namespace scanpress

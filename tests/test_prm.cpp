@@ -1,0 +1,322 @@
+// Codec `prm` (engine/codecs/prm.cpp): the lattice coder against independent truth (height fields built on a
+// relief's lattice, where every face is regular by construction; plain edgebreaker on the same meshes, which must
+// decode to the same triangles), the ugly meshes edgebreaker handles, remeshing and coding in one on analytic shapes
+// (a sphere and a torus stay near their surfaces; the decoded mesh is the remesh stage's), locked tile borders,
+// the error knob's floor, and hostile payloads.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <map>
+#include <random>
+#include <set>
+
+#include "engine/codecs/codec.h"
+#include "engine/geometry.h"
+#include "engine/io/bytes.h"
+#include "engine/quantize.h"
+#include "engine/remesh/resample.h"
+#include "engine/shapes.h"
+#include "engine/stages/stage.h"
+#include "test_util.h"
+
+namespace scanpress {
+namespace {
+
+const CodecInfo& prm() { return *findCodec(CodecId::kPrm); }
+
+// A height field on relief r's lattice of spacing G (the convention of engine/remesh/resample.h): lattice points
+// (i, j), 0 <= i < n, 0 <= j < m, at base (i G + j G / 2, j H), height h(i, j); two triangles per lattice
+// parallelogram, counterclockwise in the relief's base (reversed with `flip`).
+QuantizedMesh latticeField(int relief, uint32_t G, int n, int m, const std::function<double(int, int)>& h,
+                           bool flip = false) {
+  const uint32_t H = HexLattice::withSpacing(G).row;
+  const int a = relief / 2;
+  const int axis0 = relief % 2 == 0 ? (a + 1) % 3 : (a + 2) % 3, axis1 = relief % 2 == 0 ? (a + 2) % 3 : (a + 1) % 3;
+  QuantizedMesh q;
+  for (int j = 0; j < m; ++j)
+    for (int i = 0; i < n; ++i) {
+      Vec3u p{};
+      p[size_t(axis0)] = uint32_t(i) * G + uint32_t(j) * (G / 2);
+      p[size_t(axis1)] = uint32_t(j) * H;
+      p[size_t(a)] = uint32_t(std::lround(h(i, j)));
+      // Independent of how the coder reads the base: resample.h's reliefBase gives the same two coordinates.
+      const auto base = reliefBase({double(p[0]), double(p[1]), double(p[2])}, relief);
+      EXPECT_EQ(base[0], double(uint32_t(i) * G + uint32_t(j) * (G / 2)));
+      EXPECT_EQ(base[1], double(uint32_t(j) * H));
+      q.positions.push_back(p);
+    }
+  const auto at = [&](int i, int j) { return uint32_t(j * n + i); };
+  for (int j = 0; j + 1 < m; ++j)
+    for (int i = 0; i + 1 < n; ++i) {
+      Triangle t1{at(i, j), at(i + 1, j), at(i, j + 1)}, t2{at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)};
+      if (flip) std::swap(t1[1], t1[2]), std::swap(t2[1], t2[2]);
+      q.triangles.push_back(t1);
+      q.triangles.push_back(t2);
+    }
+  return q;
+}
+
+// Codes `q` on the lattice of spacing G and checks that it decodes to the same triangles (positions, orientation,
+// multiplicity) as the input and as plain edgebreaker's decode.
+CodecStats expectLatticeRoundTrip(const TileContext& ctx, const QuantizedMesh& q, uint32_t G) {
+  std::vector<uint8_t> bytes;
+  CodecStats stats;
+  TileSummary summary;
+  const Status st = edgebreakerEncodeOnLattice(ctx, q, G, bytes, &stats, &summary);
+  EXPECT_TRUE(st.isOk()) << st.toString();
+  if (!st.isOk()) return stats;
+  auto d = edgebreakerDecodeOnLattice(ctx, bytes, limitsOf(summary), G);
+  EXPECT_TRUE(d.isOk()) << d.status().toString();
+  if (!d.isOk()) return stats;
+  EXPECT_TRUE(testing::cornerMultiset(*d, ctx.layout.normal_bits) ==
+              testing::cornerMultiset(q, ctx.layout.normal_bits));
+  auto plain = encodeMesh(*findCodec(CodecId::kEdgebreaker), ctx, q);
+  EXPECT_TRUE(plain.isOk());
+  auto pd = findCodec(CodecId::kEdgebreaker)->decode(ctx, 2, plain->payload, limitsOf(plain->decoded));
+  EXPECT_TRUE(pd.isOk());
+  EXPECT_TRUE(d->positions == pd->positions && d->triangles == pd->triangles)
+      << "prm's coder decodes the points in another order than edgebreaker's";
+  return stats;
+}
+
+TEST(Prm, LatticeHeightFieldsAreRegularInEveryRelief) {
+  const TileContext ctx{12, {}};
+  for (int relief = 0; relief < 6; ++relief)
+    for (uint32_t G : {8u, 20u})
+      for (bool flip : {false, true}) {
+        SCOPED_TRACE("relief " + std::to_string(relief) + " G " + std::to_string(G) + (flip ? " flipped" : ""));
+        const QuantizedMesh q = latticeField(
+            relief, G, 30, 24,
+            [](int i, int j) {
+          return 1500 + 0.9 * (i - 14) * (i - 14) - 0.5 * (j - 9) * (j - 11) + 40 * std::sin(0.3 * i);
+            },
+            flip);
+        const CodecStats s = expectLatticeRoundTrip(ctx, q, G);
+        EXPECT_EQ(s.regular_faces, q.triangles.size());
+        EXPECT_EQ(s.patches, 1u);
+        // The first point of the patch is coded in full and anchors it; every other point is a height only.
+        EXPECT_EQ(s.lattice_points, q.positions.size() - 1);
+        // On another lattice (half the spacing: the field's points are on it, its triangles are not unit ones)
+        // no face is regular, and the mesh still round-trips.
+        const CodecStats other = expectLatticeRoundTrip(ctx, q, G / 2);
+        EXPECT_EQ(other.regular_faces, 0u);
+      }
+}
+
+TEST(Prm, HeightsCostLessThanEdgebreakersThreeCoordinates) {
+  // A smooth field with rounding noise: heights predicted from the lattice against edgebreaker's parallelograms.
+  const TileContext ctx{12, {}};
+  const QuantizedMesh q = latticeField(4, 24, 60, 60, [](int i, int j) {
+    return 2000 + 600 * std::sin(0.07 * i) * std::cos(0.05 * j) + 0.004 * i * j * j;
+  });
+  std::vector<uint8_t> lattice, plain;
+  CodecStats ls, ps;
+  ASSERT_TRUE(edgebreakerEncodeOnLattice(ctx, q, 24, lattice, &ls, nullptr).isOk());
+  ASSERT_TRUE(edgebreakerEncodeWithStats(ctx, q, plain, &ps).isOk());
+  EXPECT_LT(ls.geometry_bits, 0.7 * ps.geometry_bits);
+  EXPECT_LT(lattice.size(), plain.size());
+}
+
+TEST(Prm, PatchesThatShareAProjectionAndUglyMeshesRoundTrip) {
+  const TileContext ctx{12, {}};
+  const auto bump = [](int i, int j) { return 1000 + 3.0 * i + 2.0 * j + 0.2 * i * j; };
+  // Two sheets of the same relief over the same base (one 900 cells above the other), one flipped, and a sheet
+  // of another relief: three patches, keys of the same lattice coordinates in two of them.
+  QuantizedMesh two = latticeField(4, 16, 12, 12, bump);
+  const QuantizedMesh upper = latticeField(
+      4, 16, 12, 12, [&](int i, int j) { return bump(i, j) + 900; }, true);
+  const QuantizedMesh side = latticeField(1, 16, 10, 10, [](int i, int j) { return 3000 - i - j; });
+  for (const QuantizedMesh* part : {&upper, &side}) {
+    const uint32_t base = uint32_t(two.positions.size());
+    two.positions.insert(two.positions.end(), part->positions.begin(), part->positions.end());
+    for (Triangle t : part->triangles) two.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  }
+  CodecStats s = expectLatticeRoundTrip(ctx, two, 16);
+  EXPECT_EQ(s.patches, 3u);
+  EXPECT_EQ(s.regular_faces, two.triangles.size());
+
+  // What real data has, on top of a regular field: a fin (a third triangle on an edge), a duplicated and a
+  // reversed face, a zero-area triangle, two corners at one position (a second vertex there), a stray vertex, and
+  // a free-floating soup triangle.
+  QuantizedMesh ugly = latticeField(0, 12, 14, 14, bump);
+  const uint32_t n = uint32_t(ugly.positions.size());
+  ugly.positions.push_back({4000, 4000, 4000});
+  ugly.triangles.push_back({ugly.triangles[30][0], ugly.triangles[30][1], n});
+  ugly.triangles.push_back(ugly.triangles[50]);
+  ugly.triangles.push_back({ugly.triangles[60][0], ugly.triangles[60][2], ugly.triangles[60][1]});
+  ugly.positions.push_back(ugly.positions[ugly.triangles[70][0]]);  // n + 1: coincident with a corner
+  ugly.triangles.push_back({n + 1, ugly.triangles[70][1], ugly.triangles[71][2]});
+  const Vec3u pa = ugly.positions[5], pb = ugly.positions[6];
+  ugly.positions.push_back({(pa[0] + pb[0]) / 2, (pa[1] + pb[1]) / 2, (pa[2] + pb[2]) / 2});  // on edge 5-6
+  ugly.triangles.push_back({5, 6, n + 2});                                                    // zero area (or nearly)
+  ugly.positions.push_back({10, 20, 30});                                                     // stray
+  ugly.positions.push_back({100, 4000, 50});
+  ugly.positions.push_back({140, 4010, 60});
+  ugly.positions.push_back({120, 3990, 90});
+  ugly.triangles.push_back({n + 4, n + 5, n + 6});
+  s = expectLatticeRoundTrip(ctx, ugly, 12);
+  EXPECT_GT(s.regular_faces, 0u);
+
+  // Attributes ride along as edgebreaker codes them.
+  TileContext attr{12, {10, 4}};
+  QuantizedMesh colored = latticeField(2, 20, 16, 16, bump);
+  for (size_t v = 0; v < colored.positions.size(); ++v) {
+    colored.normals.push_back({uint16_t(300 + v % 7), uint16_t(500 + v % 5)});
+    colored.colors.push_back({uint8_t(v), uint8_t(2 * v), 200, 255});
+  }
+  expectLatticeRoundTrip(attr, colored, 20);
+}
+
+TEST(Prm, SphereAndTorusRemeshNearTheirSurfaces) {
+  struct Shape {
+    const char* name;
+    Mesh mesh;
+    // Distance of a point (in the mesh's own units) to the analytic surface.
+    std::function<double(const Vec3d&)> distance;
+  };
+  const Shape shapes[] = {
+      {"sphere", icosphere(5), [](const Vec3d& p) { return std::abs(vlen(p) - 1.0); }},
+      {"torus", torus(160, 60, 1.0, 0.35),
+       [](const Vec3d& p) { return std::abs(std::hypot(std::hypot(p[0], p[1]) - 1.0, p[2]) - 0.35); }},
+  };
+  for (const Shape& shape : shapes) {
+    SCOPED_TRACE(shape.name);
+    const Grid grid = *makeGrid(boundingBox(shape.mesh), 14);
+    const QuantizedMesh q = *quantizeMesh(shape.mesh, grid, {}, nullptr);
+    const TileContext ctx{14, {}};
+    CodecOptions options;
+    options.prm.grid = 0.01;  // 164 grid cells
+    auto enc = prm().encode(ctx, TileView{q, {}}, options);
+    ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+    auto d = prm().decode(ctx, prm().version, enc->payload, limitsOf(enc->decoded));
+    ASSERT_TRUE(d.isOk()) << d.status().toString();
+    // The decoded mesh is the remesh stage's output at that spacing, exactly.
+    auto staged = remeshTile(ctx, TileView{q, {}}, 0.2, prmSpacing(options.prm, 14));
+    ASSERT_TRUE(staged.isOk());
+    EXPECT_TRUE(testing::triangleMultiset(*d) == testing::triangleMultiset(staged->mesh));
+    // Vertices on the surface within the lattice's sagitta plus rounding: a chord of length g (the lattice
+    // spacing, slanted up to 1 / tau = 5 times longer in space) is within (5 g)^2 / (8 R) of a surface of
+    // curvature radius R; the smallest here is the torus tube's 0.35.
+    const double g = 164 * grid.cell, r_min = std::string(shape.name) == "torus" ? 0.35 : 1.0;
+    const double bound = (5 * g) * (5 * g) / (8 * r_min) + 2 * grid.cell;
+    double worst = 0;
+    for (const Vec3u& p : d->positions) worst = std::max(worst, shape.distance(grid.dequantize(p)));
+    EXPECT_LT(worst, bound);
+    // Most of the remeshed faces are coded as regular.
+    std::vector<uint8_t> bytes;
+    CodecStats s;
+    ASSERT_TRUE(prmEncodeWithStats(ctx, TileView{q, {}}, options, bytes, &s, nullptr).isOk());
+    EXPECT_GT(double(s.regular_faces), 0.6 * double(s.triangles));
+  }
+}
+
+TEST(Prm, LockedBorderIsKept) {
+  const TileContext ctx{14, {}};
+  const Mesh sphere = icosphere(4);
+  const testing::LockedCap cap =
+      testing::lockedCap(*quantizeMesh(sphere, *makeGrid(boundingBox(sphere), 14), {}, nullptr), 14, 100);
+  CodecOptions options;
+  options.prm.spacing = 300;
+  auto enc = prm().encode(ctx, TileView{cap.mesh, cap.locked}, options);
+  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+  auto d = prm().decode(ctx, prm().version, enc->payload, limitsOf(enc->decoded));
+  ASSERT_TRUE(d.isOk()) << d.status().toString();
+  const std::set<Vec3u> decoded(d->positions.begin(), d->positions.end());
+  std::map<std::pair<Vec3u, Vec3u>, int> edges;
+  for (const Triangle& t : d->triangles)
+    for (int k = 0; k < 3; ++k) ++edges[std::minmax(d->positions[t[size_t(k)]], d->positions[t[size_t((k + 1) % 3)]])];
+  for (uint32_t v = 0; v < cap.locked.size(); ++v)
+    if (cap.locked[v]) {
+      EXPECT_TRUE(decoded.count(cap.mesh.positions[v]));
+    }
+  // Every rim edge is still a boundary edge (one triangle), and there is no other boundary.
+  ASSERT_GT(cap.rim.size(), 10u);
+  for (const auto& [a, b] : cap.rim) {
+    const auto it = edges.find(std::minmax(cap.mesh.positions[a], cap.mesh.positions[b]));
+    ASSERT_TRUE(it != edges.end());
+    EXPECT_EQ(it->second, 1);
+  }
+  size_t boundary = 0;
+  for (const auto& [e, n] : edges) boundary += n == 1;
+  EXPECT_EQ(boundary, cap.rim.size());
+}
+
+TEST(Prm, KnobFloorAndTooFineLatticesKeepTheTile) {
+  const TileContext ctx{12, {}};
+  const QuantizedMesh q = *quantizeMesh(icosphere(2), *makeGrid(boundingBox(icosphere(2)), 12), {}, nullptr);
+  for (double spacing : {0.0, 2.0}) {
+    SCOPED_TRACE(spacing);
+    CodecOptions options;
+    options.prm.spacing = spacing;  // 0: the knob's floor; 2 cells: 64 and more pieces per triangle
+    auto enc = prm().encode(ctx, TileView{q, {}}, options);
+    ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+    auto d = prm().decode(ctx, prm().version, enc->payload, limitsOf(enc->decoded));
+    ASSERT_TRUE(d.isOk());
+    EXPECT_TRUE(testing::triangleMultiset(*d) == testing::triangleMultiset(q));
+  }
+  CodecOptions bad;
+  bad.prm.tau = 0.9;
+  EXPECT_EQ(prm().encode(ctx, TileView{q, {}}, bad).status().code(), ErrorCode::kInvalidArgument);
+  bad = CodecOptions{};
+  bad.prm.spacing = NAN;
+  EXPECT_EQ(prm().encode(ctx, TileView{q, {}}, bad).status().code(), ErrorCode::kInvalidArgument);
+}
+
+TEST(Prm, HostilePayloadsFailCleanly) {
+  const TileContext ctx{12, {}};
+  // A payload with patches, irregular faces and a boundary.
+  QuantizedMesh q = latticeField(4, 12, 16, 16, [](int i, int j) { return 900 + 2.0 * i * j; });
+  q.triangles.erase(q.triangles.begin() + 100, q.triangles.begin() + 110);
+  q.positions.push_back({2000, 2000, 3000});
+  q.triangles.push_back({0, 1, uint32_t(q.positions.size() - 1)});
+  CodecOptions options;
+  options.prm.spacing = 0;  // as it is: a patch of the lattice of spacing 12, coded with it
+  std::vector<uint8_t> payload;
+  {
+    ByteWriter w(payload);
+    w.varint(12);
+  }
+  TileSummary summary;
+  ASSERT_TRUE(edgebreakerEncodeOnLattice(ctx, q, 12, payload, nullptr, &summary).isOk());
+  const DecodeLimits lim = limitsOf(summary);
+  auto good = prm().decode(ctx, 1, payload, lim);
+  ASSERT_TRUE(good.isOk()) << good.status().toString();
+  EXPECT_TRUE(testing::triangleMultiset(*good) == testing::triangleMultiset(q));
+  // Every truncation fails.
+  for (size_t n = 0; n < payload.size(); ++n)
+    EXPECT_FALSE(prm().decode(ctx, 1, std::span(payload).first(n), lim).isOk()) << n;
+  // Corruptions: an error or a valid mesh within the limits.
+  std::mt19937 rng(21);
+  for (int trial = 0; trial < 3000; ++trial) {
+    auto bytes = payload;
+    const int edits = 1 + int(rng() % 4);
+    for (int e = 0; e < edits; ++e) bytes[1 + rng() % (bytes.size() - 1)] ^= uint8_t(1 + rng() % 255);
+    auto d = prm().decode(ctx, 1, bytes, lim);
+    if (d.isOk()) {
+      EXPECT_TRUE(validateTile(ctx, *d).isOk());
+      EXPECT_LE(d->positions.size(), lim.vertices);
+      EXPECT_LE(d->triangles.size(), lim.faces);
+    }
+  }
+  // The lattice spacing: odd, too small, too large; an unknown version.
+  for (uint64_t bad :
+       {uint64_t(0), uint64_t(1), uint64_t(3), uint64_t(13), uint64_t(kMaxLatticeSpacing) + 2, uint64_t(1) << 40}) {
+    std::vector<uint8_t> bytes;
+    ByteWriter w(bytes);
+    w.varint(bad);
+    bytes.insert(bytes.end(), payload.begin() + 1, payload.end());
+    EXPECT_EQ(prm().decode(ctx, 1, bytes, lim).status().code(), ErrorCode::kMalformed) << bad;
+  }
+  EXPECT_EQ(prm().decode(ctx, 2, payload, lim).status().code(), ErrorCode::kUnknownVersion);
+  // Another valid spacing decodes the same stream differently or fails, never past the limits.
+  std::vector<uint8_t> other = payload;
+  other[0] = 14;
+  auto d = prm().decode(ctx, 1, other, lim);
+  if (d.isOk()) {
+    EXPECT_TRUE(validateTile(ctx, *d).isOk());
+  }
+}
+
+}  // namespace
+}  // namespace scanpress
