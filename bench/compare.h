@@ -38,12 +38,13 @@ void measureDecoded(const Mesh& original, const Mesh& decoded, const CompareOpti
 // of its .glb; when gltfpack is installed).
 void runAnchors(const std::string& scan, const Mesh& mesh, const CompareOptions& opt, std::vector<CompareRow>& rows);
 
-// pm (when this build has it) on the scan quantized at `bits`, as one tile, at several error bounds.
+// pm at several error bounds and prm at several lattice spacings, on the scan quantized at `bits`, as one tile.
 void runPmSweep(const std::string& scan, const Mesh& mesh, const Grid& grid, const QuantizedMesh& q,
                 const CompareOptions& opt, std::vector<CompareRow>& rows);
 
-// The issue-19 rate-distortion table: per scan, pm's bits per original vertex against the lower envelope of the
-// anchors (interpolated in log RMS) at symmetric RMS between 5e-5 and 3e-4 of the diagonal; the median ratio.
+// The rate-distortion tables of issues 19 (pm) and 21 (prm): per scan, the codec's bits per original vertex against
+// the lower envelope of the anchors (interpolated in log RMS) at symmetric RMS between 5e-5 and 3e-4 of the
+// diagonal; the median ratio.
 void writeEnvelopeTable(std::ostream& md, const std::vector<CompareRow>& rows);
 
 // One error target of issue 19 (`--targets`): scanpress encode --codec pm --max-error E --error metric on a scan,

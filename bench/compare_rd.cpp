@@ -233,7 +233,7 @@ CompareRow baseRow(const std::string& scan, const Mesh& mesh, const std::string&
   r.scan = scan;
   r.family = family;
   r.codec = codec;
-  r.anchor = family != "pm";
+  r.anchor = family != "pm" && family != "prm";
   r.vertices = mesh.positions.size();
   r.triangles = mesh.triangles.size();
   return r;
@@ -327,24 +327,26 @@ void runAnchors(const std::string& scan, const Mesh& mesh, const CompareOptions&
   fs::remove_all(dir);
 }
 
-void runPmSweep(const std::string& scan, const Mesh& mesh, const Grid& grid, const QuantizedMesh& q,
-                const CompareOptions& opt, std::vector<CompareRow>& rows) {
-  const CodecInfo* pm = findCodec("pm");
-  if (!pm || !opt.rd) return;
+// One lossy codec at several settings: `set` puts setting `x` into the options, `label` names the row.
+void runLossySweep(const char* family, std::initializer_list<double> settings, void (*set)(CodecOptions&, double),
+                   const char* label, const std::string& scan, const Mesh& mesh, const Grid& grid,
+                   const QuantizedMesh& q, const CompareOptions& opt, std::vector<CompareRow>& rows) {
+  const CodecInfo* codec = findCodec(family);
+  if (!codec) return;
   const TileContext ctx{grid.bits, {}};
-  for (double e : {0.5, 1.0, 2.0, 4.0, 8.0}) {
+  for (double x : settings) {
     CodecOptions options;
-    options.pm.max_error = e;
-    auto encoded = encodeMesh(*pm, ctx, q, options);
+    set(options, x);
+    auto encoded = encodeMesh(*codec, ctx, q, options);
     if (!encoded.isOk()) {
-      std::fprintf(stderr, "pm failed on %s: %s\n", scan.c_str(), encoded.status().toString().c_str());
+      std::fprintf(stderr, "%s failed on %s: %s\n", family, scan.c_str(), encoded.status().toString().c_str());
       continue;
     }
-    auto decoded = pm->decode(ctx, pm->version, encoded->payload, limitsOf(encoded->decoded));
+    auto decoded = codec->decode(ctx, codec->version, encoded->payload, limitsOf(encoded->decoded));
     if (!decoded.isOk()) continue;
     char name[96];
-    std::snprintf(name, sizeof name, "pm %d bits, error %g cells", grid.bits, e);
-    CompareRow row = baseRow(scan, mesh, "pm", name);
+    std::snprintf(name, sizeof name, label, grid.bits, x);
+    CompareRow row = baseRow(scan, mesh, family, name);
     row.bits = grid.bits;
     row.bytes = encoded->payload.size();
     Mesh m;
@@ -355,13 +357,27 @@ void runPmSweep(const std::string& scan, const Mesh& mesh, const Grid& grid, con
   }
 }
 
-void writeEnvelopeTable(std::ostream& md, const std::vector<CompareRow>& rows) {
+void runPmSweep(const std::string& scan, const Mesh& mesh, const Grid& grid, const QuantizedMesh& q,
+                const CompareOptions& opt, std::vector<CompareRow>& rows) {
+  if (!opt.rd) return;
+  runLossySweep(
+      "pm", {0.5, 1.0, 2.0, 4.0, 8.0}, [](CodecOptions& o, double e) { o.pm.max_error = e; },
+      "pm %d bits, error %g cells", scan, mesh, grid, q, opt, rows);
+  runLossySweep(
+      "prm", {0.003, 0.004, 0.006, 0.008, 0.012}, [](CodecOptions& o, double g) { o.prm.grid = g; },
+      "prm %d bits, grid %g", scan, mesh, grid, q, opt, rows);
+}
+
+// One family's points against the anchors' envelope; the issue's target ratio (pm: issue 19, prm: issue 21).
+void writeFamilyEnvelopeTable(std::ostream& md, const std::vector<CompareRow>& rows, const std::string& family) {
   std::map<std::string, std::vector<const CompareRow*>> by_scan;
   for (const auto& r : rows)
     if (!r.family.empty() && r.rms_rel > 0) by_scan[r.scan].push_back(&r);
   if (by_scan.empty()) return;
-  md << "\n### pm against the anchors' lower envelope (symmetric RMS in [5e-5, 3e-4] of the diagonal)\n\n"
-     << "| scan | pm points in range | median pm bpv / envelope bpv | best ratio |\n|---|---:|---:|---:|\n";
+  md << "\n### " << family
+     << " against the anchors' lower envelope (symmetric RMS in [5e-5, 3e-4] of the diagonal)\n\n"
+     << "| scan | " << family << " points in range | median " << family
+     << " bpv / envelope bpv | best ratio |\n|---|---:|---:|---:|\n";
   std::vector<double> medians;
   char line[256];
   for (const auto& [scan, pts] : by_scan) {
@@ -377,7 +393,7 @@ void writeEnvelopeTable(std::ostream& md, const std::vector<CompareRow>& rows) {
     }
     std::vector<double> ratios;
     for (const auto* r : pts) {
-      if (r->anchor || r->rms_rel < 5e-5 || r->rms_rel > 3e-4) continue;
+      if (r->anchor || r->family != family || r->rms_rel < 5e-5 || r->rms_rel > 3e-4) continue;
       for (size_t i = 0; i + 1 < env.size(); ++i) {
         if (r->rms_rel < env[i].first || r->rms_rel > env[i + 1].first) continue;
         const double t = std::log(r->rms_rel / env[i].first) / std::log(env[i + 1].first / env[i].first);
@@ -395,8 +411,13 @@ void writeEnvelopeTable(std::ostream& md, const std::vector<CompareRow>& rows) {
   }
   if (medians.empty()) return;
   std::sort(medians.begin(), medians.end());
-  std::snprintf(line, sizeof line, "\nMedian over scans: %.3f (target: at most 0.9)\n", medians[medians.size() / 2]);
+  std::snprintf(line, sizeof line, "\nMedian over scans: %.3f (target: at most %.1f)\n", medians[medians.size() / 2],
+                family == "prm" ? 0.7 : 0.9);
   md << line;
+}
+
+void writeEnvelopeTable(std::ostream& md, const std::vector<CompareRow>& rows) {
+  for (const char* family : {"pm", "prm"}) writeFamilyEnvelopeTable(md, rows, family);
 }
 
 namespace {

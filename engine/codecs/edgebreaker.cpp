@@ -46,7 +46,6 @@
 #include <array>
 #include <cstring>
 #include <string>
-#include <unordered_map>
 
 #include "engine/codecs/codec.h"
 #include "engine/codecs/attributes.h"
@@ -87,8 +86,7 @@ inline int bitLength(u64 v) {
 // lattice point (i, j) is base (i * G + j * G / 2, j * H), G even, H = round(G * sqrt(3) / 2) (engine/remesh/resample.h).
 constexpr int kLatticeKinds = 6;
 constexpr u8 kNoRelief = 0xFF;
-// The six unit steps of the lattice, counterclockwise; rot60 turns a step into the next one.
-constexpr int kStep[6][2] = {{1, 0}, {0, 1}, {-1, 1}, {-1, 0}, {0, -1}, {1, -1}};
+// rot60 turns a lattice step into the next one counterclockwise: (1, 0) -> (0, 1) -> (-1, 1) -> ...
 // The lattice offsets within two steps: the six steps (0-5), twice each step (6-11), each step plus the next one
 // (12-17, the far corner of the parallelogram on steps k and k + 1).
 constexpr int kRing2[18][2] = {{1, 0},  {0, 1},  {-1, 1}, {-1, 0}, {0, -1}, {1, -1}, {2, 0},   {0, 2},  {-2, 2},
@@ -127,27 +125,25 @@ u32 latticeReliefs(const Vec3u& a, const Vec3u& b, const Vec3u& c, i64 G, i64 H)
   }
   return mask;
 }
-struct LatticeKey {
-  u32 patch;
+// A point's place in a patch's lattice (relative coordinates), ordered by place.
+struct LatticeEntry {
+  u32 point, patch;
   int32_t i, j;
-  bool operator==(const LatticeKey&) const = default;
+  bool operator<(const LatticeEntry& o) const {
+    return patch != o.patch ? patch < o.patch : i != o.i ? i < o.i : j < o.j;
+  }
 };
+constexpr u8 kMaxPatchesPerPoint = 2;
+constexpr int kWeightSlotBits = 10, kWeightSlots = 1 << kWeightSlotBits;
 // A regular patch, and a point's place in one.
 struct Patch {
-  u8 relief, anchored, rotation;
+  u8 relief, anchored, rotation, clockwise;  // clockwise: the first face's relief code is >= 6
   u32 first_face;
   i64 oi, oj;  // lattice coordinates of relative (0, 0), once anchored
 };
 struct PointPatch {
   u32 patch;
   int32_t i, j;
-};
-struct LatticeKeyHash {
-  size_t operator()(const LatticeKey& k) const {
-    u64 h = (u64(k.patch) << 32) ^ (u64(u32(k.i)) * 0x9E3779B97F4A7C15ull) ^ (u64(u32(k.j)) * 0xC2B2AE3D27D4EB4Full);
-    h ^= h >> 29;
-    return size_t(h * 0xBF58476D1CE4E5B9ull);
-  }
 };
 
 // Sorts sorted-corner keys lexicographically; when the points fit 21 bits a key packs into one u64 whose order is
@@ -331,7 +327,9 @@ struct Models {
   BitModel second_bit[kClasses];
   std::vector<SymbolModel> orient;
   // prm
-  BitModel regular[12];  // by the face across the gate (none, irregular, regular), corners next to an irregular face
+  // By the face across the gate (none, irregular, regular), corners next to an irregular face (0..3), corners next
+  // to a regular face (0..3), and whether the face made a new vertex (C).
+  BitModel regular[96];
   BitModel same_relief[2];  // as the face across the gate's, as the last regular face's
   SymbolModel relief{12};
   SymbolModel rotation{6};
@@ -385,6 +383,7 @@ class Engine {
     if (spacing > 0) {
       io_.meter(&CodecStats::regularity_bits);
       SP_RETURN_IF_ERROR(regularity());
+      std::vector<u8>().swap(face_op_);
       SP_RETURN_IF_ERROR(buildPatches());
     }
     io_.meter(&CodecStats::geometry_bits);
@@ -475,6 +474,7 @@ class Engine {
     while (done < faces_) {
       // A new component: its first face, three new vertices, a loop of three.
       const u32 k = done++;
+      if (spacing > 0) face_op_.push_back(u8(kNumOps));
       u32 f0 = 0;
       if (truth_) {
         while (enc_done[enc_scan]) ++enc_scan;
@@ -538,6 +538,7 @@ class Engine {
         op = io_.sym(models_.op[ctx], op);
         prev_op = int(op);
         ops[op]++;
+        if (spacing > 0) face_op_.push_back(u8(op));
         if (done >= faces_) return malformed("more faces than the header says");
         const u32 k2 = done++;
         const u32 t0 = 3 * k2, t1 = t0 + 1, t2 = t0 + 2;
@@ -770,7 +771,8 @@ class Engine {
     row = HexLattice::withSpacing(spacing).row;
     face_relief_.assign(faces_, kNoRelief);
     u8 last_relief = kNoRelief;
-    std::vector<u8> near_irregular(cut_point_.size(), 0);  // per cut vertex: on an irregular face decoded so far
+    // Per cut vertex: on an irregular face decoded so far (bit 0), on a regular one (bit 1).
+    std::vector<u8> near_irregular(cut_point_.size(), 0);
     for (u32 k = 0; k < faces_; ++k) {
       u32 pt[3];
       bool eligible = true;
@@ -793,13 +795,25 @@ class Engine {
                          : last_relief != kNoRelief && (mask >> last_relief & 1) ? last_relief
                                                                                  : u8(std::countr_zero(mask));
       }
-      int irregular_corners = 0;
-      for (int i = 0; i < 3; ++i) irregular_corners += near_irregular[hv_[3 * k + i]];
-      const int ctx = (across == kNone || across / 3 >= k ? 0 : parent == kNoRelief ? 1 : 2) * 4 + irregular_corners;
+      int irregular_corners = 0, regular_corners = 0;
+      for (int i = 0; i < 3; ++i) {
+        irregular_corners += near_irregular[hv_[3 * k + i]] & 1;
+        regular_corners += near_irregular[hv_[3 * k + i]] >> 1;
+      }
+      const int ctx = (((across == kNone || across / 3 >= k ? 0
+                         : parent == kNoRelief              ? 1
+                                                            : 2) *
+                            4 +
+                        irregular_corners) *
+                           4 +
+                       regular_corners) *
+                          2 +
+                      (face_op_[k] == kC);
       if (!io_.bit(models_.regular[ctx], truth_relief != kNoRelief)) {
-        for (int i = 0; i < 3; ++i) near_irregular[hv_[3 * k + i]] = 1;
+        for (int i = 0; i < 3; ++i) near_irregular[hv_[3 * k + i]] |= 1;
         continue;
       }
+      for (int i = 0; i < 3; ++i) near_irregular[hv_[3 * k + i]] |= 2;
       ++regular_faces;
       if (parent != kNoRelief && io_.bit(models_.same_relief[0], truth_relief == parent)) {
         face_relief_[k] = parent;
@@ -823,17 +837,14 @@ class Engine {
     std::vector<u32> face_patch(faces_, kNone);
     std::vector<u32> stamp(n_, kNone);
     std::vector<std::array<i64, 2>> rel(n_);
-    struct Entry {
-      u32 point, patch;
-      int32_t i, j;
-    };
-    std::vector<Entry> entries;
+    std::vector<u8> registered(n_, 0);
+    std::vector<LatticeEntry> entries;
     std::vector<u32> queue;
     constexpr i64 kMaxRel = i64(1) << 30;
     for (u32 f0 = 0; f0 < faces_; ++f0) {
       if (face_relief_[f0] == kNoRelief || face_patch[f0] != kNone) continue;
       const u32 patch = u32(patches_.size());
-      patches_.push_back(Patch{u8(face_relief_[f0] % 6), 0, 0, f0, 0, 0});
+      patches_.push_back(Patch{u8(face_relief_[f0] % 6), 0, 0, u8(face_relief_[f0] >= 6), f0, 0, 0});
       const auto place = [&](u32 point, std::array<i64, 2> ij) -> Status {
         if (std::abs(ij[0]) > kMaxRel || std::abs(ij[1]) > kMaxRel) return malformed("regular patch too large");
         if (stamp[point] == patch) {
@@ -842,8 +853,12 @@ class Engine {
         }
         stamp[point] = patch;
         rel[point] = ij;
-        entries.push_back({point, patch, int32_t(ij[0]), int32_t(ij[1])});
-        at_.emplace(LatticeKey{patch, int32_t(ij[0]), int32_t(ij[1])}, point);
+        // A point is registered in its first kMaxPatchesPerPoint patches only (memory: at most that many entries
+        // per point, whatever relief codes a payload gives); in later ones it is not a neighbour for predictions.
+        if (registered[point] < kMaxPatchesPerPoint) {
+          ++registered[point];
+          entries.push_back({point, patch, int32_t(ij[0]), int32_t(ij[1])});
+        }
         return Status::ok();
       };
       // A clockwise face (relief code >= 6) starts a mirrored frame: its corners' lattice steps are then still a
@@ -873,14 +888,36 @@ class Engine {
       }
     }
     patch_count = patches_.size();
+    std::vector<u32>().swap(face_patch);
+    std::vector<u32>().swap(stamp);
+    std::vector<std::array<i64, 2>>().swap(rel);
+    std::vector<u8>().swap(registered);
+    std::vector<u32>().swap(queue);
+    std::vector<u8>().swap(face_relief_);
     // Per point, its patches in patch order (entries are made patch by patch).
     point_begin_.assign(size_t(n_) + 1, 0);
-    for (const Entry& e : entries) ++point_begin_[e.point + 1];
+    for (const LatticeEntry& e : entries) ++point_begin_[e.point + 1];
     for (u32 p = 0; p < n_; ++p) point_begin_[p + 1] += point_begin_[p];
     point_patches_.resize(entries.size());
-    std::vector<u32> fill(point_begin_.begin(), point_begin_.end() - 1);
-    for (const Entry& e : entries) point_patches_[fill[e.point]++] = PointPatch{e.patch, e.i, e.j};
+    {
+      std::vector<u32> fill(point_begin_.begin(), point_begin_.end() - 1);
+      for (const LatticeEntry& e : entries) point_patches_[fill[e.point]++] = PointPatch{e.patch, e.i, e.j};
+    }
+    // The points by (patch, i, j), the first registered at a place kept (a patch may overlap itself).
+    std::stable_sort(entries.begin(), entries.end());
+    entries.erase(std::unique(entries.begin(), entries.end(),
+                              [](const LatticeEntry& a, const LatticeEntry& b) { return !(a < b) && !(b < a); }),
+                  entries.end());
+    at_ = std::move(entries);
     return Status::ok();
+  }
+
+  // The point registered at relative coordinates (i, j) of a patch, or kNone.
+  u32 pointAt(u32 patch, i64 i, i64 j) const {
+    if (i < INT32_MIN || i > INT32_MAX || j < INT32_MIN || j > INT32_MAX) return kNone;
+    const LatticeEntry key{0, patch, int32_t(i), int32_t(j)};
+    const auto it = std::lower_bound(at_.begin(), at_.end(), key);
+    return it != at_.end() && !(key < *it) ? it->point : kNone;
   }
 
   // The lattice coordinates of relative coordinates in an anchored patch.
@@ -918,11 +955,11 @@ class Engine {
     u32 mask = 0, mag_sum = 0, nnb = 0;
     for (int k = 0; k < 18; ++k) {
       h[k] = -1;
-      const auto it = at_.find(LatticeKey{pp->patch, pp->i + kRing2[k][0], pp->j + kRing2[k][1]});
-      if (it == at_.end() || !known_[it->second]) continue;
-      h[k] = pos_[it->second][size_t(axis)];
+      const u32 q = pointAt(pp->patch, pp->i + kRing2[k][0], pp->j + kRing2[k][1]);
+      if (q == kNone || !known_[q]) continue;
+      h[k] = pos_[q][size_t(axis)];
       mask |= 1u << k;
-      if (k < 6) ++nnb, mag_sum += mag_[it->second];
+      if (k < 6) ++nnb, mag_sum += mag_[q];
     }
     i64 par = 0, lin = 0, nb = 0;
     u32 npar = 0, nlin = 0;
@@ -972,9 +1009,12 @@ class Engine {
   // singular. Computed once per mask, in IEEE double without contraction (the file is built with
   // -ffp-contract=off): encoder and decoder get the same bits.
   const double* quadraticWeights(u32 mask) {
-    auto [it, fresh] = weights_.try_emplace(mask);
-    if (!fresh) return it->second.ok ? it->second.w.data() : nullptr;
-    Weights& wt = it->second;
+    // A direct-mapped cache of kWeightSlots masks (a payload can reach about 130,000 masks; memory stays fixed).
+    if (weights_.empty()) weights_.resize(kWeightSlots);
+    Weights& wt = weights_[(mask * 0x9E3779B1u) >> (32 - kWeightSlotBits)];
+    if (wt.mask == mask) return wt.ok ? wt.w.data() : nullptr;
+    wt.mask = mask;
+    wt.ok = false;
     constexpr double kRidge = 0.5, kHalfSqrt3 = 0.8660254037844386;
     double A[6][6] = {}, F[18][6];
     for (int k = 0; k < 18; ++k) {
@@ -1028,8 +1068,7 @@ class Engine {
       if (truth_) {
         // The patch's first face has relative corners (0, 0) and (1, 0) (counterclockwise) or (0, 1) (clockwise): the
         // rotation turns that step into their lattice step.
-        const std::array<i64, 2> rel_step = face_relief_[pa.first_face] >= 6 ? std::array<i64, 2>{0, 1}
-                                                                             : std::array<i64, 2>{1, 0};
+        const std::array<i64, 2> rel_step = pa.clockwise ? std::array<i64, 2>{0, 1} : std::array<i64, 2>{1, 0};
         const auto& tp = truth_->pts->pos;
         std::array<i64, 2> l0, l1;
         const bool ok0 = latticeOf(tp[truthPoint(cut_point_[hv_[3 * pa.first_face]])], pa.relief, spacing, row, l0);
@@ -1192,15 +1231,17 @@ class Engine {
   // coordinates (point_patches_[point_begin_[p] ..]); the points by patch and relative coordinates.
   u32 row = 0;
   std::vector<u8> face_relief_;
+  std::vector<u8> face_op_;  // per face in decode order: its symbol (kNumOps for a component's first face)
   std::vector<Patch> patches_;
   std::vector<u32> point_begin_;
   std::vector<PointPatch> point_patches_;
-  std::unordered_map<LatticeKey, u32, LatticeKeyHash> at_;
+  std::vector<LatticeEntry> at_;  // sorted by (patch, i, j)
   struct Weights {
-    std::array<double, 18> w{};
+    u32 mask = UINT32_MAX;
     bool ok = false;
+    std::array<double, 18> w{};
   };
-  std::unordered_map<u32, Weights> weights_;  // quadraticWeights, by mask
+  std::vector<Weights> weights_;  // quadraticWeights' cache
   // Per point.
   std::vector<Vec3u> pos_;
   std::vector<u8> known_, mag_;

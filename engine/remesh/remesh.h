@@ -18,6 +18,8 @@ namespace scanpress {
 struct RemeshOptions {
   double tau = 0.2;      // relief.h's ReliefOptions::tau
   uint32_t spacing = 0;  // grid spacing in grid units: even, >= 2
+  // The paper's collapse of relief-boundary vertices onto grid vertices after merging (remesh.cpp).
+  bool collapse_onto_grid = true;
 };
 
 struct Remeshed {
@@ -28,9 +30,10 @@ struct Remeshed {
   std::vector<uint32_t> input_vertex;  // per vertex: its index in the input mesh, or UINT32_MAX
   // Per vertex that is not an input vertex: an input triangle it lies on (to carry attributes); else UINT32_MAX.
   std::vector<uint32_t> source_triangle;
-  uint32_t reliefs = 0;       // relief components resampled
-  uint64_t merge_splits = 0;  // triangles split so that two reliefs meet vertex to vertex
-  uint64_t border_fans = 0;   // tile border edges closed by a fan of zero-area triangles
+  uint32_t reliefs = 0;         // relief components resampled
+  uint64_t merge_splits = 0;    // triangles split so that two reliefs meet vertex to vertex
+  uint64_t border_fans = 0;     // tile border edges closed by a fan of zero-area triangles
+  uint64_t grid_collapses = 0;  // vertices off the grid collapsed onto a grid vertex after merging
 };
 
 // Remeshes `mesh` (a tile: triangles on the integer grid; `locked` empty or one flag per vertex). Locked vertices
