@@ -186,7 +186,7 @@ TEST(Prm, SphereAndTorusRemeshNearTheirSurfaces) {
     const QuantizedMesh q = *quantizeMesh(shape.mesh, grid, {}, nullptr);
     const TileContext ctx{14, {}};
     CodecOptions options;
-    options.prm.grid = 0.01;  // 164 grid cells
+    options.prm.grid = 0.025;  // 410 grid cells: about the size of the input's triangles
     auto enc = prm().encode(ctx, TileView{q, {}}, options);
     ASSERT_TRUE(enc.isOk()) << enc.status().toString();
     auto d = prm().decode(ctx, prm().version, enc->payload, limitsOf(enc->decoded));
@@ -198,7 +198,7 @@ TEST(Prm, SphereAndTorusRemeshNearTheirSurfaces) {
     // Vertices on the surface within the lattice's sagitta plus rounding: a chord of length g (the lattice
     // spacing, slanted up to 1 / tau = 5 times longer in space) is within (5 g)^2 / (8 R) of a surface of
     // curvature radius R; the smallest here is the torus tube's 0.35.
-    const double g = 164 * grid.cell, r_min = std::string(shape.name) == "torus" ? 0.35 : 1.0;
+    const double g = prmSpacing(options.prm, 14) * grid.cell, r_min = std::string(shape.name) == "torus" ? 0.35 : 1.0;
     const double bound = (5 * g) * (5 * g) / (8 * r_min) + 2 * grid.cell;
     double worst = 0;
     for (const Vec3u& p : d->positions) worst = std::max(worst, shape.distance(grid.dequantize(p)));

@@ -63,8 +63,8 @@ struct PmOptions {
 // `prm` (engine/codecs/prm.cpp): the tile is remeshed into a piecewise regular mesh (the `remesh` stage,
 // engine/stages/stage.h) on hexagonal grids of spacing `grid` (a fraction of 2^bits cells), or `spacing` grid cells
 // when that is >= 0 (the error targets of jobs/ set it per tile), and coded with the regular patches' lattice. A
-// tile whose remeshing would be too large (a lattice much finer than its triangles, kLimitExceeded), or with
-// spacing 0, is coded as it is.
+// tile whose remeshing would have more than twice its triangles (a lattice finer than the tile's own triangles),
+// or with spacing 0, is coded as it is.
 struct PrmOptions {
   double grid = 0.005;  // in (0, 1]
   double tau = 0.2;     // relief regularisation, in (0, 1/sqrt(3))

@@ -27,7 +27,8 @@
 //    one pass, and the predictor needs no second pass over the patch.
 //  - Remeshing: the `remesh` stage, including the paper's collapse of relief-boundary vertices onto grid vertices
 //    after merging (remesh.cpp; without it a quarter of horse's points were off the lattice and cost 16 bits each).
-//    A tile whose remeshing would break the border contract, or be too large, is coded as it is.
+//    A tile whose remeshing would break the border contract, or have more than twice its triangles (a lattice finer
+//    than the tile), is coded as it is.
 //
 // Payload v1: varint G (the lattice spacing in grid cells, even, 2..2^24), then an edgebreaker payload (version 2
 // layout) coded on that lattice.
@@ -68,8 +69,11 @@ Status prmEncodeWithStats(const TileContext& ctx, const TileView& tile, const Co
     if (remeshed.isOk()) {
       staged = std::move(remeshed).value();
       // The border contract, as runStage checks it for the remesh stage: a tile whose remeshing broke it (it
-      // should not) is coded as it is rather than with a crack at its seam.
-      if (checkBorderContract(ctx, tile, staged.view(), false).isOk()) coded = &staged.mesh;
+      // should not) is coded as it is rather than with a crack at its seam. So is a tile the lattice would make
+      // more than twice as fine (a lattice finer than the tile's triangles: more bytes and no less error).
+      if (staged.mesh.triangles.size() <= 2 * tile.mesh.triangles.size() &&
+          checkBorderContract(ctx, tile, staged.view(), false).isOk())
+        coded = &staged.mesh;
     } else if (remeshed.status().code() != ErrorCode::kLimitExceeded) {
       return remeshed.status();
     }
