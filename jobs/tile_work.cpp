@@ -119,8 +119,9 @@ double TileEncoder::tileError(const TileResult& r) const {
 // simplification's RMS is well below its bound on the worst point). Then a bracket: while the trial meets the
 // target, t doubles (the error grows with t, roughly in proportion, so doubling finds the failing side in a
 // trial or two); once a trial misses, bisection between the largest t that met and the smallest that missed (in
-// the log of t, since t spans orders of magnitude). kKnobTrials encodes in all; the tile keeps the smallest
-// encoding of the trials that met. The error need not be monotone in t: only trials that were measured to meet are
+// the log of t, since t spans orders of magnitude). kKnobTrials encodes in all; the tile keeps the encoding of
+// the largest t that met. (prm codes a tile as it is where its lattice would more than double the tile's
+// triangles, which is where a small t made tiles larger than t = 0.) The error need not be monotone in t: only trials that were measured to meet are
 // kept, so a non-monotone codec can cost bytes, never the target.
 //
 // Per-tile bounds imply the overall one: the overall RMS is the area-weighted mean of the tiles' squared
@@ -155,14 +156,10 @@ Status TileEncoder::searchKnob(const TileContext& ctx, const TileView& tile, con
     SP_RETURN_IF_ERROR(trial(t, attempt));
     if (tileError(attempt) <= target) {
       met = t;
-      // Kept only when smaller: pm's bytes fall as t grows, but prm's lattice can be finer than the tile's own
-      // triangles at a small t, and then remeshing makes the tile larger than coding it as it is (t = 0).
-      if (attempt.encoded.payload.size() < r.encoded.payload.size()) {
-        r.encoded = std::move(attempt.encoded);
-        r.forward = attempt.forward;
-        r.backward = attempt.backward;
-        r.knob_cells = t;
-      }
+      r.encoded = std::move(attempt.encoded);
+      r.forward = attempt.forward;
+      r.backward = attempt.backward;
+      r.knob_cells = t;
     } else {
       missed = t;
     }

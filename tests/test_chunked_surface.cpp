@@ -160,8 +160,10 @@ TEST(ChunkedSurface, MeasureEqualsTheWholeMeshBitForBit) {
     ASSERT_TRUE(whole.isOk()) << whole.status().toString();
     // Runs of three triangles to a thousand; a cache of one index (rebuilt whenever another chunk is asked for) or
     // of all of them.
-    for (auto [run, cache] :
+    for (const auto& run_cache :
          {std::pair<uint64_t, uint64_t>{3, uint64_t(1) << 30}, {29, 1}, {1000, 1}, {1000, 1u << 30}}) {
+      // (A plain variable, not a structured binding: clang 14, the sanitizer lane's compiler, cannot capture those.)
+      const uint64_t run = run_cache.first, cache = run_cache.second;
       const ChunkedSurface ca = ChunkedSurface::pieces(a, run), cb = ChunkedSurface::pieces(b, run + 3);
       MeasureResult chunked;
       tbb::task_arena(2).execute([&] { chunked = *measureChunked(ca, cb, s, cache, device()); });
