@@ -337,7 +337,13 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     if (error.isOk() && s.report_name == s.output_name)
       o.fail("/output/report", "must differ from /output/name: the report would replace the container");
   }
-  if (const json* codec = top.object("codec")) {
+  if (const json* codec_in = top.object("codec")) {
+    // prm's keys may be null (as absent), so that a file can list them for any codec (configs/reference.json).
+    json codec_copy = *codec_in;
+    if (codec_copy.is_object())
+      for (const char* key : {"grid", "tau"})
+        if (codec_copy.contains(key) && codec_copy[key].is_null()) codec_copy.erase(key);
+    const json* codec = &codec_copy;
     ObjectReader c(*codec, "/codec", config_path, error);
     c.string("name", s.encode.codec, false);
     c.integer("bits", kMinGridBits, kMaxGridBits, s.encode.bits);
