@@ -20,13 +20,9 @@ targets=${SCANPRESS_FUZZ_TARGETS:-container mesh config}
 source scripts/lib.sh
 bash scripts/install-deps.sh
 install_missing_packages clang libclang-rt-14-dev
-# SCANPRESS_FUZZ_BUILD_DIR: an existing build configured with SCANPRESS_FUZZ (the sanitizer lane's build-asan,
-# scripts/test.sh) is used as it is; else build-fuzz is configured here (RelWithDebInfo, no tests).
-dir=${SCANPRESS_FUZZ_BUILD_DIR:-build-fuzz}
-if [ "$dir" = build-fuzz ] || [ ! -f "$dir/CMakeCache.txt" ]; then
-  CC=clang CXX=clang++ cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSCANPRESS_FUZZ=ON \
-    -DSCANPRESS_BUILD_TESTS=OFF -DSCANPRESS_BUILD_BENCH=OFF
-fi
+dir=build-fuzz
+CC=clang CXX=clang++ cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSCANPRESS_FUZZ=ON \
+  -DSCANPRESS_BUILD_TESTS=OFF -DSCANPRESS_BUILD_BENCH=OFF
 build_targets=()
 for t in $targets; do build_targets+=("fuzz_$t"); done
 cmake --build "$dir" -j "$(nproc)" --target "${build_targets[@]}"

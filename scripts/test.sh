@@ -8,15 +8,7 @@ bash scripts/install-test-tools.sh
 # The sanitizer lane runs tests only: no benchmark programs to compile there (the Release lane builds them).
 extra=()
 if [ "${SANITIZE:-0}" != "1" ] && command -v mpicxx >/dev/null; then extra=(-DSCANPRESS_MPI=ON); fi
-if [ "${SANITIZE:-0}" = "1" ]; then
-  # The sanitizer lane is built by clang with libFuzzer's coverage instrumentation too (SCANPRESS_FUZZ): the same
-  # build then holds the tests and the fuzz targets, which scripts/fuzz.sh runs (SCANPRESS_FUZZ_BUILD_DIR=build-asan)
-  # without a third build of everything (CI's time).
-  source scripts/lib.sh
-  install_missing_packages clang libclang-rt-14-dev
-  export CC=clang CXX=clang++
-  extra=(-DSCANPRESS_BUILD_BENCH=OFF -DSCANPRESS_FUZZ=ON)
-fi
+if [ "${SANITIZE:-0}" = "1" ]; then extra=(-DSCANPRESS_BUILD_BENCH=OFF); fi
 bash scripts/build.sh "${extra[@]}"
 dir=build
 exclude=()
