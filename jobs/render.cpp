@@ -15,6 +15,8 @@
 
 #include "engine/geometry.h"
 #include "engine/quantize.h"
+#include "engine/codecs/codec.h"
+#include "jobs/container_file.h"
 #include "jobs/file_io.h"
 #include "jobs/measure.h"
 #include "spatial/surface_index.h"
@@ -56,6 +58,7 @@ const char* glyph(char c) {
     case '=': return "00000000001111100000111110000000000";
     case '(': return "00010001000100001000010000010000010";
     case ')': return "01000001000001000010000100010001000";
+    case '%': return "11000110010001000100010001001100011";
     case 'e': return "00000000000111010001111111000001110";
     case 'd': return "00001000010110110011100011000101111";
     case 'A': return "01110100011000111111100011000110001";
@@ -147,8 +150,9 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
   // Layout: a title band on top, the scale bar on the right, the model in the rest.
   const int text_scale = std::max(1, s.height / 300);
   const int title_h = s.title.empty() ? 0 : 11 * text_scale;
+  const int legend_h = s.legend.empty() ? 0 : 12 * text_scale;
   const int bar = against ? std::max(60, s.width / 8) : 0;
-  const int view_w = s.width - bar, view_h = s.height - title_h;
+  const int view_w = s.width - bar, view_h = s.height - title_h - legend_h;
   if (view_w < 8 || view_h < 8) return makeError(ErrorCode::kInvalidArgument, "picture too small for its labels");
   // Camera: from (azimuth, elevation), framing the model's vertices to kFill of the view's smaller extent. The
   // look-at point centers their projection along the view plane; the distance is the smallest at which every vertex
@@ -216,7 +220,7 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
     const bool colors = !reference && !m->colors.empty() && m->colors.size() == m->positions.size();
     if (colors && albedo.empty()) albedo.assign(pixels, {0.85, 0.85, 0.85});
     vertex_colors |= colors;
-    tbb::parallel_for(title_h, s.height, [&](int y) {
+    tbb::parallel_for(title_h, title_h + view_h, [&](int y) {
       for (int x = 0; x < view_w; ++x) {
         const double px = ((x + 0.5) / view_w * 2 - 1) * half_w, py = (1 - (y - title_h + 0.5) / view_h * 2) * half_h;
         Vec3d dir = vadd(forward, vadd(vmul(right, px), vmul(up, py)));
@@ -290,10 +294,73 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
     }
     drawText(img, view_w + 2, y1 + 3 * scale, "0", scale);
   }
+  if (!s.legend.empty()) {  // swatch, label, swatch, label... along the bottom band
+    const int scale = text_scale, y = s.height - legend_h + 2 * scale;
+    int x = 2 * scale;
+    for (const LegendEntry& e : s.legend) {
+      for (int py = y; py < y + 7 * scale && py < s.height; ++py)
+        for (int px = x; px < x + 7 * scale && px < s.width; ++px)
+          for (int k = 0; k < 3; ++k) img.rgb[3 * (size_t(py) * s.width + px) + k] = e.rgb[size_t(k)];
+      x += 9 * scale;
+      std::string caps = e.label;
+      for (char& c : caps) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+      drawText(img, x, y, caps, scale);
+      x += (static_cast<int>(caps.size()) * 6 + 8) * scale;
+    }
+  }
   if (!s.title.empty()) {
     std::string caps = s.title;
     for (char& c : caps) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
     drawText(img, 2 * text_scale, 2 * text_scale, caps, text_scale);
+  }
+  return out;
+}
+
+Result<LatticePicture> latticePicture(const std::string& path, LatticeColoring how) {
+  // Relief colors as the paper's pictures: six distinct hues, irregular faces white.
+  static constexpr std::array<uint8_t, 3> kRelief[6] = {{222, 84, 72},  {240, 170, 60}, {96, 186, 96},
+                                                        {70, 168, 180}, {86, 112, 222}, {178, 102, 214}};
+  static constexpr std::array<uint8_t, 3> kIrregularWhite{236, 236, 236}, kRegular{110, 170, 235},
+      kIrregular{240, 120, 60};
+  static const char* const kReliefName[6] = {"+x", "-x", "+y", "-y", "+z", "-z"};
+  SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(path));
+  const ContainerHeader& header = file.header();
+  LatticePicture out;
+  std::vector<uint8_t> chunk;
+  for (const TileEntry& e : file.tiles()) {
+    if (e.codec != CodecId::kPrm)
+      return makeError(ErrorCode::kInvalidArgument, path + ": tile " + std::to_string(e.tile_id) + " is coded with " +
+                                                        codecName(e.codec) +
+                                                        "; reliefs and regularity are pictured for prm containers");
+    if (e.faces == 0) continue;
+    SP_ASSIGN_OR_RETURN(auto payload, file.readPayload(e, chunk));
+    const auto spacing = prmPayloadSpacing(payload);
+    if (!spacing.isOk()) return spacing.status().withContext(path + ": tile " + std::to_string(e.tile_id));
+    SP_ASSIGN_OR_RETURN(QuantizedMesh q, file.decodeTile(e));
+    const std::vector<int8_t> relief = latticeFaceReliefs(q, *spacing);
+    const Mesh m = dequantizeMesh(q, header.grid, AttributeLayout{});
+    out.mesh.positions.reserve(out.mesh.positions.size() + 3 * m.triangles.size());
+    for (size_t f = 0; f < m.triangles.size(); ++f) {
+      const int r = relief[f];
+      const std::array<uint8_t, 3> rgb = how == LatticeColoring::kReliefs ? (r >= 0 ? kRelief[r] : kIrregularWhite)
+                                         : r >= 0                         ? kRegular
+                                                                          : kIrregular;
+      const uint32_t base = uint32_t(out.mesh.positions.size());
+      for (int c = 0; c < 3; ++c) {
+        out.mesh.positions.push_back(m.positions[m.triangles[f][size_t(c)]]);
+        out.mesh.colors.push_back({rgb[0], rgb[1], rgb[2], 255});
+      }
+      out.mesh.triangles.push_back({base, base + 1, base + 2});
+      out.regular_faces += r >= 0;
+    }
+    out.faces += m.triangles.size();
+  }
+  out.mesh.color_channels = 3;
+  if (how == LatticeColoring::kReliefs) {
+    for (int r = 0; r < 6; ++r) out.legend.push_back({kReliefName[r], kRelief[r]});
+    out.legend.push_back({"irregular", kIrregularWhite});
+  } else {
+    out.legend = {{"regular", kRegular}, {"irregular", kIrregular}};
   }
   return out;
 }

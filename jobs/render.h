@@ -3,6 +3,7 @@
 // units; otherwise by the scan's vertex colors when it has them. PNG output (libpng), written all-or-nothing.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -16,13 +17,19 @@ namespace scanpress {
 
 class EmbreeDevice;
 
+struct LegendEntry {
+  std::string label;  // drawn in capitals
+  std::array<uint8_t, 3> rgb;
+};
+
 struct RenderSettings {
   int width = 800, height = 600;
   double azimuth = 30, elevation = 20;  // degrees; y is up
   // Top of the color bar in units of the reference's diagonal; 0: the 99.5th percentile of the visible distances.
   // A fixed value gives every picture of a batch the same scale.
   double scale_max_relative = 0;
-  std::string title;  // drawn in a band at the top (e.g. the file name); none when empty
+  std::string title;                // drawn in a band at the top (e.g. the file name); none when empty
+  std::vector<LegendEntry> legend;  // swatches with labels along the bottom (what the colors mean); none when empty
 };
 
 struct Image {
@@ -47,6 +54,18 @@ Result<RenderResult> renderMesh(const Mesh& mesh, const RenderSettings& settings
 Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSettings& settings,
                                    std::shared_ptr<EmbreeDevice> device, const ChunkedSurface* against,
                                    uint64_t cache_bytes);
+
+// A prm container's surface with every face colored by what prm's coder made of it (the paper's Fig. 1 and 10):
+// by the relief whose lattice it is a unit triangle of, irregular faces white (kReliefs), or regular against
+// irregular (kRegularity). Each face gets its own three vertices (so its color is its own) and `legend` says what
+// the colors are. Regularity is read from the decoded positions on each tile's lattice, as the coder decides it.
+enum class LatticeColoring { kReliefs, kRegularity };
+struct LatticePicture {
+  Mesh mesh;
+  std::vector<LegendEntry> legend;
+  uint64_t faces = 0, regular_faces = 0;
+};
+Result<LatticePicture> latticePicture(const std::string& container_path, LatticeColoring how);
 
 Result<std::vector<uint8_t>> encodePng(const Image& image);
 Status writePng(const std::string& path, const Image& image);

@@ -120,9 +120,9 @@ double TileEncoder::tileError(const TileResult& r) const {
 // target, t doubles (the error grows with t, roughly in proportion, so doubling finds the failing side in a
 // trial or two); once a trial misses, bisection between the largest t that met and the smallest that missed (in
 // the log of t, since t spans orders of magnitude). kKnobTrials encodes in all; the tile keeps the encoding of
-// the largest t that met. (prm codes a tile as it is where its lattice would more than double the tile's
-// triangles, which is where a small t made tiles larger than t = 0.) The error need not be monotone in t: only trials that were measured to meet are
-// kept, so a non-monotone codec can cost bytes, never the target.
+// the largest t that met. (prm keeps the smaller of the tile as it is and its remeshing, so a small t, a lattice
+// finer than the tile, cannot make it larger than t = 0.) The error need not be monotone in t: only trials that
+// were measured to meet are kept, so a non-monotone codec can cost bytes, never the target.
 //
 // Per-tile bounds imply the overall one: the overall RMS is the area-weighted mean of the tiles' squared
 // errors (each side samples by area, and the tiles partition the original's triangles and the decoded ones),

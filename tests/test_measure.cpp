@@ -23,6 +23,7 @@
 #include "engine/shapes.h"
 #include "jobs/commands.h"
 #include "jobs/config.h"
+#include "jobs/container_file.h"
 #include "jobs/measure.h"
 #include "jobs/render.h"
 #include "jobs/mesh_io/mesh_reader.h"
@@ -583,6 +584,78 @@ TEST(Render, TheTitleIsDrawnOnTop) {
   ASSERT_EQ(testing::runScanpress("render '" + dir.file("named.ply") + "' '" + dir.file("n.png") + "' --size 160,120"),
             0);
   EXPECT_GT(inkRows(decodePng(testing::readBytes(dir.file("n.png"))), 0, 11), 50u);
+}
+
+// prm's pictures (issue 21, part 7): a remeshed sphere's faces colored by relief. Independent truth: a face
+// regular in relief r is a unit triangle of r's lattice, so its outward normal faces r's axis (+x, -x, +y, ...);
+// the picture's counts are the container's; a legend swatch is drawn in its color; other codecs are refused.
+TEST(Render, PrmContainersAreColoredByReliefAndRegularity) {
+  testing::TempDir dir;
+  ASSERT_TRUE(writePly(dir.file("s.ply"), icosphere(5)).isOk());
+  std::string out;
+  ASSERT_EQ(testing::runScanpress("encode '" + dir.file("s.ply") + "' '" + dir.file("s.spz") +
+                                      "' --codec prm --bits 12 --grid 0.03 --quiet",
+                                  &out),
+            0)
+      << out;
+  auto picture = latticePicture(dir.file("s.spz"), LatticeColoring::kReliefs);
+  ASSERT_TRUE(picture.isOk()) << picture.status().toString();
+  auto file = ContainerFile::open(dir.file("s.spz"));
+  ASSERT_TRUE(file.isOk());
+  EXPECT_EQ(picture->faces, file->header().faces);
+  EXPECT_EQ(picture->mesh.triangles.size(), picture->faces);
+  EXPECT_GT(double(picture->regular_faces), 0.6 * double(picture->faces));
+  ASSERT_EQ(picture->legend.size(), 7u);  // six reliefs and "irregular"
+  uint64_t regular = 0, facing = 0;
+  for (const Triangle& t : picture->mesh.triangles) {
+    const Rgba8 c = picture->mesh.colors[t[0]];
+    const auto same = [&](const LegendEntry& e) { return e.rgb[0] == c[0] && e.rgb[1] == c[1] && e.rgb[2] == c[2]; };
+    const auto it = std::find_if(picture->legend.begin(), picture->legend.end(), same);
+    ASSERT_NE(it, picture->legend.end());
+    const int relief = int(it - picture->legend.begin());
+    if (relief == 6) continue;
+    ++regular;
+    const auto& p = picture->mesh.positions;
+    const Vec3d n = vcross(vsub(p[t[1]], p[t[0]]), vsub(p[t[2]], p[t[0]]));
+    facing += (relief % 2 == 0 ? 1 : -1) * n[size_t(relief / 2)] > 0;
+  }
+  EXPECT_EQ(regular, picture->regular_faces);
+  EXPECT_EQ(facing, regular);
+  auto by_regularity = latticePicture(dir.file("s.spz"), LatticeColoring::kRegularity);
+  ASSERT_TRUE(by_regularity.isOk());
+  EXPECT_EQ(by_regularity->legend.size(), 2u);
+  EXPECT_EQ(by_regularity->regular_faces, picture->regular_faces);
+  // The legend's first swatch, bottom left, in its color.
+  RenderSettings s;
+  s.width = 160;
+  s.height = 120;
+  s.legend = {{"+x", {255, 0, 0}}};
+  auto r = renderMesh(icosphere(1), s, device());
+  ASSERT_TRUE(r.isOk());
+  const uint8_t* swatch = &r->image.rgb[3 * (size_t(111) * 160 + 4)];
+  EXPECT_TRUE(swatch[0] == 255 && swatch[1] == 0 && swatch[2] == 0);
+  // The CLI, and its refusals.
+  const std::string render = "render '" + dir.file("s.spz") + "' '" + dir.file("r.png") + "' --size 160,120 ";
+  EXPECT_EQ(testing::runScanpress(render + "--color-by reliefs", &out), 0) << out;
+  EXPECT_EQ(decodePng(testing::readBytes(dir.file("r.png"))).width, 160);
+  EXPECT_EQ(testing::runScanpress(render + "--color-by regularity", &out), 0) << out;
+  EXPECT_EQ(testing::runScanpress(render + "--color-by nope", &out), 1);
+  EXPECT_NE(out.find("--color-by is"), std::string::npos) << out;
+  EXPECT_EQ(testing::runScanpress(render + "--color-by reliefs --against '" + dir.file("s.ply") + "'", &out), 1);
+  EXPECT_EQ(testing::runScanpress("render '" + dir.file("s.ply") + "' '" + dir.file("p.png") + "' --color-by reliefs",
+                                  &out),
+            1);
+  EXPECT_NE(out.find("needs a prm container"), std::string::npos) << out;
+  ASSERT_EQ(testing::runScanpress("encode '" + dir.file("s.ply") + "' '" + dir.file("k.spz") +
+                                      "' --codec kdtree --bits 12 --quiet",
+                                  &out),
+            0);
+  EXPECT_NE(testing::runScanpress("render '" + dir.file("k.spz") + "' '" + dir.file("k.png") + "' --color-by reliefs",
+                                  &out),
+            0);
+  EXPECT_NE(out.find("coded with kdtree"), std::string::npos) << out;
+  EXPECT_NE(out.find("k.spz"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(dir.file("k.png")));
 }
 
 TEST(Render, ScaleMaxOptionAndKeyAreValidated) {

@@ -94,6 +94,21 @@ TEST(Prm, LatticeHeightFieldsAreRegularInEveryRelief) {
             flip);
         const CodecStats s = expectLatticeRoundTrip(ctx, q, G);
         EXPECT_EQ(s.regular_faces, q.triangles.size());
+        // What the pictures show (render --color-by): every face regular, and in this relief where its normal is
+        // nearer the relief's axis than the others (a steep face may be a unit triangle of another relief too, and is shown there).
+        const auto pictured = latticeFaceReliefs(q, G);
+        for (size_t f = 0; f < q.triangles.size(); ++f) {
+          ASSERT_NE(pictured[f], -1);
+          Vec3d p[3];
+          for (int c = 0; c < 3; ++c)
+            for (int k = 0; k < 3; ++k) p[c][size_t(k)] = q.positions[q.triangles[f][size_t(c)]][size_t(k)];
+          const Vec3d n = vcross(vsub(p[1], p[0]), vsub(p[2], p[0]));
+          const size_t axis = size_t(relief / 2);
+          if (std::abs(n[axis]) > std::max(std::abs(n[(axis + 1) % 3]), std::abs(n[(axis + 2) % 3]))) {
+            ASSERT_EQ(pictured[f], relief) << "face " << f;
+          }
+        }
+        EXPECT_EQ(latticeFaceReliefs(q, G / 2), std::vector<int8_t>(q.triangles.size(), -1));
         EXPECT_EQ(s.patches, 1u);
         // The first point of the patch is coded in full and anchors it; every other point is a height only.
         EXPECT_EQ(s.lattice_points, q.positions.size() - 1);
@@ -208,6 +223,9 @@ TEST(Prm, SphereAndTorusRemeshNearTheirSurfaces) {
     CodecStats s;
     ASSERT_TRUE(prmEncodeWithStats(ctx, TileView{q, {}}, options, bytes, &s, nullptr).isOk());
     EXPECT_GT(double(s.regular_faces), 0.6 * double(s.triangles));
+    // The pictures' classification of the decoded faces is the coder's.
+    const auto relief = latticeFaceReliefs(*d, prmSpacing(options.prm, 14));
+    EXPECT_EQ(uint64_t(std::count_if(relief.begin(), relief.end(), [](int8_t r) { return r >= 0; })), s.regular_faces);
   }
 }
 
@@ -242,7 +260,8 @@ TEST(Prm, LockedBorderIsKept) {
   EXPECT_EQ(boundary, cap.rim.size());
 }
 
-TEST(Prm, KnobFloorAndTooFineLatticesKeepTheTile) {
+// The knob's floor and lattices too fine for the remesher keep the tile as it is.
+TEST(Prm, KnobFloorTooFineLatticesAndTheSmallerCodingKeepTheTile) {
   const TileContext ctx{12, {}};
   const QuantizedMesh q = *quantizeMesh(icosphere(2), *makeGrid(boundingBox(icosphere(2)), 12), {}, nullptr);
   for (double spacing : {0.0, 2.0}) {
@@ -255,6 +274,30 @@ TEST(Prm, KnobFloorAndTooFineLatticesKeepTheTile) {
     ASSERT_TRUE(d.isOk());
     EXPECT_TRUE(testing::triangleMultiset(*d) == testing::triangleMultiset(q));
   }
+  // Otherwise the smaller of the two codings, the tile as it is and the remesh stage's output, whichever that is:
+  // a coarse icosphere on lattices from finer than its triangles (remeshing is larger) to coarser.
+  const QuantizedMesh coarse = *quantizeMesh(icosphere(3), *makeGrid(boundingBox(icosphere(3)), 12), {}, nullptr);
+  std::set<bool> chosen;
+  for (double spacing : {24.0, 64.0, 160.0, 400.0}) {
+    SCOPED_TRACE(spacing);
+    CodecOptions options;
+    options.prm.spacing = spacing;
+    auto enc = prm().encode(ctx, TileView{coarse, {}}, options);
+    ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+    auto d = prm().decode(ctx, prm().version, enc->payload, limitsOf(enc->decoded));
+    ASSERT_TRUE(d.isOk());
+    auto staged = remeshTile(ctx, TileView{coarse, {}}, options.prm.tau, uint32_t(spacing));
+    ASSERT_TRUE(staged.isOk());
+    std::vector<uint8_t> as_is, remeshed;
+    TileSummary unused;
+    ASSERT_TRUE(edgebreakerEncodeOnLattice(ctx, coarse, uint32_t(spacing), as_is, nullptr, &unused).isOk());
+    ASSERT_TRUE(edgebreakerEncodeOnLattice(ctx, staged->mesh, uint32_t(spacing), remeshed, nullptr, &unused).isOk());
+    const bool remesh_smaller = remeshed.size() < as_is.size();
+    chosen.insert(remesh_smaller);
+    EXPECT_EQ(enc->payload.size(), std::min(as_is.size(), remeshed.size()) + (spacing < 128 ? 1 : 2));
+    EXPECT_TRUE(testing::triangleMultiset(*d) == testing::triangleMultiset(remesh_smaller ? staged->mesh : coarse));
+  }
+  EXPECT_EQ(chosen.size(), 2u) << "the lattices should give both choices";
   CodecOptions bad;
   bad.prm.tau = 0.9;
   EXPECT_EQ(prm().encode(ctx, TileView{q, {}}, bad).status().code(), ErrorCode::kInvalidArgument);

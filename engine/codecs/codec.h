@@ -62,9 +62,9 @@ struct PmOptions {
 };
 // `prm` (engine/codecs/prm.cpp): the tile is remeshed into a piecewise regular mesh (the `remesh` stage,
 // engine/stages/stage.h) on hexagonal grids of spacing `grid` (a fraction of 2^bits cells), or `spacing` grid cells
-// when that is >= 0 (the error targets of jobs/ set it per tile), and coded with the regular patches' lattice. A
-// tile whose remeshing would have more than twice its triangles (a lattice finer than the tile's own triangles),
-// or with spacing 0, is coded as it is.
+// when that is >= 0 (the error targets of jobs/ set it per tile), and coded with the regular patches' lattice. The
+// tile is coded as it is when that is smaller (a lattice finer than the tile's own triangles, most often), or with
+// spacing 0.
 struct PrmOptions {
   double grid = 0.005;  // in (0, 1]
   double tau = 0.2;     // relief regularisation, in (0, 1/sqrt(3))
@@ -259,12 +259,18 @@ Status edgebreakerEncodeOnLattice(const TileContext& ctx, const QuantizedMesh& m
                                   std::vector<uint8_t>& out, CodecStats* stats, TileSummary* summary);
 Result<QuantizedMesh> edgebreakerDecodeOnLattice(const TileContext& ctx, std::span<const uint8_t> payload,
                                                  const DecodeLimits& limits, uint32_t spacing);
+// Per face, the relief (0..5: +x, -x, +y, -y, +z, -z) in whose lattice of `spacing` grid cells it is a unit triangle
+// (either orientation; of several, the one whose axis the face's normal is nearest), or -1: the faces prm's coder
+// codes as regular (FORMAT.md, "prm").
+std::vector<int8_t> latticeFaceReliefs(const QuantizedMesh& mesh, uint32_t spacing);
 // `prm`: remeshing and the coder in one (prm.cpp); `stats` as edgebreaker's, with the regularity part.
 Result<EncodedTile> prmEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options);
 Result<QuantizedMesh> prmDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                 const DecodeLimits& limits);
 Status prmEncodeWithStats(const TileContext& ctx, const TileView& tile, const CodecOptions& options,
                           std::vector<uint8_t>& out, CodecStats* stats, TileSummary* summary);
+// The lattice spacing a prm v1 payload was coded on (its first field), checked as the decoder checks it.
+Result<uint32_t> prmPayloadSpacing(std::span<const uint8_t> payload);
 // The lattice spacing prm's options give at `bits`: an even number of grid cells, at least 2.
 uint32_t prmSpacing(const PrmOptions& options, int bits);
 

@@ -1321,6 +1321,29 @@ Status edgebreakerEncodeOnLattice(const TileContext& ctx, const QuantizedMesh& m
   return encodeImpl(ctx, mesh, spacing, out, stats, summary);
 }
 
+std::vector<int8_t> latticeFaceReliefs(const QuantizedMesh& mesh, uint32_t spacing) {
+  std::vector<int8_t> relief(mesh.triangles.size(), -1);
+  if (spacing < 2 || spacing % 2 != 0 || spacing > kMaxLatticeSpacing) return relief;
+  const i64 row = HexLattice::withSpacing(spacing).row;
+  const size_t n = mesh.positions.size();
+  for (size_t f = 0; f < mesh.triangles.size(); ++f) {
+    const Triangle& t = mesh.triangles[f];
+    if (t[0] >= n || t[1] >= n || t[2] >= n || t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) continue;
+    const u32 mask = latticeReliefs(mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]], spacing, row);
+    if (mask == 0) continue;
+    // A face may be a unit triangle of several reliefs' lattices: the one whose axis its normal is nearest.
+    const Vec3u &a = mesh.positions[t[0]], &b = mesh.positions[t[1]], &c = mesh.positions[t[2]];
+    double d1[3], d2[3];
+    for (int k = 0; k < 3; ++k) d1[k] = double(b[k]) - double(a[k]), d2[k] = double(c[k]) - double(a[k]);
+    const double n[3] = {d1[1] * d2[2] - d1[2] * d2[1], d1[2] * d2[0] - d1[0] * d2[2], d1[0] * d2[1] - d1[1] * d2[0]};
+    double best = -1;
+    for (int r = 0; r < kLatticeKinds; ++r)
+      if ((mask >> r & 1 || mask >> (r + kLatticeKinds) & 1) && std::abs(n[r / 2]) > best)
+        best = std::abs(n[r / 2]), relief[f] = int8_t(r);
+  }
+  return relief;
+}
+
 Result<QuantizedMesh> edgebreakerDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         const DecodeLimits& limits) {
   if (version < 1 || version > kPredictedAttributes)

@@ -27,8 +27,9 @@
 //    one pass, and the predictor needs no second pass over the patch.
 //  - Remeshing: the `remesh` stage, including the paper's collapse of relief-boundary vertices onto grid vertices
 //    after merging (remesh.cpp; without it a quarter of horse's points were off the lattice and cost 16 bits each).
-//    A tile whose remeshing would break the border contract, or have more than twice its triangles (a lattice finer
-//    than the tile), is coded as it is.
+//    The tile is coded both as it is and remeshed, and the smaller coding is kept (beyond the paper: a lattice finer
+//    than the tile's own triangles makes it larger, and coded as it is it is exact); so is it when remeshing would
+//    break the border contract or exceed the remesher's size limit.
 //
 // Payload v1: varint G (the lattice spacing in grid cells, even, 2..2^24), then an edgebreaker payload (version 2
 // layout) coded on that lattice.
@@ -41,6 +42,22 @@
 #include "engine/stages/stage.h"
 
 namespace scanpress {
+
+namespace {
+
+// The payload's first field, the lattice spacing; `header`: its length in bytes.
+Result<uint32_t> readSpacing(std::span<const uint8_t> payload, size_t& header) {
+  ByteReader r(payload, "prm payload");
+  uint64_t spacing = 0;
+  SP_RETURN_IF_ERROR(r.varint(spacing));
+  if (spacing < 2 || spacing % 2 != 0 || spacing > kMaxLatticeSpacing)
+    return makeError(ErrorCode::kMalformed, "prm payload: lattice spacing " + std::to_string(spacing) +
+                                                " is not an even number in 2.." + std::to_string(kMaxLatticeSpacing));
+  header = r.position();
+  return uint32_t(spacing);
+}
+
+}  // namespace
 
 uint32_t prmSpacing(const PrmOptions& options, int bits) {
   // At most the grid's extent (a coarser lattice has no point in it; the error knob can ask for more).
@@ -62,27 +79,39 @@ Status prmEncodeWithStats(const TileContext& ctx, const TileView& tile, const Co
   if (std::isnan(options.prm.spacing) || std::isinf(options.prm.spacing))
     return makeError(ErrorCode::kInvalidArgument, "prm: spacing must be a number of grid cells");
   const uint32_t spacing = prmSpacing(options.prm, ctx.bits);
-  const QuantizedMesh* coded = &tile.mesh;
-  StagedTile staged;
+  // Both codings of the tile, as it is and remeshed: the smaller is kept. Kept as it is, the tile is also exact
+  // (after quantization), so a remeshing that does not make it smaller (a lattice finer than the tile's own
+  // triangles, most often) is never worth its error.
+  struct Coding {
+    std::vector<uint8_t> bytes;
+    CodecStats stats;
+    TileSummary summary;
+  };
+  const auto code = [&](const QuantizedMesh& mesh, Coding& c) -> Status {
+    ByteWriter w(c.bytes);
+    w.varint(spacing);
+    SP_RETURN_IF_ERROR(edgebreakerEncodeOnLattice(ctx, mesh, spacing, c.bytes, stats ? &c.stats : nullptr, &c.summary));
+    c.stats.payload_bytes = c.bytes.size();
+    return Status::ok();
+  };
+  Coding kept, remeshed;
+  SP_RETURN_IF_ERROR(code(tile.mesh, kept));
   if (options.prm.spacing != 0) {
-    auto remeshed = remeshTile(ctx, tile, options.prm.tau, spacing);
-    if (remeshed.isOk()) {
-      staged = std::move(remeshed).value();
-      // The border contract, as runStage checks it for the remesh stage: a tile whose remeshing broke it (it
-      // should not) is coded as it is rather than with a crack at its seam. So is a tile the lattice would make
-      // more than twice as fine (a lattice finer than the tile's triangles: more bytes and no less error).
-      if (staged.mesh.triangles.size() <= 2 * tile.mesh.triangles.size() &&
-          checkBorderContract(ctx, tile, staged.view(), false).isOk())
-        coded = &staged.mesh;
-    } else if (remeshed.status().code() != ErrorCode::kLimitExceeded) {
-      return remeshed.status();
+    auto staged = remeshTile(ctx, tile, options.prm.tau, spacing);
+    // The border contract, as runStage checks it for the remesh stage: a tile whose remeshing broke it (it should
+    // not) is coded as it is rather than with a crack at its seam. So is one the lattice would make too large.
+    if (staged.isOk()) {
+      if (checkBorderContract(ctx, tile, staged->view(), false).isOk()) {
+        SP_RETURN_IF_ERROR(code(staged->mesh, remeshed));
+        if (remeshed.bytes.size() < kept.bytes.size()) std::swap(kept, remeshed);
+      }
+    } else if (staged.status().code() != ErrorCode::kLimitExceeded) {
+      return staged.status();
     }
   }
-  const size_t start = out.size();
-  ByteWriter w(out);
-  w.varint(spacing);
-  SP_RETURN_IF_ERROR(edgebreakerEncodeOnLattice(ctx, *coded, spacing, out, stats, summary));
-  if (stats) stats->payload_bytes = out.size() - start;
+  out.insert(out.end(), kept.bytes.begin(), kept.bytes.end());
+  if (stats) *stats = kept.stats;
+  if (summary) *summary = kept.summary;
   return Status::ok();
 }
 
@@ -96,13 +125,14 @@ Result<QuantizedMesh> prmDecode(const TileContext& ctx, uint16_t version, std::s
                                 const DecodeLimits& limits) {
   if (version != 1)
     return makeError(ErrorCode::kUnknownVersion, "prm payload: unknown version " + std::to_string(version));
-  ByteReader r(payload, "prm payload");
-  uint64_t spacing = 0;
-  SP_RETURN_IF_ERROR(r.varint(spacing));
-  if (spacing < 2 || spacing % 2 != 0 || spacing > kMaxLatticeSpacing)
-    return makeError(ErrorCode::kMalformed, "prm payload: lattice spacing " + std::to_string(spacing) +
-                                                " is not an even number in 2.." + std::to_string(kMaxLatticeSpacing));
-  return edgebreakerDecodeOnLattice(ctx, payload.subspan(r.position()), limits, uint32_t(spacing));
+  size_t header = 0;
+  SP_ASSIGN_OR_RETURN(const uint32_t spacing, readSpacing(payload, header));
+  return edgebreakerDecodeOnLattice(ctx, payload.subspan(header), limits, spacing);
+}
+
+Result<uint32_t> prmPayloadSpacing(std::span<const uint8_t> payload) {
+  size_t header = 0;
+  return readSpacing(payload, header);
 }
 
 }  // namespace scanpress

@@ -173,6 +173,9 @@ options:
                        read into scratch files and drawn a run of triangles at a time (the same picture, up to
                        pixels on an edge between two triangles)
   --scratch-dir DIR    where those scratch files go (default: the system temp directory)
+  --color-by K         for a prm container (MESH.spz coded with --codec prm): color each face by what the coder
+                       made of it: `reliefs` (the relief whose lattice it is a unit triangle of; irregular faces
+                       white) or `regularity` (regular against irregular). The title gives the regular share.
 MESH or ORIGINAL may be a container (.spz): it is drawn as `decode` would write it, a tile at a time.
 )";
 
@@ -738,7 +741,8 @@ int runMeasure(int argc, char** argv) {
 int runRender(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2, {"--against", "--view", "--size", "--scale-max", "--memory-budget", "--scratch-dir"},
+  if (!parseArgs(argc, argv, 2,
+                 {"--against", "--view", "--size", "--scale-max", "--memory-budget", "--scratch-dir", "--color-by"},
                  {"--help"}, args, error))
     return usage(error, "render");
   if (args.has("--help")) return std::fputs(kRenderHelp, stdout), 0;
@@ -775,7 +779,21 @@ int runRender(int argc, char** argv) {
   auto device = EmbreeDevice::create();
   if (!device.isOk()) return fail(device.status());
   Result<RenderResult> r = makeError(ErrorCode::kInternal, "not rendered");
-  if (needsChunks(inputs, budget)) {
+  if (const auto* by = args.get("--color-by")) {
+    if (*by != "reliefs" && *by != "regularity")
+      return usage("--color-by is `reliefs` or `regularity`, got '" + *by + "'", "render");
+    if (args.has("--against")) return usage("--color-by and --against both color the surface: give one", "render");
+    if (!isContainerPath(inputs[0])) return usage("--color-by needs a prm container (.spz) as MESH", "render");
+    auto picture =
+        latticePicture(inputs[0], *by == "reliefs" ? LatticeColoring::kReliefs : LatticeColoring::kRegularity);
+    if (!picture.isOk()) return fail(picture.status());
+    char share[64];
+    std::snprintf(share, sizeof share, "  %.1f%% REGULAR",
+                  picture->faces ? 100.0 * double(picture->regular_faces) / double(picture->faces) : 0.0);
+    s.title += share;
+    s.legend = std::move(picture->legend);
+    r = renderMesh(picture->mesh, s, *device);
+  } else if (needsChunks(inputs, budget)) {
     auto mesh = openSurface(inputs[0], budget, scratch);
     if (!mesh.isOk()) return fail(mesh.status());
     std::optional<ChunkedSurface> original;
