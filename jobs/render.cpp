@@ -150,7 +150,21 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
   // Layout: a title band on top, the scale bar on the right, the model in the rest.
   const int text_scale = std::max(1, s.height / 300);
   const int title_h = s.title.empty() ? 0 : 11 * text_scale;
-  const int legend_h = s.legend.empty() ? 0 : 12 * text_scale;
+  // The legend: swatch and label after swatch and label, wrapped into rows at the picture's width.
+  std::vector<std::array<int, 2>> legend_at;  // x, row
+  int legend_rows = 0;
+  for (const LegendEntry& e : s.legend) {
+    const int w = (9 + 6 * static_cast<int>(e.label.size())) * text_scale;
+    int x = legend_at.empty() ? 2 * text_scale : legend_at.back()[0] + 8 * text_scale;
+    if (!legend_at.empty()) {
+      const LegendEntry& prev = s.legend[legend_at.size() - 1];
+      x += (9 + 6 * static_cast<int>(prev.label.size())) * text_scale;
+    }
+    if (!legend_at.empty() && x + w > s.width) x = 2 * text_scale, ++legend_rows;
+    legend_at.push_back({x, legend_rows});
+  }
+  if (!s.legend.empty()) ++legend_rows;
+  const int legend_h = legend_rows * 12 * text_scale;
   const int bar = against ? std::max(60, s.width / 8) : 0;
   const int view_w = s.width - bar, view_h = s.height - title_h - legend_h;
   if (view_w < 8 || view_h < 8) return makeError(ErrorCode::kInvalidArgument, "picture too small for its labels");
@@ -211,6 +225,11 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
   std::vector<std::array<double, 3>> albedo;
   std::vector<Vec3d> hit_point(reference ? pixels : 0);
   bool vertex_colors = false;
+  const bool face_colors = !s.face_colors.empty();
+  if (face_colors && (reference || mesh.chunks() != 1 || s.face_colors.size() != mesh.triangles()))
+    return makeError(ErrorCode::kInvalidArgument,
+                     "face colors are for a mesh drawn whole, one per triangle, without a reference");
+  if (face_colors) albedo.assign(pixels, {0.85, 0.85, 0.85});
   for (size_t i = 0; i < mesh.chunks(); ++i) {
     if (mesh.info(i).triangles == 0) continue;
     SP_ASSIGN_OR_RETURN(auto m, mesh.load(i));
@@ -231,8 +250,12 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
         depth[k] = hit.t;
         shade[k] = 0.25 + 0.75 * std::fabs(vdot(hit.normal, dir));
         const Vec3d point = vadd(eye, vmul(dir, hit.t));
-        if (colors) albedo[k] = vertexColor(*m, hit.triangle, point);
-        else if (!albedo.empty()) albedo[k] = {0.85, 0.85, 0.85};
+        if (face_colors) {
+          const auto& c = s.face_colors[hit.triangle];
+          albedo[k] = {c[0] / 255.0, c[1] / 255.0, c[2] / 255.0};
+        } else if (colors) {
+          albedo[k] = vertexColor(*m, hit.triangle, point);
+        } else if (!albedo.empty()) albedo[k] = {0.85, 0.85, 0.85};
         if (reference) hit_point[k] = point;
       }
     });
@@ -271,14 +294,14 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
     if (shade[i] < 0) continue;
     std::array<double, 3> c{0.85, 0.85, 0.85};
     if (reference) c = colormap(error[i] / out.scale_max);
-    else if (vertex_colors) c = albedo[i];
+    else if (vertex_colors || face_colors) c = albedo[i];
     for (int k = 0; k < 3; ++k)
       img.rgb[3 * i + k] = static_cast<uint8_t>(std::clamp(c[k] * shade[i], 0.0, 1.0) * 255 + 0.5);
   }
   if (reference) {  // the scale bar, its top labelled in units of the diagonal and in the scan's own units
     const int scale = text_scale, line = 10 * scale;
     const int x0 = view_w + bar / 6, x1 = view_w + bar / 3;
-    const int y0 = title_h + 2 * line + 4 * scale, y1 = std::max(y0 + 1, s.height - line - 2 * scale);
+    const int y0 = title_h + 2 * line + 4 * scale, y1 = std::max(y0 + 1, s.height - legend_h - line - 2 * scale);
     for (int y = y0; y <= y1 && y < s.height; ++y) {
       const auto c = colormap(double(y1 - y) / (y1 - y0));
       for (int x = x0; x <= x1; ++x)
@@ -294,19 +317,14 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
     }
     drawText(img, view_w + 2, y1 + 3 * scale, "0", scale);
   }
-  if (!s.legend.empty()) {  // swatch, label, swatch, label... along the bottom band
-    const int scale = text_scale, y = s.height - legend_h + 2 * scale;
-    int x = 2 * scale;
-    for (const LegendEntry& e : s.legend) {
-      for (int py = y; py < y + 7 * scale && py < s.height; ++py)
-        for (int px = x; px < x + 7 * scale && px < s.width; ++px)
-          for (int k = 0; k < 3; ++k) img.rgb[3 * (size_t(py) * s.width + px) + k] = e.rgb[size_t(k)];
-      x += 9 * scale;
-      std::string caps = e.label;
-      for (char& c : caps) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-      drawText(img, x, y, caps, scale);
-      x += (static_cast<int>(caps.size()) * 6 + 8) * scale;
-    }
+  for (size_t i = 0; i < s.legend.size(); ++i) {  // the bottom band
+    const int scale = text_scale, x = legend_at[i][0], y = s.height - legend_h + (12 * legend_at[i][1] + 2) * scale;
+    for (int py = y; py < y + 7 * scale && py < s.height; ++py)
+      for (int px = x; px < x + 7 * scale && px < s.width; ++px)
+        for (int k = 0; k < 3; ++k) img.rgb[3 * (size_t(py) * s.width + px) + k] = s.legend[i].rgb[size_t(k)];
+    std::string caps = s.legend[i].label;
+    for (char& c : caps) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    drawText(img, x + 9 * scale, y, caps, scale);
   }
   if (!s.title.empty()) {
     std::string caps = s.title;
@@ -316,7 +334,7 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
   return out;
 }
 
-Result<LatticePicture> latticePicture(const std::string& path, LatticeColoring how) {
+Result<LatticePicture> latticePicture(const std::string& path, LatticeColoring how, uint64_t memory_budget) {
   // Relief colors as the paper's pictures: six distinct hues, irregular faces white.
   static constexpr std::array<uint8_t, 3> kRelief[6] = {{222, 84, 72},  {240, 170, 60}, {96, 186, 96},
                                                         {70, 168, 180}, {86, 112, 222}, {178, 102, 214}};
@@ -325,37 +343,42 @@ Result<LatticePicture> latticePicture(const std::string& path, LatticeColoring h
   static const char* const kReliefName[6] = {"+x", "-x", "+y", "-y", "+z", "-z"};
   SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(path));
   const ContainerHeader& header = file.header();
+  // The picture is drawn whole: the mesh, its face colors and the ray-casting index (as inMemorySurfaceBytes).
+  uint64_t faces = 0, vertices = 0;
+  for (const TileEntry& e : file.tiles()) faces += e.faces, vertices += e.vertices;
+  constexpr uint64_t kBytesPerFace = 200;
+  if (memory_budget != 0 && faces * kBytesPerFace > memory_budget)
+    return makeError(ErrorCode::kLimitExceeded,
+                     path + ": its " + std::to_string(faces) + " faces are pictured whole, which needs about " +
+                         std::to_string(faces * kBytesPerFace >> 20) + " MiB, over the memory budget of " +
+                         std::to_string(memory_budget >> 20) + " MiB (--memory-budget)");
+  if (vertices > UINT32_MAX)
+    return makeError(ErrorCode::kLimitExceeded, path + ": more than 2^32 vertices cannot be pictured in one mesh");
   LatticePicture out;
   std::vector<uint8_t> chunk;
   for (const TileEntry& e : file.tiles()) {
+    const std::string where = path + ": tile " + std::to_string(e.tile_id);
     if (e.codec != CodecId::kPrm)
-      return makeError(ErrorCode::kInvalidArgument, path + ": tile " + std::to_string(e.tile_id) + " is coded with " +
-                                                        codecName(e.codec) +
+      return makeError(ErrorCode::kInvalidArgument, where + " is coded with " + codecName(e.codec) +
                                                         "; reliefs and regularity are pictured for prm containers");
     if (e.faces == 0) continue;
     SP_ASSIGN_OR_RETURN(auto payload, file.readPayload(e, chunk));
     const auto spacing = prmPayloadSpacing(payload);
-    if (!spacing.isOk()) return spacing.status().withContext(path + ": tile " + std::to_string(e.tile_id));
-    SP_ASSIGN_OR_RETURN(QuantizedMesh q, file.decodeTile(e));
+    if (!spacing.isOk()) return spacing.status().withContext(where);
+    SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeTilePayload(header, e, payload, path));
     const std::vector<int8_t> relief = latticeFaceReliefs(q, *spacing);
-    const Mesh m = dequantizeMesh(q, header.grid, AttributeLayout{});
-    out.mesh.positions.reserve(out.mesh.positions.size() + 3 * m.triangles.size());
-    for (size_t f = 0; f < m.triangles.size(); ++f) {
+    const uint32_t base = uint32_t(out.mesh.positions.size());
+    for (const Vec3u& p : q.positions) out.mesh.positions.push_back(header.grid.dequantize(p));
+    for (size_t f = 0; f < q.triangles.size(); ++f) {
       const int r = relief[f];
-      const std::array<uint8_t, 3> rgb = how == LatticeColoring::kReliefs ? (r >= 0 ? kRelief[r] : kIrregularWhite)
-                                         : r >= 0                         ? kRegular
-                                                                          : kIrregular;
-      const uint32_t base = uint32_t(out.mesh.positions.size());
-      for (int c = 0; c < 3; ++c) {
-        out.mesh.positions.push_back(m.positions[m.triangles[f][size_t(c)]]);
-        out.mesh.colors.push_back({rgb[0], rgb[1], rgb[2], 255});
-      }
-      out.mesh.triangles.push_back({base, base + 1, base + 2});
+      out.face_colors.push_back(how == LatticeColoring::kReliefs ? (r >= 0 ? kRelief[r] : kIrregularWhite)
+                                : r >= 0                         ? kRegular
+                                                                 : kIrregular);
+      out.mesh.triangles.push_back({base + q.triangles[f][0], base + q.triangles[f][1], base + q.triangles[f][2]});
       out.regular_faces += r >= 0;
     }
-    out.faces += m.triangles.size();
+    out.faces += q.triangles.size();
   }
-  out.mesh.color_channels = 3;
   if (how == LatticeColoring::kReliefs) {
     for (int r = 0; r < 6; ++r) out.legend.push_back({kReliefName[r], kRelief[r]});
     out.legend.push_back({"irregular", kIrregularWhite});

@@ -30,6 +30,8 @@ struct RenderSettings {
   double scale_max_relative = 0;
   std::string title;                // drawn in a band at the top (e.g. the file name); none when empty
   std::vector<LegendEntry> legend;  // swatches with labels along the bottom (what the colors mean); none when empty
+  // One color per triangle of a mesh drawn whole (one chunk) without a reference; none when empty.
+  std::vector<std::array<uint8_t, 3>> face_colors;
 };
 
 struct Image {
@@ -57,15 +59,19 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
 
 // A prm container's surface with every face colored by what prm's coder made of it (the paper's Fig. 1 and 10):
 // by the relief whose lattice it is a unit triangle of, irregular faces white (kReliefs), or regular against
-// irregular (kRegularity). Each face gets its own three vertices (so its color is its own) and `legend` says what
-// the colors are. Regularity is read from the decoded positions on each tile's lattice, as the coder decides it.
+// irregular (kRegularity): `face_colors` for RenderSettings, and `legend` says what the colors are. Regularity is
+// read from the decoded positions on each tile's lattice, as the coder reads it (a face the mesh repeats counts each
+// time; the coder codes the repeat as a copy). The picture is drawn whole: kLimitExceeded when that would need
+// more than `memory_budget` bytes (0: no limit).
 enum class LatticeColoring { kReliefs, kRegularity };
 struct LatticePicture {
-  Mesh mesh;
+  Mesh mesh;  // the tiles' meshes side by side (not welded)
+  std::vector<std::array<uint8_t, 3>> face_colors;
   std::vector<LegendEntry> legend;
   uint64_t faces = 0, regular_faces = 0;
 };
-Result<LatticePicture> latticePicture(const std::string& container_path, LatticeColoring how);
+Result<LatticePicture> latticePicture(const std::string& container_path, LatticeColoring how,
+                                      uint64_t memory_budget = 0);
 
 Result<std::vector<uint8_t>> encodePng(const Image& image);
 Status writePng(const std::string& path, const Image& image);

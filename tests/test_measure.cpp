@@ -604,11 +604,13 @@ TEST(Render, PrmContainersAreColoredByReliefAndRegularity) {
   ASSERT_TRUE(file.isOk());
   EXPECT_EQ(picture->faces, file->header().faces);
   EXPECT_EQ(picture->mesh.triangles.size(), picture->faces);
+  ASSERT_EQ(picture->face_colors.size(), picture->faces);
   EXPECT_GT(double(picture->regular_faces), 0.6 * double(picture->faces));
   ASSERT_EQ(picture->legend.size(), 7u);  // six reliefs and "irregular"
   uint64_t regular = 0, facing = 0;
-  for (const Triangle& t : picture->mesh.triangles) {
-    const Rgba8 c = picture->mesh.colors[t[0]];
+  for (size_t f = 0; f < picture->faces; ++f) {
+    const Triangle& t = picture->mesh.triangles[f];
+    const auto& c = picture->face_colors[f];
     const auto same = [&](const LegendEntry& e) { return e.rgb[0] == c[0] && e.rgb[1] == c[1] && e.rgb[2] == c[2]; };
     const auto it = std::find_if(picture->legend.begin(), picture->legend.end(), same);
     ASSERT_NE(it, picture->legend.end());
@@ -625,7 +627,13 @@ TEST(Render, PrmContainersAreColoredByReliefAndRegularity) {
   ASSERT_TRUE(by_regularity.isOk());
   EXPECT_EQ(by_regularity->legend.size(), 2u);
   EXPECT_EQ(by_regularity->regular_faces, picture->regular_faces);
-  // The legend's first swatch, bottom left, in its color.
+  // Drawn whole, within a memory budget.
+  auto tight = latticePicture(dir.file("s.spz"), LatticeColoring::kReliefs, 4096);
+  ASSERT_FALSE(tight.isOk());
+  EXPECT_EQ(tight.status().code(), ErrorCode::kLimitExceeded);
+  EXPECT_NE(tight.status().message().find("memory budget"), std::string::npos) << tight.status().message();
+  // The legend's first swatch, bottom left, in its color; a legend wider than the picture wraps (every swatch is
+  // drawn), and the model stays above it.
   RenderSettings s;
   s.width = 160;
   s.height = 120;
@@ -634,9 +642,39 @@ TEST(Render, PrmContainersAreColoredByReliefAndRegularity) {
   ASSERT_TRUE(r.isOk());
   const uint8_t* swatch = &r->image.rgb[3 * (size_t(111) * 160 + 4)];
   EXPECT_TRUE(swatch[0] == 255 && swatch[1] == 0 && swatch[2] == 0);
+  s.legend.clear();
+  for (uint8_t k = 1; k <= 7; ++k) s.legend.push_back({"irregular", {uint8_t(30 * k), 0, uint8_t(255 - 30 * k)}});
+  r = renderMesh(icosphere(1), s, device());
+  ASSERT_TRUE(r.isOk());
+  int lowest_model_row = -1;
+  for (const LegendEntry& e : s.legend) {
+    size_t n = 0;
+    for (size_t i = 0; i < r->image.rgb.size(); i += 3)
+      n += r->image.rgb[i] == e.rgb[0] && r->image.rgb[i + 1] == 0 && r->image.rgb[i + 2] == e.rgb[2];
+    EXPECT_EQ(n, 49u) << int(e.rgb[0]);  // a 7x7 swatch at scale 1
+  }
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      const uint8_t* p = &r->image.rgb[3 * (size_t(y) * 160 + x)];
+      if (p[0] == p[1] && p[1] == p[2] && p[0] != 245 && p[0] > 40) lowest_model_row = y;  // shaded grey
+    }
+  EXPECT_LT(lowest_model_row, 120 - 12 * 4) << "seven entries of this width take four rows";
+  // Face colors: one per triangle, for a mesh drawn whole without a reference.
+  s.legend.clear();
+  s.face_colors.assign(3, {255, 0, 0});
+  EXPECT_EQ(renderMesh(icosphere(1), s, device()).status().code(), ErrorCode::kInvalidArgument);
+  s.face_colors.assign(icosphere(1).triangles.size(), {255, 0, 0});
+  r = renderMesh(icosphere(1), s, device());
+  ASSERT_TRUE(r.isOk());
+  size_t red = 0;
+  for (size_t i = 0; i < r->image.rgb.size(); i += 3) red += r->image.rgb[i] > 60 && r->image.rgb[i + 1] == 0;
+  EXPECT_GT(red, 1000u);
   // The CLI, and its refusals.
   const std::string render = "render '" + dir.file("s.spz") + "' '" + dir.file("r.png") + "' --size 160,120 ";
   EXPECT_EQ(testing::runScanpress(render + "--color-by reliefs", &out), 0) << out;
+  EXPECT_NE(out.find(std::to_string(picture->faces) + " faces, " + std::to_string(picture->regular_faces) + " regular"),
+            std::string::npos)
+      << out;
   EXPECT_EQ(decodePng(testing::readBytes(dir.file("r.png"))).width, 160);
   EXPECT_EQ(testing::runScanpress(render + "--color-by regularity", &out), 0) << out;
   EXPECT_EQ(testing::runScanpress(render + "--color-by nope", &out), 1);

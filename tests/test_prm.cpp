@@ -278,7 +278,8 @@ TEST(Prm, KnobFloorTooFineLatticesAndTheSmallerCodingKeepTheTile) {
   // a coarse icosphere on lattices from finer than its triangles (remeshing is larger) to coarser.
   const QuantizedMesh coarse = *quantizeMesh(icosphere(3), *makeGrid(boundingBox(icosphere(3)), 12), {}, nullptr);
   std::set<bool> chosen;
-  for (double spacing : {24.0, 64.0, 160.0, 400.0}) {
+  bool more_than_doubled_and_kept = false;  // the case a rule on triangle counts would miss
+  for (double spacing : {64.0, 160.0, 180.0, 400.0}) {
     SCOPED_TRACE(spacing);
     CodecOptions options;
     options.prm.spacing = spacing;
@@ -294,10 +295,12 @@ TEST(Prm, KnobFloorTooFineLatticesAndTheSmallerCodingKeepTheTile) {
     ASSERT_TRUE(edgebreakerEncodeOnLattice(ctx, staged->mesh, uint32_t(spacing), remeshed, nullptr, &unused).isOk());
     const bool remesh_smaller = remeshed.size() < as_is.size();
     chosen.insert(remesh_smaller);
+    more_than_doubled_and_kept |= remesh_smaller && staged->mesh.triangles.size() > 2 * coarse.triangles.size();
     EXPECT_EQ(enc->payload.size(), std::min(as_is.size(), remeshed.size()) + (spacing < 128 ? 1 : 2));
     EXPECT_TRUE(testing::triangleMultiset(*d) == testing::triangleMultiset(remesh_smaller ? staged->mesh : coarse));
   }
   EXPECT_EQ(chosen.size(), 2u) << "the lattices should give both choices";
+  EXPECT_TRUE(more_than_doubled_and_kept) << "spacing 180: more than twice the triangles, and fewer bytes";
   CodecOptions bad;
   bad.prm.tau = 0.9;
   EXPECT_EQ(prm().encode(ctx, TileView{q, {}}, bad).status().code(), ErrorCode::kInvalidArgument);

@@ -129,6 +129,61 @@ TEST(Remesh, BoundaryVerticesCollapseOntoTheGrid) {
               static_cast<unsigned long long>(with->grid_collapses));
 }
 
+// The paper's area-reducing edge flips (§2.3): they move no vertex, touch no regular triangle, lower the area of
+// the irregular band, and leave a closed manifold of the same genus whose triangles all face outwards (a sphere is
+// convex: a fold would face inwards) and stay as near the sphere as the chords' sag allows.
+TEST(Remesh, EdgeFlipsReduceTheIrregularBandsArea) {
+  const QuantizedMesh m = quantized(icosphere(5), 14);
+  auto with = remeshPiecewiseRegular(m, {}, {.tau = 0.2, .spacing = 200});
+  auto without = remeshPiecewiseRegular(m, {}, {.tau = 0.2, .spacing = 200, .flip_edges = false});
+  ASSERT_TRUE(with.isOk() && without.isOk());
+  EXPECT_GT(with->edge_flips, 20u);
+  EXPECT_EQ(without->edge_flips, 0u);
+  EXPECT_EQ(with->positions, without->positions);
+  const auto regularTriangles = [](const Remeshed& r) {
+    std::multiset<std::array<Vec3d, 3>> out;
+    for (size_t t = 0; t < r.triangles.size(); ++t)
+      if (r.regular[t]) {
+        std::array<Vec3d, 3> c;
+        for (int k = 0; k < 3; ++k) c[size_t(k)] = r.positions[r.triangles[t][size_t(k)]];
+        std::rotate(c.begin(), std::min_element(c.begin(), c.end()), c.end());
+        out.insert(c);
+      }
+    return out;
+  };
+  EXPECT_TRUE(regularTriangles(*with) == regularTriangles(*without));
+  const auto area = [](const Remeshed& r) {
+    double a = 0;
+    for (const Triangle& t : r.triangles)
+      a += vlen(vcross(vsub(r.positions[t[1]], r.positions[t[0]]), vsub(r.positions[t[2]], r.positions[t[0]]))) / 2;
+    return a;
+  };
+  EXPECT_LT(area(*with), area(*without));
+  const EdgeCheck c = checkEdges(with->positions, with->triangles);
+  EXPECT_EQ(c.boundary, 0u);
+  EXPECT_EQ(c.non_manifold, 0u);
+  EXPECT_EQ(int64_t(usedVertices(with->triangles)) - int64_t(c.edges) + int64_t(with->triangles.size()), 2);
+  // The sphere's centre and radius on the grid: the mean and the mean distance of the input's vertices.
+  Vec3d centre{0, 0, 0};
+  for (const Vec3u& p : m.positions) centre = vadd(centre, Vec3d{double(p[0]), double(p[1]), double(p[2])});
+  centre = vmul(centre, 1.0 / double(m.positions.size()));
+  double radius = 0;
+  for (const Vec3u& p : m.positions) radius += vlen(vsub(Vec3d{double(p[0]), double(p[1]), double(p[2])}, centre));
+  radius /= double(m.positions.size());
+  double worst = 0;
+  for (const Triangle& t : with->triangles) {
+    const Vec3d a = with->positions[t[0]], b = with->positions[t[1]], d = with->positions[t[2]];
+    const Vec3d mid = vmul(vadd(vadd(a, b), d), 1.0 / 3);
+    EXPECT_GT(vdot(vcross(vsub(b, a), vsub(d, a)), vsub(mid, centre)), 0);
+    worst = std::max(worst, std::abs(vlen(vsub(mid, centre)) - radius));
+  }
+  // A triangle of the 200-cell lattice, slanted up to 1 / tau = 5 times, has chords of at most 1000 cells; its
+  // centroid is within their sag, 1000^2 / (8 r), plus the input's own chords' sag and rounding.
+  EXPECT_LT(worst, 1000.0 * 1000.0 / (8 * radius) + 20);
+  std::printf("%llu flips, area %.6g -> %.6g, worst centroid %.3g cells off the sphere\n",
+              static_cast<unsigned long long>(with->edge_flips), area(*without), area(*with), worst);
+}
+
 TEST(Remesh, TorusKeepsItsGenus) {
   const QuantizedMesh m = quantized(torus(120, 60, 1.0, 0.35), 14);
   auto r = remeshPiecewiseRegular(m, {}, {.tau = 0.2, .spacing = 160});

@@ -63,8 +63,8 @@ struct PmOptions {
 // `prm` (engine/codecs/prm.cpp): the tile is remeshed into a piecewise regular mesh (the `remesh` stage,
 // engine/stages/stage.h) on hexagonal grids of spacing `grid` (a fraction of 2^bits cells), or `spacing` grid cells
 // when that is >= 0 (the error targets of jobs/ set it per tile), and coded with the regular patches' lattice. The
-// tile is coded as it is when that is smaller (a lattice finer than the tile's own triangles, most often), or with
-// spacing 0.
+// tile is coded as it is when that is smaller (a lattice finer than the tile's own triangles, most often), when its
+// remeshing would break the border contract or exceed the remesher's size limit, or with spacing 0.
 struct PrmOptions {
   double grid = 0.005;  // in (0, 1]
   double tau = 0.2;     // relief regularisation, in (0, 1/sqrt(3))

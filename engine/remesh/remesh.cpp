@@ -11,13 +11,14 @@
 // triangle. On a tile's border edge (which must stay an edge) such points get the paper's fan of zero-area
 // triangles instead. Resampling never joins two boundary vertices by a new edge (resample.cpp), so two reliefs'
 // triangles never overlap where they meet. After merging, the paper's collapse of relief boundary vertices onto
-// grid vertices (collapseOntoGrid), with a bound on how far the surface moves that the paper does not have. Not done:
-// its area-reducing edge flips.
+// grid vertices (collapseOntoGrid), then its area-reducing edge flips in the irregular band (flipToReduceArea), both
+// with a bound on how far the surface moves that the paper does not have.
 #include "engine/remesh/remesh.h"
 
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <span>
 #include <string>
 #include <unordered_map>
 #include <unordered_set>
@@ -190,6 +191,7 @@ void collapseOntoGrid(Remeshed& out, const std::vector<uint8_t>& keep, const std
   c.merge_splits = out.merge_splits;
   c.border_fans = out.border_fans;
   c.grid_collapses = out.grid_collapses;
+  c.edge_flips = out.edge_flips;
   for (u32 t = 0; t < out.triangles.size(); ++t) {
     if (dead[t]) continue;
     Triangle tri = out.triangles[t];
@@ -207,6 +209,85 @@ void collapseOntoGrid(Remeshed& out, const std::vector<uint8_t>& keep, const std
     c.regular.push_back(out.regular[t]);
   }
   out = std::move(c);
+}
+
+// The paper's edge flips after the collapses (§2.3): an edge between two irregular triangles is flipped when that
+// reduces their area, repeatedly (each flip queues the quad's four sides again), which straightens the irregular
+// band between reliefs. Regular triangles are never touched. A flip is refused when the new edge exists already,
+// when a new triangle would be degenerate or turn against either old one (no fold), or when an old corner is more
+// than a quarter of the spacing off the new triangles' planes (the surface moves by that much at most, as for the
+// collapses). Edges used by other than two triangles, or not in opposite directions, are never flipped; edges
+// between two locked vertices are kept too (a tile's border stays as it is).
+void flipToReduceArea(Remeshed& out, std::span<const uint8_t> locked_vertex, double spacing) {
+  const u32 nt = u32(out.triangles.size());
+  const auto key = [](u32 a, u32 b) { return a < b ? (u64(a) << 32 | b) : (u64(b) << 32 | a); };
+  // Per undirected edge, its two triangles (kNone: fewer; a third makes it unflippable).
+  struct Uses {
+    u32 t[2] = {kNone, kNone};
+    bool extra = false;
+  };
+  std::unordered_map<u64, Uses> edges;
+  edges.reserve(size_t(nt) * 2);
+  for (u32 t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) {
+      Uses& u = edges[key(out.triangles[t][size_t(k)], out.triangles[t][size_t((k + 1) % 3)])];
+      if (u.t[0] == kNone) u.t[0] = t;
+      else if (u.t[1] == kNone) u.t[1] = t;
+      else u.extra = true;
+    }
+  const auto normal = [&](u32 a, u32 b, u32 c) {
+    return vcross(vsub(out.positions[b], out.positions[a]), vsub(out.positions[c], out.positions[a]));
+  };
+  const auto locked = [&](u32 v) { return v < locked_vertex.size() && locked_vertex[v]; };
+  std::vector<std::array<u32, 2>> queue;  // edges as vertex pairs, in triangle order
+  for (u32 t = 0; t < nt; ++t)
+    if (!out.regular[t])
+      for (int k = 0; k < 3; ++k)
+        queue.push_back({out.triangles[t][size_t(k)], out.triangles[t][size_t((k + 1) % 3)]});
+  // Each flip lowers the total area, so this ends; the bound only caps the work on pathological input.
+  const size_t max_steps = 20 * queue.size() + 1024;
+  for (size_t head = 0; head < queue.size() && head < max_steps; ++head) {
+    const u32 a0 = queue[head][0], b0 = queue[head][1];
+    const auto it = edges.find(key(a0, b0));
+    if (it == edges.end() || it->second.extra || it->second.t[1] == kNone) continue;
+    u32 t1 = it->second.t[0], t2 = it->second.t[1];
+    if (out.regular[t1] || out.regular[t2] || (locked(a0) && locked(b0))) continue;
+    // t1 = (a, b, c) and t2 = (b, a, d), rotated so.
+    if (t1 == t2) continue;
+    const auto rotate = [&](u32 t, u32 from) {
+      Triangle tri = out.triangles[t];
+      for (int k = 0; k < 3 && tri[0] != from; ++k) std::rotate(tri.begin(), tri.begin() + 1, tri.end());
+      return tri;
+    };
+    Triangle p = rotate(t1, a0), q;
+    if (p[0] != a0 || p[1] != b0) std::swap(t1, t2), p = rotate(t1, a0);
+    if (p[0] != a0 || p[1] != b0) continue;
+    q = rotate(t2, b0);
+    if (q[0] != b0 || q[1] != a0) continue;  // not in opposite directions
+    const u32 a = a0, b = b0, c = p[2], d = q[2];
+    if (c == d || c == a || c == b || d == a || d == b || edges.count(key(c, d))) continue;
+    const Vec3d n1 = normal(a, b, c), n2 = normal(b, a, d), m1 = normal(a, d, c), m2 = normal(d, b, c);
+    const double before = vlen(n1) + vlen(n2), l1 = vlen(m1), l2 = vlen(m2);
+    if (!(l1 + l2 < before * (1 - 1e-9)) || !(l1 > 1e-9 * before) || !(l2 > 1e-9 * before)) continue;
+    if (vdot(m1, n1) <= 0 || vdot(m1, n2) <= 0 || vdot(m2, n1) <= 0 || vdot(m2, n2) <= 0) continue;
+    // a and b within a quarter of the spacing of the new triangles' planes.
+    if (std::abs(vdot(vsub(out.positions[b], out.positions[a]), m1)) > 0.25 * spacing * l1 ||
+        std::abs(vdot(vsub(out.positions[a], out.positions[b]), m2)) > 0.25 * spacing * l2)
+      continue;
+    out.triangles[t1] = {a, d, c};
+    out.triangles[t2] = {d, b, c};
+    edges.erase(key(a, b));
+    edges[key(c, d)] = Uses{{t1, t2}, false};
+    for (u32& slot : edges[key(b, c)].t)
+      if (slot == t1) slot = t2;
+    for (u32& slot : edges[key(a, d)].t)
+      if (slot == t2) slot = t1;
+    ++out.edge_flips;
+    queue.push_back({a, c});
+    queue.push_back({c, b});
+    queue.push_back({b, d});
+    queue.push_back({d, a});
+  }
 }
 
 }  // namespace
@@ -389,6 +470,14 @@ Result<Remeshed> remeshPiecewiseRegular(const QuantizedMesh& mesh, std::span<con
       keep[v] = on_lattice[v] || (lv != kNone && lv < locked.size() && locked[lv]);
     }
     collapseOntoGrid(out, keep, on_lattice, options.spacing);
+  }
+  if (out.border_fans == 0 && options.flip_edges) {
+    std::vector<uint8_t> locked_out(out.positions.size(), 0);
+    for (u32 v = 0; v < out.positions.size(); ++v) {
+      const u32 lv = out.input_vertex[v];
+      locked_out[v] = lv != kNone && lv < locked.size() && locked[lv];
+    }
+    flipToReduceArea(out, locked_out, options.spacing);
   }
   return out;
 }

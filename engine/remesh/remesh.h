@@ -20,6 +20,8 @@ struct RemeshOptions {
   uint32_t spacing = 0;  // grid spacing in grid units: even, >= 2
   // The paper's collapse of relief-boundary vertices onto grid vertices after merging (remesh.cpp).
   bool collapse_onto_grid = true;
+  // Then the paper's area-reducing edge flips between irregular triangles (remesh.cpp).
+  bool flip_edges = true;
 };
 
 struct Remeshed {
@@ -34,6 +36,7 @@ struct Remeshed {
   uint64_t merge_splits = 0;    // triangles split so that two reliefs meet vertex to vertex
   uint64_t border_fans = 0;     // tile border edges closed by a fan of zero-area triangles
   uint64_t grid_collapses = 0;  // vertices off the grid collapsed onto a grid vertex after merging
+  uint64_t edge_flips = 0;      // edges between irregular triangles flipped to reduce area
 };
 
 // Remeshes `mesh` (a tile: triangles on the integer grid; `locked` empty or one flag per vertex). Locked vertices

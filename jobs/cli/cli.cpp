@@ -175,7 +175,9 @@ options:
   --scratch-dir DIR    where those scratch files go (default: the system temp directory)
   --color-by K         for a prm container (MESH.spz coded with --codec prm): color each face by what the coder
                        made of it: `reliefs` (the relief whose lattice it is a unit triangle of; irregular faces
-                       white) or `regularity` (regular against irregular). The title gives the regular share.
+                       white) or `regularity` (regular against irregular). The title gives the regular share,
+                       and so does a line on standard output. The container is drawn whole (within
+                       --memory-budget, else it fails).
 MESH or ORIGINAL may be a container (.spz): it is drawn as `decode` would write it, a tile at a time.
 )";
 
@@ -785,14 +787,20 @@ int runRender(int argc, char** argv) {
     if (args.has("--against")) return usage("--color-by and --against both color the surface: give one", "render");
     if (!isContainerPath(inputs[0])) return usage("--color-by needs a prm container (.spz) as MESH", "render");
     auto picture =
-        latticePicture(inputs[0], *by == "reliefs" ? LatticeColoring::kReliefs : LatticeColoring::kRegularity);
+        latticePicture(inputs[0], *by == "reliefs" ? LatticeColoring::kReliefs : LatticeColoring::kRegularity, budget);
     if (!picture.isOk()) return fail(picture.status());
     char share[64];
     std::snprintf(share, sizeof share, "  %.1f%% REGULAR",
                   picture->faces ? 100.0 * double(picture->regular_faces) / double(picture->faces) : 0.0);
     s.title += share;
     s.legend = std::move(picture->legend);
+    s.face_colors = std::move(picture->face_colors);
     r = renderMesh(picture->mesh, s, *device);
+    if (r.isOk())
+      std::printf("%s: %llu faces, %llu regular (%.1f%%)\n", inputs[0].c_str(),
+                  static_cast<unsigned long long>(picture->faces),
+                  static_cast<unsigned long long>(picture->regular_faces),
+                  picture->faces ? 100.0 * double(picture->regular_faces) / double(picture->faces) : 0.0);
   } else if (needsChunks(inputs, budget)) {
     auto mesh = openSurface(inputs[0], budget, scratch);
     if (!mesh.isOk()) return fail(mesh.status());
