@@ -17,9 +17,10 @@ mkdir -p "$out"
 while read -r scan view grid; do
   src=$(ls "$data/$scan".* | head -1)
   "$bin" encode "$src" "$work/$scan.spz" --codec prm --grid "$grid" --bits 12 --no-colors --no-normals --quiet
-  for by in reliefs regularity; do
-    "$bin" render "$work/$scan.spz" "$out/prm-$scan-$by.png" --color-by "$by" --size 640,480 --view "$view"
-  done
+  # Prints the faces and the regular share once.
+  "$bin" render "$work/$scan.spz" "$out/prm-$scan-reliefs.png" --color-by reliefs --size 640,480 --view "$view"
+  "$bin" render "$work/$scan.spz" "$out/prm-$scan-regularity.png" --color-by regularity --size 640,480 \
+    --view "$view" >/dev/null
   echo "$scan: $(stat -c %s "$work/$scan.spz") bytes"
 done <<'SCANS'
 horse 90,10 0.005
