@@ -355,6 +355,9 @@ Result<LatticePicture> latticePicture(const std::string& path, LatticeColoring h
   if (vertices > UINT32_MAX)
     return makeError(ErrorCode::kLimitExceeded, path + ": more than 2^32 vertices cannot be pictured in one mesh");
   LatticePicture out;
+  out.mesh.positions.reserve(vertices);
+  out.mesh.triangles.reserve(faces);
+  out.face_colors.reserve(faces);
   std::vector<uint8_t> chunk;
   for (const TileEntry& e : file.tiles()) {
     const std::string where = path + ": tile " + std::to_string(e.tile_id);

@@ -180,7 +180,7 @@ TEST(Remesh, EdgeFlipsReduceTheIrregularBandsArea) {
   // A triangle of the 200-cell lattice, slanted up to 1 / tau = 5 times, has chords of at most 1000 cells; its
   // centroid is within their sag, 1000^2 / (8 r), plus the input's own chords' sag and rounding.
   EXPECT_LT(worst, 1000.0 * 1000.0 / (8 * radius) + 20);
-  std::printf("%llu flips, area %.6g -> %.6g, worst centroid %.3g cells off the sphere\n",
+  std::printf("%llu flips, area %.9g -> %.9g, worst centroid %.3g cells off the sphere\n",
               static_cast<unsigned long long>(with->edge_flips), area(*without), area(*with), worst);
 }
 

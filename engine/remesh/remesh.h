@@ -42,7 +42,8 @@ struct Remeshed {
 // Remeshes `mesh` (a tile: triangles on the integer grid; `locked` empty or one flag per vertex). Locked vertices
 // keep their positions and the tile's border edges (between locked vertices, used by one triangle or more than
 // two) stay edges. The result covers the same surface up to the resampling (grid vertices lie on the input
-// surface; boundaries between reliefs and the mesh's own boundaries are the input's polylines). Where the input is
+// surface; the mesh's own boundaries are the input's polylines, and so are the boundaries between reliefs before the
+// collapses and edge flips of the irregular band straighten them). Where the input is
 // a manifold the result is one. kInvalidArgument for bad options, indices or lock flags; kLimitExceeded when the
 // grid is so fine that resampling would make more than about 64 pieces per input triangle (plus 2^20 per call).
 Result<Remeshed> remeshPiecewiseRegular(const QuantizedMesh& mesh, std::span<const uint8_t> locked,
