@@ -212,9 +212,10 @@ void collapseOntoGrid(Remeshed& out, const std::vector<uint8_t>& keep, const std
 }
 
 // The paper's edge flips after the collapses (§2.3): an edge between two irregular triangles is flipped when that
-// reduces their area (the paper flips edges joining vertices from different reliefs; ours are the edges of the
-// irregular band, which holds those and the irregular faces around holes and tile borders), repeatedly (each flip queues the quad's four sides again), which straightens the irregular
-// band between reliefs. Regular triangles are never touched. A flip is refused when the new edge exists already,
+// reduces their area, repeatedly (each flip queues the quad's four sides again), which straightens the irregular
+// band between reliefs. The paper flips the edges joining vertices from different reliefs; ours are all the edges
+// of the irregular band, which holds those and the irregular faces around holes and tile borders. Regular
+// triangles are never touched. A flip is refused when the new edge exists already,
 // when a new triangle would be degenerate or turn against either old one (no fold), or when an old corner is more
 // than a quarter of the spacing off the new triangles' planes (the surface moves by that much at most, as for the
 // collapses). Edges used by other than two triangles, or not in opposite directions, are never flipped; edges
