@@ -370,13 +370,12 @@ Result<Mesh> readSurfaceFile(const std::string& path) {
 }
 
 uint64_t inMemorySurfaceBytes(const std::string& path) {
-  constexpr uint64_t kBytesPerTriangle = 200;
   if (isContainerPath(path)) {
     auto file = ContainerFile::open(path);
     if (!file.isOk()) return 0;  // the reader reports what is wrong with it
     uint64_t faces = 0;
     for (const TileEntry& e : file->tiles()) faces += e.faces;
-    return faces * kBytesPerTriangle;
+    return faces * kInMemoryBytesPerTriangle;
   }
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) return 0;
@@ -384,7 +383,7 @@ uint64_t inMemorySurfaceBytes(const std::string& path) {
   // formats are larger per triangle, which only errs on the side of the budget.
   const bool zst = path.size() > 4 && path.compare(path.size() - 4, 4, ".zst") == 0;
   const uint64_t triangles = uint64_t(st.st_size) * (zst ? 5 : 1) / 19;
-  return triangles * kBytesPerTriangle;
+  return triangles * kInMemoryBytesPerTriangle;
 }
 
 uint64_t searchIndexBytes(uint64_t triangles, uint64_t vertices) {

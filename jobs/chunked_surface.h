@@ -93,8 +93,10 @@ bool needsChunks(const std::vector<std::string>& paths, uint64_t memory_budget);
 Result<Mesh> readSurfaceFile(const std::string& path);
 bool isContainerPath(const std::string& path);
 
-// What measuring or rendering `path` whole would take in memory, estimated from its size (about 200 bytes per
-// triangle: mesh, search index, samples; a container from its index counts).
+// What measuring or rendering a surface whole takes in memory per triangle: mesh, search index, samples.
+constexpr uint64_t kInMemoryBytesPerTriangle = 200;
+// What measuring or rendering `path` whole would take in memory, estimated from its size (kInMemoryBytesPerTriangle;
+// a container from its index counts).
 uint64_t inMemorySurfaceBytes(const std::string& path);
 
 }  // namespace scanpress

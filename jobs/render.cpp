@@ -91,6 +91,11 @@ const char* glyph(char c) {
   }
 }
 
+std::string capitals(std::string text) {
+  for (char& c : text) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  return text;
+}
+
 void drawText(Image& img, int x, int y, const std::string& text, int scale) {
   for (char c : text) {
     const char* g = glyph(c);
@@ -152,19 +157,13 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
   const int title_h = s.title.empty() ? 0 : 11 * text_scale;
   // The legend: swatch and label after swatch and label, wrapped into rows at the picture's width.
   std::vector<std::array<int, 2>> legend_at;  // x, row
-  int legend_rows = 0;
-  for (const LegendEntry& e : s.legend) {
-    const int w = (9 + 6 * static_cast<int>(e.label.size())) * text_scale;
-    int x = legend_at.empty() ? 2 * text_scale : legend_at.back()[0] + 8 * text_scale;
-    if (!legend_at.empty()) {
-      const LegendEntry& prev = s.legend[legend_at.size() - 1];
-      x += (9 + 6 * static_cast<int>(prev.label.size())) * text_scale;
-    }
-    if (!legend_at.empty() && x + w > s.width) x = 2 * text_scale, ++legend_rows;
-    legend_at.push_back({x, legend_rows});
+  for (int x = 2 * text_scale, row = 0; const LegendEntry& e : s.legend) {
+    const int w = (9 + 6 * static_cast<int>(e.label.size())) * text_scale;  // swatch, gap, label
+    if (!legend_at.empty() && x + w > s.width) x = 2 * text_scale, ++row;
+    legend_at.push_back({x, row});
+    x += w + 8 * text_scale;
   }
-  if (!s.legend.empty()) ++legend_rows;
-  const int legend_h = legend_rows * 12 * text_scale;
+  const int legend_h = legend_at.empty() ? 0 : (legend_at.back()[1] + 1) * 12 * text_scale;
   const int bar = against ? std::max(60, s.width / 8) : 0;
   const int view_w = s.width - bar, view_h = s.height - title_h - legend_h;
   if (view_w < 8 || view_h < 8) return makeError(ErrorCode::kInvalidArgument, "picture too small for its labels");
@@ -322,14 +321,10 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
     for (int py = y; py < y + 7 * scale && py < s.height; ++py)
       for (int px = x; px < x + 7 * scale && px < s.width; ++px)
         for (int k = 0; k < 3; ++k) img.rgb[3 * (size_t(py) * s.width + px) + k] = s.legend[i].rgb[size_t(k)];
-    std::string caps = s.legend[i].label;
-    for (char& c : caps) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-    drawText(img, x + 9 * scale, y, caps, scale);
+    drawText(img, x + 9 * scale, y, capitals(s.legend[i].label), scale);
   }
   if (!s.title.empty()) {
-    std::string caps = s.title;
-    for (char& c : caps) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-    drawText(img, 2 * text_scale, 2 * text_scale, caps, text_scale);
+    drawText(img, 2 * text_scale, 2 * text_scale, capitals(s.title), text_scale);
   }
   return out;
 }
@@ -343,14 +338,13 @@ Result<LatticePicture> latticePicture(const std::string& path, LatticeColoring h
   static const char* const kReliefName[6] = {"+x", "-x", "+y", "-y", "+z", "-z"};
   SP_ASSIGN_OR_RETURN(ContainerFile file, ContainerFile::open(path));
   const ContainerHeader& header = file.header();
-  // The picture is drawn whole: the mesh, its face colors and the ray-casting index (as inMemorySurfaceBytes).
+  // The picture is drawn whole: the mesh, its face colors and the ray-casting index.
   uint64_t faces = 0, vertices = 0;
   for (const TileEntry& e : file.tiles()) faces += e.faces, vertices += e.vertices;
-  constexpr uint64_t kBytesPerFace = 200;
-  if (memory_budget != 0 && faces * kBytesPerFace > memory_budget)
+  if (memory_budget != 0 && faces * kInMemoryBytesPerTriangle > memory_budget)
     return makeError(ErrorCode::kLimitExceeded,
                      path + ": its " + std::to_string(faces) + " faces are pictured whole, which needs about " +
-                         std::to_string(faces * kBytesPerFace >> 20) + " MiB, over the memory budget of " +
+                         std::to_string(faces * kInMemoryBytesPerTriangle >> 20) + " MiB, over the memory budget of " +
                          std::to_string(memory_budget >> 20) + " MiB (--memory-budget)");
   if (vertices > UINT32_MAX)
     return makeError(ErrorCode::kLimitExceeded, path + ": more than 2^32 vertices cannot be pictured in one mesh");

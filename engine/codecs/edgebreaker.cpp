@@ -49,6 +49,7 @@
 
 #include "engine/codecs/codec.h"
 #include "engine/codecs/attributes.h"
+#include "engine/geometry.h"
 #include "engine/codecs/hierarchy.h"
 #include "engine/entropy/range_coder.h"
 #include "engine/io/bytes.h"
@@ -1352,14 +1353,14 @@ std::vector<int8_t> latticeFaceReliefs(const QuantizedMesh& mesh, uint32_t spaci
     const u32 mask = latticeReliefs(mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]], spacing, row);
     if (mask == 0) continue;
     // A face may be a unit triangle of several reliefs' lattices: the one whose axis its normal is nearest.
-    const Vec3u &a = mesh.positions[t[0]], &b = mesh.positions[t[1]], &c = mesh.positions[t[2]];
-    double d1[3], d2[3];
-    for (int k = 0; k < 3; ++k) d1[k] = double(b[k]) - double(a[k]), d2[k] = double(c[k]) - double(a[k]);
-    const double n[3] = {d1[1] * d2[2] - d1[2] * d2[1], d1[2] * d2[0] - d1[0] * d2[2], d1[0] * d2[1] - d1[1] * d2[0]};
+    Vec3d p[3];
+    for (int c = 0; c < 3; ++c)
+      for (int k = 0; k < 3; ++k) p[c][size_t(k)] = double(mesh.positions[t[size_t(c)]][size_t(k)]);
+    const Vec3d n = vcross(vsub(p[1], p[0]), vsub(p[2], p[0]));
     double best = -1;
     for (int r = 0; r < kLatticeKinds; ++r)
-      if ((mask >> r & 1 || mask >> (r + kLatticeKinds) & 1) && std::abs(n[r / 2]) > best)
-        best = std::abs(n[r / 2]), relief[f] = int8_t(r);
+      if ((mask >> r & 1 || mask >> (r + kLatticeKinds) & 1) && std::abs(n[size_t(r / 2)]) > best)
+        best = std::abs(n[size_t(r / 2)]), relief[f] = int8_t(r);
   }
   return relief;
 }

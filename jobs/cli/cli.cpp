@@ -789,9 +789,9 @@ int runRender(int argc, char** argv) {
     auto picture =
         latticePicture(inputs[0], *by == "reliefs" ? LatticeColoring::kReliefs : LatticeColoring::kRegularity, budget);
     if (!picture.isOk()) return fail(picture.status());
+    const double percent = picture->faces ? 100.0 * double(picture->regular_faces) / double(picture->faces) : 0.0;
     char share[64];
-    std::snprintf(share, sizeof share, "  %.1f%% REGULAR",
-                  picture->faces ? 100.0 * double(picture->regular_faces) / double(picture->faces) : 0.0);
+    std::snprintf(share, sizeof share, "  %.1f%% REGULAR", percent);
     s.title += share;
     s.legend = std::move(picture->legend);
     s.face_colors = std::move(picture->face_colors);
@@ -799,8 +799,7 @@ int runRender(int argc, char** argv) {
     if (r.isOk())
       std::printf("%s: %llu faces, %llu regular (%.1f%%)\n", inputs[0].c_str(),
                   static_cast<unsigned long long>(picture->faces),
-                  static_cast<unsigned long long>(picture->regular_faces),
-                  picture->faces ? 100.0 * double(picture->regular_faces) / double(picture->faces) : 0.0);
+                  static_cast<unsigned long long>(picture->regular_faces), percent);
   } else if (needsChunks(inputs, budget)) {
     auto mesh = openSurface(inputs[0], budget, scratch);
     if (!mesh.isOk()) return fail(mesh.status());
