@@ -244,6 +244,97 @@ TEST(Resample, FixedVerticesStayAndVerticesOnGridLinesAndPointsAreHandled) {
   EXPECT_NEAR(projectedArea(r->positions, r->triangles, 4), projectedArea(fin.positions, fin.triangles, 4), 1e-6);
 }
 
+// The direct fill of cells inside good triangles (ResampleMethod::kDirect, the default) against slicing and
+// collapsing every triangle (kSliceAll, the paper's way), a second implementation: the same regular triangles by
+// their lattice corners and the same triangle count on a wavy jittered plane, a cap, the self-overlapping spiral
+// ramp and a patch with fixed vertices and vertices on grid lines; and the direct result passes expectValid.
+std::vector<std::array<int32_t, 6>> regularCellsOf(const ResampledRelief& r) {
+  std::vector<std::array<int32_t, 6>> cells;
+  for (size_t t = 0; t < r.triangles.size(); ++t) {
+    if (!r.regular[t]) continue;
+    std::array<std::array<int32_t, 2>, 3> c{r.lattice_ij[r.triangles[t][0]], r.lattice_ij[r.triangles[t][1]],
+                                            r.lattice_ij[r.triangles[t][2]]};
+    std::sort(c.begin(), c.end());
+    cells.push_back({c[0][0], c[0][1], c[1][0], c[1][1], c[2][0], c[2][1]});
+  }
+  std::sort(cells.begin(), cells.end());
+  return cells;
+}
+
+TEST(Resample, DirectFillMatchesSlicingEveryTriangle) {
+  struct Case {
+    const char* name;
+    int relief;
+    Patch in;
+    HexLattice lattice;
+    std::vector<uint8_t> fixed;
+  };
+  std::vector<Case> cases;
+  cases.push_back({"wavy plane",
+                   4,
+                   heightField(
+                       4, 24, 100, 1000,
+                       [](double x, double y) { return 0.3 * x - 0.2 * y + 500 + 30 * std::sin(x / 90); }, 0.3),
+                   HexLattice::withSpacing(40),
+                   {}});
+  cases.push_back(
+      {"cap",
+       1,
+       heightField(1, 32, 400, 1200,
+                   [](double x,
+                      double y) { return std::sqrt(4e6 - (x - 1000) * (x - 1000) - (y - 1000) * (y - 1000)); }),
+       HexLattice::withSpacing(30),
+       {}});
+  {
+    Patch spiral;
+    const int nr = 12, nt = 180;
+    for (int k = 0; k <= nt; ++k)
+      for (int i = 0; i <= nr; ++i) {
+        const double th = 3 * std::numbers::pi * k / nt, rad = 300 + 600.0 * i / nr;
+        spiral.positions.push_back({2000 + rad * std::cos(th), 2000 + rad * std::sin(th), 500 + 120 * th});
+      }
+    const auto at = [&](int k, int i) { return uint32_t(k * (nr + 1) + i); };
+    for (int k = 0; k < nt; ++k)
+      for (int i = 0; i < nr; ++i) {
+        spiral.triangles.push_back({at(k, i), at(k, i + 1), at(k + 1, i + 1)});
+        spiral.triangles.push_back({at(k, i), at(k + 1, i + 1), at(k + 1, i)});
+      }
+    cases.push_back({"spiral ramp", 4, spiral, HexLattice::withSpacing(24), {}});
+  }
+  {
+    Patch steps = heightField(4, 20, 0, 20.0 * 20, [](double x, double y) { return std::floor(0.1 * x + 0.05 * y); });
+    std::vector<uint8_t> fixed(steps.positions.size(), 0);
+    fixed[5 * 21 + 5] = fixed[10 * 21 + 13] = fixed[15 * 21 + 7] = 1;
+    cases.push_back({"grid-aligned steps, fixed vertices", 4, steps, HexLattice::withSpacing(20), fixed});
+  }
+  {
+    // A second layer over a plane, its vertices fixed: its triangles are sliced, and its grid vertices at the corners
+    // of cells of the plane below make the direct fill give up for the whole relief.
+    Patch two = heightField(
+        4, 24, 100, 1000, [](double x, double) { return 0.1 * x; }, 0.3);
+    const Patch top = heightField(4, 4, 400, 200, [](double x, double) { return 0.1 * x + 300; });
+    const uint32_t offset = uint32_t(two.positions.size());
+    two.positions.insert(two.positions.end(), top.positions.begin(), top.positions.end());
+    for (Triangle t : top.triangles) two.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+    std::vector<uint8_t> fixed(two.positions.size(), 0);
+    std::fill(fixed.begin() + offset, fixed.end(), 1);
+    cases.push_back({"a fixed layer over a plane", 4, two, HexLattice::withSpacing(40), fixed});
+  }
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const int relief = c.relief;
+    auto direct = resampleRelief(c.in.positions, c.in.triangles, relief, c.lattice, c.fixed, ResampleMethod::kDirect);
+    auto sliced = resampleRelief(c.in.positions, c.in.triangles, relief, c.lattice, c.fixed, ResampleMethod::kSliceAll);
+    ASSERT_TRUE(direct.isOk()) << direct.status().toString();
+    ASSERT_TRUE(sliced.isOk()) << sliced.status().toString();
+    expectValid(c.in, *direct, relief, c.lattice, c.fixed);
+    const auto a = regularCellsOf(*direct), b = regularCellsOf(*sliced);
+    EXPECT_GT(a.size(), 100u);
+    EXPECT_EQ(a, b);
+    EXPECT_EQ(direct->triangles.size(), sliced->triangles.size());
+  }
+}
+
 TEST(Resample, RefusesBadArguments) {
   const Patch in = heightField(4, 4, 0, 100, [](double, double) { return 1.0; });
   EXPECT_FALSE(resampleRelief(in.positions, in.triangles, 4, HexLattice::withSpacing(3), {}).isOk());

@@ -55,27 +55,32 @@ struct Adjacency {
 };
 
 Adjacency adjacencyOf(const std::vector<Vec3d>& p, const std::vector<Triangle>& triangles) {
-  std::vector<std::pair<u32, u32>> edges;
-  edges.reserve(triangles.size() * 6);
-  for (const Triangle& t : triangles)
-    for (int k = 0; k < 3; ++k) {
-      const u32 a = t[size_t(k)], b = t[size_t((k + 1) % 3)];
-      if (a == b) continue;
-      edges.push_back({a, b});
-      edges.push_back({b, a});
-    }
-  std::sort(edges.begin(), edges.end());
-  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  // Each vertex's neighbours through its triangles' sides (two per triangle), then sorted and made unique per vertex.
   Adjacency adj;
-  adj.start.assign(p.size() + 1, 0);
-  for (const auto& e : edges) ++adj.start[e.first + 1];
-  for (size_t v = 0; v < p.size(); ++v) adj.start[v + 1] += adj.start[v];
-  adj.to.reserve(edges.size());
-  adj.length.reserve(edges.size());
-  for (const auto& e : edges) {
-    adj.to.push_back(e.second);
-    adj.length.push_back(vlen(vsub(p[e.first], p[e.second])));
+  const size_t n = p.size();
+  std::vector<u32> start(n + 1, 0);
+  for (const Triangle& t : triangles)
+    for (u32 v : t) start[v + 1] += 2;
+  for (size_t v = 0; v < n; ++v) start[v + 1] += start[v];
+  std::vector<u32> fill(start.begin(), start.end() - 1), to(start[n]);
+  for (const Triangle& t : triangles)
+    for (size_t k = 0; k < 3; ++k) {
+      const u32 v = t[k];
+      to[fill[v]++] = t[(k + 1) % 3];
+      to[fill[v]++] = t[(k + 2) % 3];
+    }
+  adj.start.assign(n + 1, 0);
+  adj.to.reserve(start[n] / 2 + n);
+  for (size_t v = 0; v < n; ++v) {
+    const auto first = to.begin() + start[v], last = to.begin() + start[v + 1];
+    std::sort(first, last);
+    for (auto it = first; it != last; ++it)
+      if (*it != v && (it == first || *it != *(it - 1))) adj.to.push_back(*it);
+    adj.start[v + 1] = u32(adj.to.size());
   }
+  adj.length.resize(adj.to.size());
+  for (size_t v = 0; v < n; ++v)
+    for (u32 e = adj.start[v]; e < adj.start[v + 1]; ++e) adj.length[e] = vlen(vsub(p[v], p[adj.to[e]]));
   return adj;
 }
 
@@ -85,9 +90,12 @@ void geodesicDistances(const Adjacency& adj, const std::vector<uint8_t>& source,
   using Entry = std::pair<double, u32>;
   std::priority_queue<Entry, std::vector<Entry>, std::greater<>> queue;
   const size_t n = source.size();
-  for (size_t v = 0; v < n; ++v) {
-    d[v * kReliefCount + size_t(r)] = source[v] ? 0.0 : kInf;
-    if (source[v]) queue.push({0.0, u32(v)});
+  for (size_t v = 0; v < n; ++v) d[v * kReliefCount + size_t(r)] = source[v] ? 0.0 : kInf;
+  for (size_t v = 0; v < n; ++v) {  // only sources next to a vertex that is not one have anything to relax
+    if (!source[v]) continue;
+    bool frontier = false;
+    for (u32 e = adj.start[v]; e < adj.start[v + 1] && !frontier; ++e) frontier = !source[adj.to[e]];
+    if (frontier) queue.push({0.0, u32(v)});
   }
   while (!queue.empty()) {
     const auto [dv, v] = queue.top();

@@ -363,8 +363,8 @@ Result<Remeshed> remeshPiecewiseRegular(const QuantizedMesh& mesh, std::span<con
   std::vector<uint8_t> on_lattice;                             // per merged vertex: a grid vertex of its relief
   std::map<std::pair<u32, u32>, std::vector<EdgePoint>> left;  // by layout edge (lower index first)
   for (u32 part = 0; part < parts; ++part) {
-    SP_ASSIGN_OR_RETURN(ResampledRelief r,
-                        resampleRelief(layout.positions, part_triangles[part], part_relief[part], lattice, fixed));
+    SP_ASSIGN_OR_RETURN(ResampledRelief r, resampleRelief(layout.positions, part_triangles[part], part_relief[part],
+                                                          lattice, fixed, options.resample));
     std::vector<u32> merged(r.positions.size());
     for (size_t v = 0; v < r.positions.size(); ++v) {
       const u32 lv = r.input_vertex[v];

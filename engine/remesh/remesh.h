@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "engine/mesh.h"
+#include "engine/remesh/resample.h"
 #include "engine/status.h"
 
 namespace scanpress {
@@ -22,6 +23,8 @@ struct RemeshOptions {
   bool collapse_onto_grid = true;
   // Then the paper's area-reducing edge flips between irregular triangles (remesh.cpp).
   bool flip_edges = true;
+  // Cells inside a relief straight from their corners' heights, or every triangle sliced (resample.h).
+  ResampleMethod resample = ResampleMethod::kDirect;
 };
 
 struct Remeshed {

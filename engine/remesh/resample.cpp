@@ -27,6 +27,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <string>
 #include <unordered_map>
 
@@ -79,11 +80,90 @@ double cross2(const double* a, const double* b, const double* c) {
   return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
 }
 
+// A lattice point's key.
+u64 pointKey(int64_t i, int64_t j) { return (u64(i + (int64_t(1) << 30)) << 32) | u64(j + (int64_t(1) << 30)); }
+// A grid edge's key: the edge of line `k` of family F between its lattice points m and m + 1 along the line (along
+// t for family 0, along s for families 1 and 2).
+u64 edgeKey(int family, int64_t k, int64_t m) {
+  return (u64(family) << 62) | (u64(k + (int64_t(1) << 30)) << 31) | u64(m + (int64_t(1) << 30));
+}
+
+// An open-addressing map from 64-bit keys (never ~0) to 32-bit values: cells and lattice points of a relief.
+class KeyMap {
+ public:
+  // The value of `key`, inserted as `fresh` if absent (`added` says which).
+  u32& insert(u64 key, u32 fresh, bool& added) {
+    if ((size_ + 1) * 2 > keys_.size()) grow();
+    size_t s = hash(key) & (keys_.size() - 1);
+    while (keys_[s] != kEmpty) {
+      if (keys_[s] == key) {
+        added = false;
+        return values_[s];
+      }
+      s = (s + 1) & (keys_.size() - 1);
+    }
+    keys_[s] = key;
+    values_[s] = fresh;
+    ++size_;
+    added = true;
+    return values_[s];
+  }
+  const u32* find(u64 key) const {
+    if (keys_.empty()) return nullptr;
+    for (size_t s = hash(key) & (keys_.size() - 1); keys_[s] != kEmpty; s = (s + 1) & (keys_.size() - 1))
+      if (keys_[s] == key) return &values_[s];
+    return nullptr;
+  }
+  template <typename F>
+  void forEach(F f) {
+    for (size_t s = 0; s < keys_.size(); ++s)
+      if (keys_[s] != kEmpty) f(keys_[s], values_[s]);
+  }
+
+ private:
+  static constexpr u64 kEmpty = ~u64(0);
+  static size_t hash(u64 k) {
+    k ^= k >> 33;
+    k *= 0xff51afd7ed558ccdull;
+    return size_t(k ^ (k >> 33));
+  }
+  void grow() {
+    std::vector<u64> keys = std::move(keys_);
+    std::vector<u32> values = std::move(values_);
+    keys_.assign(std::max<size_t>(64, keys.size() * 2), kEmpty);
+    values_.assign(keys_.size(), 0);
+    size_ = 0;
+    bool added;
+    for (size_t s = 0; s < keys.size(); ++s)
+      if (keys[s] != kEmpty) insert(keys[s], values[s], added);
+  }
+  std::vector<u64> keys_;
+  std::vector<u32> values_;
+  size_t size_ = 0;
+};
+
+// A vertex's triangles (v, a, b), given as the pairs (a, b), link into one cycle through all its neighbours (sorts
+// `ring`).
+bool closedCycle(std::span<std::pair<u32, u32>> ring) {
+  std::sort(ring.begin(), ring.end());
+  for (size_t i = 1; i < ring.size(); ++i)
+    if (ring[i].first == ring[i - 1].first) return false;
+  if (ring.size() < 3) return false;
+  u32 a = ring[0].first;
+  for (size_t steps = 0; steps < ring.size(); ++steps) {
+    const auto it = std::lower_bound(ring.begin(), ring.end(), std::pair<u32, u32>{a, 0});
+    if (it == ring.end() || it->first != a) return false;
+    a = it->second;
+    if (a == ring[0].first) return steps + 1 == ring.size();
+  }
+  return false;
+}
+
 class Resampler {
  public:
   Resampler(std::span<const Vec3d> positions, std::span<const Triangle> triangles, int relief,
-            const HexLattice& lattice, std::span<const uint8_t> fixed)
-      : relief_(relief), lattice_(lattice) {
+            const HexLattice& lattice, std::span<const uint8_t> fixed, bool direct)
+      : relief_(relief), lattice_(lattice), direct_(direct) {
     // The used vertices, numbered in order of first use.
     std::unordered_map<u32, u32> local;
     local.reserve(triangles.size());
@@ -116,10 +196,12 @@ class Resampler {
       s.f[2] = (2 * H * base[0] + G * base[1]) / (2 * G * H);
       completeLattice(s);
     }
+    // Per input triangle: kRepeats, kZeroArea or 0.
+    std::vector<uint8_t> degenerate(triangles_in_.size(), 0);
     for (size_t t = 0; t < triangles_in_.size(); ++t) {
       const Triangle& tri = triangles_in_[t];
-      if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]) {  // repeats a vertex: kept as it is
-        addTriangle(tri, kNoCell);
+      if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]) {
+        degenerate[t] = kRepeats;
         continue;
       }
       // Rounding noise of the orientation grows with the coordinates' size and the triangle's extent (lattice
@@ -135,8 +217,21 @@ class Resampler {
       if (a < -noise)
         return makeError(ErrorCode::kInvalidArgument, "resampling relief " + std::to_string(relief_) + ": triangle " +
                                                           std::to_string(t) + " faces away from it");
+      if (a <= noise) degenerate[t] = kZeroArea;
+    }
+    if (direct_) planInterior(degenerate);
+    for (size_t t = 0; t < triangles_in_.size(); ++t) {
+      if (degenerate[t] == kRepeats) {  // kept as it is
+        addTriangle(triangles_in_[t], kNoCell);
+        continue;
+      }
+      if (direct_ && !band_[t]) continue;  // only in cells filled directly
       current_triangle_ = u32(t);
-      slice(tri, a <= noise);  // (near) zero area: its pieces are fanned as they come
+      slice(triangles_in_[t], degenerate[t] == kZeroArea);  // (near) zero area: its pieces are fanned as they come
+    }
+    if (direct_ && !fillInterior()) {
+      needs_full_ = true;
+      return ResampledRelief{};
     }
     findFixed();
     collapseAll();
@@ -145,7 +240,254 @@ class Resampler {
     return std::move(out_);
   }
 
+  // The direct fill met two vertices at one of its cells' corners (overlapping layers the planning did not see):
+  // run() gave up, and the relief must be resampled with every triangle sliced.
+  bool needsFull() const { return needs_full_; }
+
  private:
+  static constexpr uint8_t kRepeats = 1, kZeroArea = 2;
+  // Cell states in cell_state_.
+  static constexpr u32 kBadCell = 1, kInteriorCell = 2;
+  struct Location {  // where a lattice point is on the input: a triangle and barycentric coordinates in it
+    u32 triangle;
+    double b[3];
+    bool conflict;  // also in a triangle that shares no vertex with that one: another layer
+  };
+
+  static std::array<int64_t, 3> cellOf(u64 cell) {  // i, j, up
+    return {int64_t(cell >> 33) - (int64_t(1) << 30), int64_t((cell >> 1) & 0xffffffffull) - (int64_t(1) << 30),
+            int64_t(cell & 1)};
+  }
+  static std::array<std::array<int64_t, 2>, 3> cellCorners(u64 cell) {  // counterclockwise
+    const auto [i, j, up] = cellOf(cell);
+    if (up) return {{{i, j}, {i + 1, j}, {i, j + 1}}};
+    return {{{i + 1, j}, {i + 1, j + 1}, {i, j + 1}}};
+  }
+
+  // Calls f with every cell the triangle may overlap (a superset: each row's part of the triangle by its extents
+  // in s and u, padded by kSnap).
+  template <typename F>
+  void forCells(const Triangle& tri, F f) const {
+    const double* p[3] = {verts_[tri[0]].f, verts_[tri[1]].f, verts_[tri[2]].f};
+    const double tmin = std::min({p[0][1], p[1][1], p[2][1]}), tmax = std::max({p[0][1], p[1][1], p[2][1]});
+    for (int64_t j = int64_t(std::floor(tmin - kSnap)); j <= int64_t(std::floor(tmax + kSnap)); ++j) {
+      // The triangle's part in the row j <= t <= j + 1: its corners there and its sides' crossings of the row's
+      // two lines.
+      double smin = INFINITY, smax = -INFINITY, umin = INFINITY, umax = -INFINITY;
+      const auto take = [&](double s, double u) {
+        smin = std::min(smin, s);
+        smax = std::max(smax, s);
+        umin = std::min(umin, u);
+        umax = std::max(umax, u);
+      };
+      for (int k = 0; k < 3; ++k) {
+        const double *a = p[k], *b = p[(k + 1) % 3];
+        if (a[1] >= double(j) - kSnap && a[1] <= double(j + 1) + kSnap) take(a[0], a[2]);
+        for (const double line : {double(j), double(j + 1)})
+          if ((a[1] - line) * (b[1] - line) < 0) {
+            const double l = (line - a[1]) / (b[1] - a[1]);
+            take(a[0] + l * (b[0] - a[0]), a[2] + l * (b[2] - a[2]));
+          }
+      }
+      if (smin > smax) continue;
+      smin -= kSnap;
+      smax += kSnap;
+      umin -= kSnap;
+      umax += kSnap;
+      for (int64_t i = int64_t(std::floor(smin)); i <= int64_t(std::floor(smax)); ++i) {
+        const double lo = double(i + j);
+        if (umax >= lo && umin <= lo + 1) f(cellId(i, j, true));
+        if (umax >= lo + 1 && umin <= lo + 2) f(cellId(i, j, false));
+      }
+    }
+  }
+
+  // Finds the cells to fill directly and the triangles to slice (band_). A cell is filled directly when every
+  // triangle that may overlap it is good (not zero-area, corners neither flagged by the caller nor on a boundary,
+  // each corner's triangles one closed fan winding once around it in projection) and each of its corners lies in
+  // one good triangle (or in several that share a vertex: on their common side or corner). Such a cell is covered
+  // once by good triangles (a boundary crossing it would bring a bad triangle), so slicing and collapsing it would
+  // leave exactly its grid triangle, with its corners' heights on the input.
+  void planInterior(const std::vector<uint8_t>& degenerate) {
+    const size_t n_in = input_vertex_.size(), m = triangles_in_.size();
+    std::vector<u32> start(n_in + 1, 0);
+    for (const Triangle& tri : triangles_in_)
+      for (u32 v : tri) ++start[v + 1];
+    for (size_t v = 0; v < n_in; ++v) start[v + 1] += start[v];
+    std::vector<u32> fill(start.begin(), start.end() - 1);
+    std::vector<std::pair<u32, u32>> ring(start[n_in]);
+    std::vector<double> turn(n_in, 0);
+    std::vector<uint8_t> good(n_in, 1);
+    for (size_t t = 0; t < m; ++t) {
+      const Triangle& tri = triangles_in_[t];
+      for (size_t k = 0; k < 3; ++k) {
+        const u32 v = tri[k], a = tri[(k + 1) % 3], b = tri[(k + 2) % 3];
+        ring[fill[v]++] = {a, b};
+        if (degenerate[t]) {
+          good[v] = 0;
+          continue;
+        }
+        const double *pv = verts_[v].f, *pa = verts_[a].f, *pb = verts_[b].f;
+        const double ax = pa[0] - pv[0], ay = pa[1] - pv[1], bx = pb[0] - pv[0], by = pb[1] - pv[1];
+        turn[v] += std::atan2(ax * by - ay * bx, ax * bx + ay * by);
+      }
+    }
+    for (u32 v = 0; v < n_in; ++v)
+      good[v] = good[v] && fixed_in_[v] == 0 && std::abs(turn[v] - 2 * std::numbers::pi) < 1 &&
+                closedCycle(std::span(ring).subspan(start[v], start[v + 1] - start[v]));
+    std::vector<uint8_t> good_triangle(m, 0);
+    cell_start_.assign(1, 0);
+    bool added;
+    for (size_t t = 0; t < m; ++t) {
+      const Triangle& tri = triangles_in_[t];
+      if (degenerate[t] != kRepeats) {
+        good_triangle[t] = !degenerate[t] && good[tri[0]] && good[tri[1]] && good[tri[2]];
+        forCells(tri, [&](u64 cell) {
+          tri_cells_.push_back(cell);
+          u32& state = cell_state_.insert(cell, 0, added);
+          if (!good_triangle[t]) state |= kBadCell;
+        });
+      }
+      cell_start_.push_back(u32(tri_cells_.size()));
+    }
+    // Lattice points in good triangles.
+    for (size_t t = 0; t < m; ++t) {
+      if (!good_triangle[t]) continue;
+      const Triangle& tri = triangles_in_[t];
+      const double* p[3] = {verts_[tri[0]].f, verts_[tri[1]].f, verts_[tri[2]].f};
+      const double area = cross2(p[0], p[1], p[2]);
+      const double tmin = std::min({p[0][1], p[1][1], p[2][1]}), tmax = std::max({p[0][1], p[1][1], p[2][1]});
+      for (int64_t j = int64_t(std::ceil(tmin - kSnap)); j <= int64_t(std::floor(tmax + kSnap)); ++j) {
+        double lo = INFINITY, hi = -INFINITY;  // the line t = j's part in the triangle
+        for (int k = 0; k < 3; ++k) {
+          const double *a = p[k], *b = p[(k + 1) % 3];
+          if (a[1] == double(j)) {
+            lo = std::min(lo, a[0]);
+            hi = std::max(hi, a[0]);
+          } else if ((a[1] - double(j)) * (b[1] - double(j)) < 0) {
+            const double s = a[0] + (double(j) - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+            lo = std::min(lo, s);
+            hi = std::max(hi, s);
+          }
+        }
+        if (lo > hi) continue;
+        for (int64_t i = int64_t(std::ceil(lo - kSnap)); i <= int64_t(std::floor(hi + kSnap)); ++i) {
+          const double x[2] = {double(i), double(j)};
+          const double b0 = cross2(p[1], p[2], x) / area, b1 = cross2(p[2], p[0], x) / area, b2 = 1 - b0 - b1;
+          if (b0 < -1e-9 || b1 < -1e-9 || b2 < -1e-9) continue;
+          u32& at = located_.insert(pointKey(i, j), u32(locations_.size()), added);
+          if (added) {
+            locations_.push_back({u32(t), {b0, b1, b2}, false});
+          } else {
+            const Triangle& other = triangles_in_[locations_[at].triangle];
+            bool shares = false;
+            for (u32 v : tri) shares = shares || v == other[0] || v == other[1] || v == other[2];
+            if (!shares) locations_[at].conflict = true;
+          }
+        }
+      }
+    }
+    cell_state_.forEach([&](u64 cell, u32& state) {
+      if (state & kBadCell) return;
+      for (const auto& c : cellCorners(cell)) {
+        const u32* at = located_.find(pointKey(c[0], c[1]));
+        if (!at || locations_[*at].conflict) return;
+      }
+      state |= kInteriorCell;
+    });
+    band_.assign(m, 0);
+    for (size_t t = 0; t < m; ++t)
+      for (u32 k = cell_start_[t]; k < cell_start_[t + 1] && !band_[t]; ++k)
+        band_[t] = !(*cell_state_.find(tri_cells_[k]) & kInteriorCell);
+  }
+
+  bool interiorCell(u64 cell) const {
+    if (!direct_) return false;
+    const u32* state = cell_state_.find(cell);
+    return state && (*state & kInteriorCell);
+  }
+
+  // The vertex at lattice point (i, j) of the kept pieces, or a new one at the input's height there.
+  u32 latticeVertex(int64_t i, int64_t j) {
+    bool added;
+    const u32 id = lattice_id_.insert(pointKey(i, j), u32(positions_.size()), added);
+    if (!added) return id;
+    const Location& l = locations_[*located_.find(pointKey(i, j))];
+    const Triangle& tri = triangles_in_[l.triangle];
+    Vec3d p{0, 0, 0};
+    for (int k = 0; k < 3; ++k) p = vadd(p, vmul(positions_[tri[size_t(k)]], l.b[k]));
+    SliceVertex x;
+    x.f[0] = double(i);
+    x.f[1] = double(j);
+    x.f[2] = double(i + j);
+    x.on = 7;
+    positions_.push_back(p);
+    verts_.push_back(x);
+    origin_.push_back(l.triangle);
+    return id;
+  }
+
+  // Fills the cells planInterior chose: each cell's polygon (its corners and the points the kept pieces have on its
+  // sides) is fanned as a piece. False when two of the kept pieces' vertices are at one of those corners.
+  bool fillInterior() {
+    constexpr u32 kTwice = kNone - 1;
+    std::vector<uint8_t> seen(positions_.size(), 0);
+    std::vector<std::pair<std::pair<u64, double>, u32>> on_side;  // (grid edge, position along it), vertex
+    for (const Triangle& tri : tris_)
+      for (u32 v : tri) {
+        if (seen[v]) continue;
+        seen[v] = 1;
+        const SliceVertex& s = verts_[v];
+        if (s.on == 7) {
+          bool added;
+          u32& id = lattice_id_.insert(pointKey(int64_t(s.f[0]), int64_t(s.f[1])), v, added);
+          if (!added && id != v) id = kTwice;
+        } else if (s.on) {
+          const int family = s.on == 1 ? 0 : s.on == 2 ? 1 : 2;
+          const double along = family == 0 ? s.f[1] : s.f[0];
+          on_side.push_back({{edgeKey(family, int64_t(s.f[family]), int64_t(std::floor(along))), along}, v});
+        }
+      }
+    std::sort(on_side.begin(), on_side.end());
+    std::vector<u64> cells;
+    cell_state_.forEach([&](u64 cell, u32 state) {
+      if (state & kInteriorCell) cells.push_back(cell);
+    });
+    std::sort(cells.begin(), cells.end());
+    std::vector<u32> poly;
+    for (const u64 cell : cells) {
+      const auto [i, j, up] = cellOf(cell);
+      const auto corners = cellCorners(cell);
+      // Per side from corner k to k + 1: its family, line, index along the line, and whether it runs forward.
+      struct Side {
+        int family;
+        int64_t line, m;
+        bool forward;
+      };
+      const Side sides[3] = {up ? Side{1, j, i, true} : Side{0, i + 1, j, true},
+                             up ? Side{2, i + j + 1, i, false} : Side{1, j + 1, i, false},
+                             up ? Side{0, i, j, false} : Side{2, i + j + 1, i, true}};
+      poly.clear();
+      for (int k = 0; k < 3; ++k) {
+        const u32 c = latticeVertex(corners[size_t(k)][0], corners[size_t(k)][1]);
+        if (c == kTwice) return false;
+        poly.push_back(c);
+        const u64 key = edgeKey(sides[k].family, sides[k].line, sides[k].m);
+        const auto first = std::lower_bound(on_side.begin(), on_side.end(),
+                                            std::pair<std::pair<u64, double>, u32>{{key, -INFINITY}, 0});
+        auto last = first;
+        while (last != on_side.end() && last->first.first == key) ++last;
+        if (sides[k].forward)
+          for (auto it = first; it != last; ++it) poly.push_back(it->second);
+        else
+          for (auto it = last; it != first;) poly.push_back((--it)->second);
+      }
+      current_triangle_ = locations_[*located_.find(pointKey(corners[0][0], corners[0][1]))].triangle;
+      emitFan(poly, false, cell);
+    }
+    return true;
+  }
+
   // A coordinate within kSnap of an integer is that integer: the vertex is on that line. Then a vertex on two line
   // families is a lattice vertex, and its third coordinate is made exact too.
   static void completeLattice(SliceVertex& s) {
@@ -257,18 +599,35 @@ class Resampler {
     for (const std::vector<u32>& poly : pieces) emitPiece(poly, degenerate);
   }
 
-  void emitPiece(const std::vector<u32>& poly, bool degenerate) {
-    const size_t m = poly.size();
-    // The piece's cell, from its centroid.
+  // The piece's cell. A piece is within one strip of each family, k <= f < k + 1 with its largest f in (k, k + 1]
+  // (coordinates within kSnap of an integer are that integer, so the largest is exact); a zero-area piece of a
+  // zero-area triangle may not be, and is placed by its centroid.
+  u64 pieceCell(const std::vector<u32>& poly) const {
+    double hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (u32 v : poly)
+      for (int k = 0; k < 3; ++k) hi[k] = std::max(hi[k], verts_[v].f[k]);
+    const int64_t i = int64_t(std::ceil(hi[0])) - 1, j = int64_t(std::ceil(hi[1])) - 1,
+                  u = int64_t(std::ceil(hi[2])) - 1;
+    if (u == i + j || u == i + j + 1) return cellId(i, j, u == i + j);
     double s = 0, t = 0;
     for (u32 v : poly) {
       s += verts_[v].f[0];
       t += verts_[v].f[1];
     }
-    s /= double(m);
-    t /= double(m);
+    s /= double(poly.size());
+    t /= double(poly.size());
     const double fi = std::floor(s), fj = std::floor(t);
-    const u64 cell = cellId(int64_t(fi), int64_t(fj), (s - fi) + (t - fj) < 1);
+    return cellId(int64_t(fi), int64_t(fj), (s - fi) + (t - fj) < 1);
+  }
+
+  // A piece in a cell filled directly is dropped.
+  void emitPiece(const std::vector<u32>& poly, bool degenerate) {
+    const u64 cell = pieceCell(poly);
+    if (!interiorCell(cell)) emitFan(poly, degenerate, cell);
+  }
+
+  void emitFan(const std::vector<u32>& poly, bool degenerate, u64 cell) {
+    const size_t m = poly.size();
     // A fan from the first corner that makes no zero-area triangle (a convex polygon with points along its sides
     // has one unless all its corners are on two sides of one corner); else a fan around the centroid.
     size_t apex = m;
@@ -347,18 +706,7 @@ class Resampler {
       if (a == v || b == v || a == b) return false;
       next.push_back({a, b});
     }
-    std::sort(next.begin(), next.end());
-    for (size_t i = 1; i < next.size(); ++i)
-      if (next[i].first == next[i - 1].first) return false;
-    if (next.size() < 3) return false;
-    u32 a = next[0].first;
-    for (size_t steps = 0; steps < next.size(); ++steps) {
-      const auto it = std::lower_bound(next.begin(), next.end(), std::pair<u32, u32>{a, 0});
-      if (it == next.end() || it->first != a) return false;
-      a = it->second;
-      if (a == next[0].first) return steps + 1 == next.size();
-    }
-    return false;
+    return closedCycle(next);
   }
 
   bool shareCell(u32 a, u32 b, u32 c) const {
@@ -595,6 +943,15 @@ class Resampler {
 
   const int relief_;
   const HexLattice lattice_;
+  const bool direct_;        // fill cells inside good triangles directly (planInterior)
+  bool needs_full_ = false;  // see needsFull()
+  // The direct fill's plan: per input triangle the cells it may overlap (from cell_start_[t]), each cell's state,
+  // where lattice points are on the input, which triangles to slice, and the kept pieces' lattice vertices.
+  std::vector<u32> cell_start_;
+  std::vector<u64> tri_cells_;
+  KeyMap cell_state_, located_, lattice_id_;
+  std::vector<Location> locations_;
+  std::vector<uint8_t> band_;
   std::vector<Triangle> triangles_in_;  // local vertex ids
   std::vector<Vec3d> positions_;        // the used input vertices, then the added ones
   std::vector<u32> input_vertex_;       // per used input vertex: its input index
@@ -638,7 +995,8 @@ std::array<double, 2> latticeCoordinates(const HexLattice& lattice, const std::a
 }
 
 Result<ResampledRelief> resampleRelief(std::span<const Vec3d> positions, std::span<const Triangle> triangles,
-                                       int relief, const HexLattice& lattice, std::span<const uint8_t> fixed) {
+                                       int relief, const HexLattice& lattice, std::span<const uint8_t> fixed,
+                                       ResampleMethod method) {
   if (lattice.spacing < 2 || lattice.spacing % 2 != 0 || lattice.row == 0)
     return makeError(ErrorCode::kInvalidArgument,
                      "resampling: grid spacing " + std::to_string(lattice.spacing) + " is not an even number >= 2");
@@ -656,7 +1014,11 @@ Result<ResampledRelief> resampleRelief(std::span<const Vec3d> positions, std::sp
           return makeError(ErrorCode::kInvalidArgument,
                            "resampling: triangle " + std::to_string(t) + " has a corner beyond 2^25 grid units");
     }
-  return Resampler(positions, triangles, relief, lattice, fixed).run();
+  if (method == ResampleMethod::kSliceAll) return Resampler(positions, triangles, relief, lattice, fixed, false).run();
+  Resampler direct(positions, triangles, relief, lattice, fixed, true);
+  auto r = direct.run();
+  if (!r.isOk() || !direct.needsFull()) return r;
+  return Resampler(positions, triangles, relief, lattice, fixed, false).run();
 }
 
 }  // namespace scanpress

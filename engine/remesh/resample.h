@@ -72,7 +72,15 @@ enum ResampleFlag : uint8_t {
 // one triangle or by more than two, or a vertex whose triangles do not form one fan. Triangles that repeat a vertex are kept as they are.
 // kInvalidArgument for a spacing that is odd or below 2, a relief id outside 0..5, indices out of range, corners
 // beyond 2^25 grid units, or a triangle facing away from the relief (beyond the rounding noise of its orientation).
+// How the inside of a relief is resampled. kDirect: cells that only good triangles cover (no boundary, no
+// fixed or zero-area triangle, one layer) get their grid triangle straight from their corners' heights on the input,
+// which is what slicing and collapsing them leaves, and only the triangles over the other cells are sliced; it falls
+// back to kSliceAll when overlapping layers meet at a corner it would fill. kSliceAll: every triangle is sliced and
+// collapsed, as the paper does (tests compare the two).
+enum class ResampleMethod : uint8_t { kDirect, kSliceAll };
+
 Result<ResampledRelief> resampleRelief(std::span<const Vec3d> positions, std::span<const Triangle> triangles,
-                                       int relief, const HexLattice& lattice, std::span<const uint8_t> fixed);
+                                       int relief, const HexLattice& lattice, std::span<const uint8_t> fixed,
+                                       ResampleMethod method = ResampleMethod::kDirect);
 
 }  // namespace scanpress
