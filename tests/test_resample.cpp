@@ -9,6 +9,7 @@
 #include <numbers>
 #include <map>
 #include <random>
+#include <set>
 
 #include "engine/geometry.h"
 #include "engine/remesh/relief.h"
@@ -72,7 +73,7 @@ double projectedArea(const std::vector<Vec3d>& p, const std::vector<Triangle>& t
 
 // The checks every resampled relief must pass.
 void expectValid(const Patch& in, const ResampledRelief& r, int relief, const HexLattice& lattice,
-                 const std::vector<uint8_t>& fixed = {}) {
+                 const std::vector<uint8_t>& fixed = {}, size_t* irregular_inside = nullptr) {
   ASSERT_EQ(r.regular.size(), r.triangles.size());
   ASSERT_EQ(r.kind.size(), r.positions.size());
   ASSERT_EQ(r.input_vertex.size(), r.positions.size());
@@ -98,7 +99,9 @@ void expectValid(const Patch& in, const ResampledRelief& r, int relief, const He
       used[v] = 1;
       on_boundary = on_boundary || (r.kind[v] & kFixedVertex);
     }
-    if (!on_boundary) {
+    if (!on_boundary && irregular_inside) {
+      *irregular_inside += !r.regular[i];
+    } else if (!on_boundary) {
       EXPECT_TRUE(r.regular[i]) << "interior triangle " << i << " is not a grid triangle";
     }
     if (r.regular[i])  // its corners are grid points of one cell, at the integer base coordinates of the lattice
@@ -333,6 +336,53 @@ TEST(Resample, DirectFillMatchesSlicingEveryTriangle) {
     EXPECT_EQ(a, b);
     EXPECT_EQ(direct->triangles.size(), sliced->triangles.size());
   }
+}
+
+// A tile's border: rough tiles whose boundary vertices are all fixed by the caller (a tile's locked border), at
+// grids finer than the input. Every point a grid line adds on a border edge must leave it (the border edges come
+// back whole) and no triangle may flip. Where no collapse along the edge can go, the point is removed by
+// triangulating the hole it leaves; before that existed, collapses checking nothing but the topology flipped
+// thousands of triangles on these tiles. The holes' triangles may be irregular without a fixed corner (at most a
+// few per point removed so).
+TEST(Resample, TileBorderPointsLeaveWithoutFlippingATriangle) {
+  const int cells = 12;
+  uint64_t retriangulated = 0;
+  for (uint32_t seed = 1; seed <= 8; ++seed) {
+    SCOPED_TRACE("seed " + std::to_string(seed));
+    const Patch in = heightField(
+        4, cells, 100, 600,
+        [&](double x, double y) { return 40 * std::sin(x / 37.0 + seed) * std::cos(y / 23.0) + 0.05 * x; }, 0.3, seed);
+    std::vector<uint8_t> fixed(in.positions.size(), 0);
+    for (int j = 0; j <= cells; ++j)
+      for (int i = 0; i <= cells; ++i)
+        if (i == 0 || j == 0 || i == cells || j == cells) fixed[size_t(j * (cells + 1) + i)] = kFixedByCaller;
+    std::set<std::pair<uint32_t, uint32_t>> border;  // input boundary edges, as input vertex pairs
+    {
+      std::map<std::pair<uint32_t, uint32_t>, int> uses;
+      for (const Triangle& t : in.triangles)
+        for (int k = 0; k < 3; ++k) ++uses[std::minmax(t[size_t(k)], t[size_t((k + 1) % 3)])];
+      for (const auto& [e, n] : uses)
+        if (n == 1) border.insert(e);
+    }
+    for (uint32_t spacing : {6u, 10u, 16u}) {
+      SCOPED_TRACE("spacing " + std::to_string(spacing));
+      const HexLattice lattice = HexLattice::withSpacing(spacing);
+      auto r = resampleRelief(in.positions, in.triangles, 4, lattice, fixed);
+      ASSERT_TRUE(r.isOk()) << r.status().toString();
+      size_t irregular_inside = 0;
+      expectValid(in, *r, 4, lattice, fixed, &irregular_inside);
+      EXPECT_LE(irregular_inside, 2 * r->retriangulated);
+      retriangulated += r->retriangulated;
+      std::set<std::pair<uint32_t, uint32_t>> edges;
+      for (const Triangle& t : r->triangles)
+        for (int k = 0; k < 3; ++k) {
+          const uint32_t a = r->input_vertex[t[size_t(k)]], b = r->input_vertex[t[size_t((k + 1) % 3)]];
+          if (a != UINT32_MAX && b != UINT32_MAX) edges.insert(std::minmax(a, b));
+        }
+      for (const auto& e : border) EXPECT_TRUE(edges.count(e)) << "border edge " << e.first << "-" << e.second;
+    }
+  }
+  EXPECT_GT(retriangulated, 100u);
 }
 
 TEST(Resample, RefusesBadArguments) {

@@ -22,6 +22,12 @@
 //   edge), and only vertices whose triangles form one closed fan move.
 // - A vertex prefers to collapse onto a grid vertex, then onto a vertex on a grid line, then onto any other, nearest
 //   first; passes repeat until none is possible.
+// - Not in the paper, for speed (ResampleMethod::kDirect, the default): inside the relief, slicing and collapsing
+//   leave each cell's grid triangle with its corners at the input's heights, so cells that only good triangles
+//   cover (planInterior says which) are filled directly, and only the triangles over the other cells (the band along
+//   boundaries, fixed vertices and zero-area triangles) are sliced. Each directly filled cell is first a polygon of
+//   its corners and the points the band's pieces have on its sides, so the mesh stays conforming, and the usual
+//   collapses then remove those points. kSliceAll does what the paper does; tests compare the two.
 #include "engine/remesh/resample.h"
 
 #include <algorithm>
@@ -720,15 +726,14 @@ class Resampler {
   int rank(u32 v) const { return (verts_[v].on == 7) ? 0 : verts_[v].on ? 1 : 2; }
   bool removable(u32 v) const { return !fixed_[v] && verts_[v].on != 7; }
 
-  // Collapses u onto w if allowed.
   // Collapses u onto w if allowed. incident_ lists hold live triangles only. `along_boundary`: u and w are
   // neighbours on the relief's boundary (one triangle on their edge), and the cells are not kept.
-  // How a collapse along the boundary checks geometry: the projection (as inside), the normals in space, nothing.
-  enum class Check { kProjection, kSpace, kTopologyOnly };
+  // How a collapse along the boundary checks geometry: the projection (as inside), or the normals in space.
+  enum class Check { kProjection, kSpace };
 
   bool tryCollapse(u32 u, u32 w, bool along_boundary = false, Check check = Check::kProjection) {
     // Every moved triangle stays counterclockwise in projection and inside one cell (kSpace: its normal in space
-    // stays within 90 degrees of its old one; kTopologyOnly: no geometric test).
+    // stays within 90 degrees of its old one).
     opposite_.clear();
     for (u32 t : incident_[u]) {
       Triangle tri = tris_[t];
@@ -742,9 +747,7 @@ class Resampler {
           if (x != w) opposite_.push_back(x);
         continue;
       }
-      if (check == Check::kTopologyOnly) {
-        // only the link condition below
-      } else if (check == Check::kSpace) {
+      if (check == Check::kSpace) {
         const Triangle& old = tris_[t];
         const auto normal = [&](const Triangle& x) {
           return vcross(vsub(positions_[x[1]], positions_[x[0]]), vsub(positions_[x[2]], positions_[x[0]]));
@@ -846,6 +849,135 @@ class Resampler {
     }
   }
 
+  // Removes point c of an input edge by triangulating the hole its triangles leave, in projection, with the
+  // segment between its two neighbours on that edge as a side: so the edge loses the point without a triangle
+  // folding (a half-edge collapse fans the hole from one corner, which folds when the hole is not star-shaped from
+  // it). c's neighbours must be a path (c on the relief's boundary) from one neighbour on the edge to the other, or
+  // a cycle through both (c inside: the hole is cut in two by that segment). Each part is cut into ears, in
+  // projection counterclockwise with no other corner inside, never making an edge that exists already or that joins
+  // two vertices of a boundary shared with another relief. False, with nothing changed, when that is not possible.
+  bool retriangulateWithout(u32 c) {
+    std::vector<std::pair<u32, u32>> ring;  // (a, b) per triangle (c, a, b)
+    for (u32 t : incident_[c]) {
+      const Triangle& tri = tris_[t];
+      const int k = tri[0] == c ? 0 : tri[1] == c ? 1 : 2;
+      const u32 a = tri[size_t((k + 1) % 3)], b = tri[size_t((k + 2) % 3)];
+      if (a == c || b == c || a == b) return false;
+      ring.push_back({a, b});
+    }
+    std::sort(ring.begin(), ring.end());
+    for (size_t i = 1; i < ring.size(); ++i)
+      if (ring[i].first == ring[i - 1].first) return false;
+    const auto next = [&](u32 a) {
+      const auto it = std::lower_bound(ring.begin(), ring.end(), std::pair<u32, u32>{a, 0});
+      return it != ring.end() && it->first == a ? it->second : kNone;
+    };
+    // The link in order: from a start with no predecessor (a path), else from any neighbour (a cycle).
+    u32 start = ring[0].first;
+    bool path = false;
+    for (const auto& [a, b] : ring) {
+      bool has_before = false;
+      for (const auto& [a2, b2] : ring) has_before = has_before || b2 == a;
+      if (!has_before) {
+        start = a;
+        path = true;
+        break;
+      }
+    }
+    std::vector<u32> link = {start};
+    for (size_t steps = 0; steps < ring.size(); ++steps) {
+      const u32 b = next(link.back());
+      if (b == kNone) return false;
+      if (!path && b == start) break;
+      link.push_back(b);
+    }
+    if (link.size() != ring.size() + (path ? 1 : 0)) return false;
+    std::vector<std::vector<u32>> holes;
+    u32 x = kNone, y = kNone;
+    if (path) {
+      x = link.front();
+      y = link.back();
+      if (!sameInputEdge(c, x) || !sameInputEdge(c, y) || hasEdge(x, y)) return false;
+      holes.push_back(link);
+    } else {
+      std::vector<size_t> on_edge;
+      for (size_t i = 0; i < link.size(); ++i)
+        if (sameInputEdge(c, link[i])) on_edge.push_back(i);
+      if (on_edge.size() != 2 || hasEdge(link[on_edge[0]], link[on_edge[1]])) return false;
+      x = link[on_edge[0]];
+      y = link[on_edge[1]];
+      holes.emplace_back(link.begin() + std::ptrdiff_t(on_edge[0]), link.begin() + std::ptrdiff_t(on_edge[1]) + 1);
+      std::vector<u32> other(link.begin() + std::ptrdiff_t(on_edge[1]), link.end());
+      other.insert(other.end(), link.begin(), link.begin() + std::ptrdiff_t(on_edge[0]) + 1);
+      holes.push_back(std::move(other));
+    }
+    std::vector<Triangle> made;
+    std::vector<std::pair<u32, u32>> diagonals;  // new edges so far (lower first)
+    for (std::vector<u32> poly : holes) {
+      while (poly.size() > 3) {
+        size_t best = poly.size();
+        double best_length = INFINITY;
+        for (size_t i = 0; i < poly.size(); ++i) {
+          const u32 p = poly[(i + poly.size() - 1) % poly.size()], q = poly[i], r = poly[(i + 1) % poly.size()];
+          if (!(cross2(verts_[p].f, verts_[q].f, verts_[r].f) > kMinArea)) continue;
+          bool empty = true;
+          for (u32 o : poly) {
+            if (o == p || o == q || o == r) continue;
+            const double* f = verts_[o].f;
+            if (cross2(verts_[p].f, verts_[q].f, f) >= 0 && cross2(verts_[q].f, verts_[r].f, f) >= 0 &&
+                cross2(verts_[r].f, verts_[p].f, f) >= 0) {
+              empty = false;
+              break;
+            }
+          }
+          if (!empty || hasEdge(p, r) ||
+              std::find(diagonals.begin(), diagonals.end(), std::pair<u32, u32>(std::min(p, r), std::max(p, r))) !=
+                  diagonals.end() ||
+              (fixed_[p] && shared_[p] && fixed_[r] && shared_[r]))
+            continue;
+          const double length = std::hypot(verts_[r].f[0] - verts_[p].f[0], verts_[r].f[1] - verts_[p].f[1]);
+          if (length < best_length) {
+            best_length = length;
+            best = i;
+          }
+        }
+        if (best == poly.size()) return false;
+        const u32 p = poly[(best + poly.size() - 1) % poly.size()], r = poly[(best + 1) % poly.size()];
+        made.push_back({p, poly[best], r});
+        diagonals.push_back({std::min(p, r), std::max(p, r)});
+        poly.erase(poly.begin() + std::ptrdiff_t(best));
+      }
+      if (!(cross2(verts_[poly[0]].f, verts_[poly[1]].f, verts_[poly[2]].f) > kMinArea)) return false;
+      made.push_back({poly[0], poly[1], poly[2]});
+    }
+    for (u32 t : incident_[c]) {
+      dead_[t] = 1;
+      for (u32 v : tris_[t])
+        if (v != c) {
+          auto& list = incident_[v];
+          list.erase(std::remove(list.begin(), list.end(), t), list.end());
+        }
+    }
+    incident_[c].clear();
+    for (const Triangle& tri : made) {
+      const u32 t = u32(tris_.size());
+      tris_.push_back(tri);
+      tri_cell_.push_back(kNoCell);
+      dead_.push_back(0);
+      for (u32 v : tri) incident_[v].push_back(t);
+    }
+    ++out_.retriangulated;
+    return true;
+  }
+
+  // A live triangle has both a and b.
+  bool hasEdge(u32 a, u32 b) const {
+    for (u32 t : incident_[a])
+      for (u32 v : tris_[t])
+        if (v == b) return true;
+    return false;
+  }
+
   // x is on u's input edge (an end of it, or another point added on it).
   bool sameInputEdge(u32 u, u32 x) const {
     const u32 e0 = verts_[u].edge[0], e1 = verts_[u].edge[1];
@@ -856,23 +988,28 @@ class Resampler {
   // edge onto its neighbours there, where no triangle flips: the boundary then has the input's vertices only, and
   // neighbouring reliefs (and tiles) meet along the same edges. Points that cannot go stay (ResampledRelief's
   // input_edge names their edge).
-  // On a tile's border (an input edge between two vertices the caller fixed) a point that cannot go so is tried
-  // again with normals in space, then with the topology alone: a border edge must come back whole (a subdivided
-  // border edge makes the remesh stage keep the tile as it was). The topology-only collapses can fold triangles next
-  // to the border: the point may move several cells along the edge (a review measured folds of 2 to 4 cells of
-  // projected area on rough synthetic tiles). Known defect; the fix planned is to leave border triangles unsliced
-  // and keep the two tiles' points near a seam from rounding onto the same grid point.
+  // On a tile's border (an input edge between two vertices the caller fixed) a point that cannot go so is removed
+  // by triangulating the hole it leaves (retriangulateWithout), else collapsed with normals checked in space: a
+  // border edge must come back whole (a subdivided border edge makes the remesh stage keep the tile as it was).
+  // Collapses checking only the topology used to be the last resort here, and folded triangles next to tile
+  // borders; they are gone. Still open: two tiles' added points near a seam can round onto the same grid point
+  // (remesh_stage.cpp keeps a tile's own points apart, not its neighbour's).
   void collapseBoundaryChains() {
     const u32 n_in = u32(input_vertex_.size());
     std::vector<std::pair<double, u32>> candidates;
     for (int round = 0; round < 3; ++round) {
-      const Check check = round == 0 ? Check::kProjection : round == 1 ? Check::kSpace : Check::kTopologyOnly;
+      // Round 0: collapses checked in projection; 1: triangulating the hole; 2: collapses checked in space.
+      const Check check = round == 0 ? Check::kProjection : Check::kSpace;
       for (int pass = 0; pass < 4; ++pass) {
         bool any = false;
         for (u32 c = n_in; c < positions_.size(); ++c) {
           if (incident_[c].empty() || verts_[c].edge[0] == kNone) continue;
           const u32 e0 = verts_[c].edge[0], e1 = verts_[c].edge[1];
           if (round > 0 && !((fixed_in_[e0] & kFixedByCaller) && (fixed_in_[e1] & kFixedByCaller))) continue;
+          if (round == 1) {
+            if (retriangulateWithout(c)) any = true;
+            continue;
+          }
           // Its neighbours along the same input edge, on a boundary edge (used by one triangle).
           candidates.clear();
           for (u32 t : incident_[c])

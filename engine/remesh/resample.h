@@ -58,6 +58,8 @@ struct ResampledRelief {
   std::vector<uint8_t> kind;                       // per vertex: ResampledVertex, kFixedVertex or'ed in
   std::vector<std::array<int32_t, 2>> lattice_ij;  // per vertex: lattice coordinates (i, j) of a lattice vertex
   uint64_t collapses = 0;
+  // Points on a tile's border edge removed by triangulating the hole they leave (where no collapse could go).
+  uint64_t retriangulated = 0;
 };
 
 // Flags per input position (resampleRelief's `fixed`).
