@@ -271,6 +271,7 @@ TEST(Resample, DirectFillMatchesSlicingEveryTriangle) {
     Patch in;
     HexLattice lattice;
     std::vector<uint8_t> fixed;
+    bool valid = true;  // expectValid applies (no triangle that repeats a vertex)
   };
   std::vector<Case> cases;
   cases.push_back({"wavy plane",
@@ -323,6 +324,40 @@ TEST(Resample, DirectFillMatchesSlicingEveryTriangle) {
     std::fill(fixed.begin() + offset, fixed.end(), 1);
     cases.push_back({"a fixed layer over a plane", 4, two, HexLattice::withSpacing(40), fixed});
   }
+  {
+    // A plane plus a triangle that repeats a vertex, its corners on lattice points far above the plane: kept as it
+    // is, and no grid triangle of the plane may take its corners (review of the direct fill).
+    Patch spike;
+    const int n = 10;
+    for (int j = 0; j <= n; ++j)
+      for (int i = 0; i <= n; ++i) spike.positions.push_back({i * 20.0 + 0.37, j * 20.0 + 0.21, 0.1 * i * 20.0});
+    const auto at = [&](int i, int j) { return uint32_t(j * (n + 1) + i); };
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) {
+        spike.triangles.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
+        spike.triangles.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+      }
+    const uint32_t v = uint32_t(spike.positions.size());
+    spike.positions.push_back({130, 90, 999});  // lattice points (8, 10) and (9, 10) at spacing 10
+    spike.positions.push_back({140, 90, 999});
+    spike.triangles.push_back({v, v, v + 1});
+    cases.push_back({"a triangle repeating a vertex over a plane", 4, spike, HexLattice::withSpacing(10), {}, false});
+  }
+  {
+    // Input vertices on lattice points: a plane with a vertex every 3 units at spacing 6 (row 5). Grid vertices that
+    // are input vertices stay input vertices (they keep their normals and colors in the remesh stage).
+    Patch integer;
+    const int n = 40;
+    for (int j = 0; j <= n; ++j)
+      for (int i = 0; i <= n; ++i) integer.positions.push_back({3.0 * i, 5.0 * j, 0.5 * i + 0.25 * j});
+    const auto at = [&](int i, int j) { return uint32_t(j * (n + 1) + i); };
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) {
+        integer.triangles.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
+        integer.triangles.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+      }
+    cases.push_back({"input vertices on lattice points", 4, integer, HexLattice::withSpacing(6), {}});
+  }
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
     const int relief = c.relief;
@@ -330,11 +365,27 @@ TEST(Resample, DirectFillMatchesSlicingEveryTriangle) {
     auto sliced = resampleRelief(c.in.positions, c.in.triangles, relief, c.lattice, c.fixed, ResampleMethod::kSliceAll);
     ASSERT_TRUE(direct.isOk()) << direct.status().toString();
     ASSERT_TRUE(sliced.isOk()) << sliced.status().toString();
-    expectValid(c.in, *direct, relief, c.lattice, c.fixed);
+    if (c.valid) expectValid(c.in, *direct, relief, c.lattice, c.fixed);
     const auto a = regularCellsOf(*direct), b = regularCellsOf(*sliced);
     EXPECT_GT(a.size(), 100u);
     EXPECT_EQ(a, b);
     EXPECT_EQ(direct->triangles.size(), sliced->triangles.size());
+    // The regular triangles' corners: positions to rounding, and input vertices where slicing keeps input vertices.
+    const auto gridVertices = [](const ResampledRelief& r) {
+      std::map<std::array<int32_t, 2>, std::pair<Vec3d, uint32_t>> out;
+      for (size_t t = 0; t < r.triangles.size(); ++t)
+        if (r.regular[t])
+          for (uint32_t v : r.triangles[t]) out[r.lattice_ij[v]] = {r.positions[v], r.input_vertex[v]};
+      return out;
+    };
+    const auto ga = gridVertices(*direct), gb = gridVertices(*sliced);
+    EXPECT_EQ(ga.size(), gb.size());
+    for (const auto& [ij, p] : gb) {
+      const auto it = ga.find(ij);
+      ASSERT_NE(it, ga.end()) << "grid vertex " << ij[0] << "," << ij[1];
+      EXPECT_LT(vlen(vsub(it->second.first, p.first)), 1e-6) << "grid vertex " << ij[0] << "," << ij[1];
+      EXPECT_EQ(it->second.second, p.second) << "grid vertex " << ij[0] << "," << ij[1];
+    }
   }
 }
 

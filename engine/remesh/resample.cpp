@@ -416,10 +416,12 @@ class Resampler {
   // The vertex at lattice point (i, j) of the kept pieces, or a new one at the input's height there.
   u32 latticeVertex(int64_t i, int64_t j) {
     bool added;
-    const u32 id = lattice_id_.insert(pointKey(i, j), u32(positions_.size()), added);
+    u32& id = lattice_id_.insert(pointKey(i, j), u32(positions_.size()), added);
     if (!added) return id;
     const Location& l = locations_[*located_.find(pointKey(i, j))];
     const Triangle& tri = triangles_in_[l.triangle];
+    for (u32 v : tri)  // an input vertex at the point is the grid vertex, as slicing keeps it
+      if (verts_[v].on == 7 && verts_[v].f[0] == double(i) && verts_[v].f[1] == double(j)) return id = v;
     Vec3d p{0, 0, 0};
     for (int k = 0; k < 3; ++k) p = vadd(p, vmul(positions_[tri[size_t(k)]], l.b[k]));
     SliceVertex x;
@@ -439,9 +441,9 @@ class Resampler {
     constexpr u32 kTwice = kNone - 1;
     std::vector<uint8_t> seen(positions_.size(), 0);
     std::vector<std::pair<std::pair<u64, double>, u32>> on_side;  // (grid edge, position along it), vertex
-    for (const Triangle& tri : tris_)
-      for (u32 v : tri) {
-        if (seen[v]) continue;
+    for (size_t t = 0; t < tris_.size(); ++t)
+      for (u32 v : tris_[t]) {
+        if (tri_cell_[t] == kNoCell || seen[v]) continue;  // not a triangle that repeats a vertex (kept as it is)
         seen[v] = 1;
         const SliceVertex& s = verts_[v];
         if (s.on == 7) {
@@ -606,15 +608,15 @@ class Resampler {
   }
 
   // The piece's cell. A piece is within one strip of each family, k <= f < k + 1 with its largest f in (k, k + 1]
-  // (coordinates within kSnap of an integer are that integer, so the largest is exact); a zero-area piece of a
-  // zero-area triangle may not be, and is placed by its centroid.
-  u64 pieceCell(const std::vector<u32>& poly) const {
+  // (coordinates within kSnap of an integer are that integer, so the largest is exact). The pieces of a zero-area
+  // triangle (`degenerate`) may lie on a line, and are placed by their centroid, as before that rule.
+  u64 pieceCell(const std::vector<u32>& poly, bool degenerate) const {
     double hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (u32 v : poly)
       for (int k = 0; k < 3; ++k) hi[k] = std::max(hi[k], verts_[v].f[k]);
     const int64_t i = int64_t(std::ceil(hi[0])) - 1, j = int64_t(std::ceil(hi[1])) - 1,
                   u = int64_t(std::ceil(hi[2])) - 1;
-    if (u == i + j || u == i + j + 1) return cellId(i, j, u == i + j);
+    if (!degenerate && (u == i + j || u == i + j + 1)) return cellId(i, j, u == i + j);
     double s = 0, t = 0;
     for (u32 v : poly) {
       s += verts_[v].f[0];
@@ -628,7 +630,7 @@ class Resampler {
 
   // A piece in a cell filled directly is dropped.
   void emitPiece(const std::vector<u32>& poly, bool degenerate) {
-    const u64 cell = pieceCell(poly);
+    const u64 cell = pieceCell(poly, degenerate);
     if (!interiorCell(cell)) emitFan(poly, degenerate, cell);
   }
 
