@@ -5,10 +5,11 @@
 // two neighbouring tiles would be welded into one non-manifold seam).
 //
 // After remeshing, positions are rounded (grid vertices' base coordinates are integers already; heights and the
-// points on relief boundaries move by at most half a cell per axis). An added vertex whose grid point is taken
-// goes to the nearest free one of the 27 around it (at most 1.5 cells away), so no two vertices share a point
-// (the coders refuse two corners in one cell, and welding would change the topology); only if all 27 are taken
-// is it welded, and triangles that then repeat a vertex are dropped. Input vertices keep their points and
+// points on relief boundaries move by at most half a cell per axis). An added vertex goes to the nearest of the 27
+// grid points around it that is free and turns none of its triangles against their normal before rounding (the tiny
+// triangles along relief boundaries flip otherwise), else to the nearest free one (at most 1.5 cells away), so no
+// two vertices share a point (the coders refuse two corners in one cell, and welding would change the topology);
+// only if all 27 are taken is it welded, and triangles that then repeat a vertex are dropped. Input vertices keep their points and
 // identity, so locked vertices stay.
 // Normals and colors: an input vertex that is kept keeps its own; any other vertex lies on an input triangle and
 // takes the barycentric interpolation of that triangle's corners (normals normalised, colors rounded and snapped to
@@ -90,18 +91,35 @@ Result<StagedTile> remeshTile(const TileContext& ctx, const TileView& tile, doub
   StagedTile out;
   std::vector<u32> source;  // per output vertex: the input vertex, or kNone
   uint64_t welded = 0;
+  // Each remeshed vertex's triangles, their normals before rounding, and where the vertices are so far (rounded
+  // once placed): a point is placed where none of its triangles turns against its normal before rounding, if one
+  // of the candidates allows it (tiny triangles along relief boundaries would flip otherwise).
+  std::vector<u32> start(r.positions.size() + 1, 0), around;
+  for (const Triangle& t : r.triangles)
+    for (u32 v : t) ++start[v + 1];
+  for (size_t v = 0; v < r.positions.size(); ++v) start[v + 1] += start[v];
+  around.resize(start.back());
+  {
+    std::vector<u32> fill(start.begin(), start.end() - 1);
+    for (u32 t = 0; t < r.triangles.size(); ++t)
+      for (u32 v : r.triangles[t]) around[fill[v]++] = t;
+  }
+  const auto normalOf = [](const std::vector<Vec3d>& p, const Triangle& t) {
+    return vcross(vsub(p[t[1]], p[t[0]]), vsub(p[t[2]], p[t[0]]));
+  };
+  std::vector<Vec3d> where = r.positions;
+  std::vector<std::pair<double, Vec3u>> candidates;
   for (u32 v : order) {
     Vec3u q;
     if (r.input_vertex[v] != kNone) {
       q = in.positions[r.input_vertex[v]];
     } else {
-      // The nearest free grid point among the 27 around the rounded position (a taken one would weld two
-      // vertices: a change of topology).
+      // The free grid points among the 27 around the rounded position (a taken one would weld two vertices: a
+      // change of topology), nearest first; the first that flips none of the vertex's triangles, else the nearest.
       const Vec3d& p = r.positions[v];
       Vec3u base;
       for (int k = 0; k < 3; ++k) base[size_t(k)] = u32(std::clamp(std::round(p[size_t(k)]), 0.0, top));
-      double best = INFINITY;
-      bool found = false;
+      candidates.clear();
       for (int dx = -1; dx <= 1; ++dx)
         for (int dy = -1; dy <= 1; ++dy)
           for (int dz = -1; dz <= 1; ++dz) {
@@ -109,19 +127,31 @@ Result<StagedTile> remeshTile(const TileContext& ctx, const TileView& tile, doub
             if (c[0] < 0 || c[1] < 0 || c[2] < 0 || c[0] > int64_t(top) || c[1] > int64_t(top) || c[2] > int64_t(top))
               continue;
             const Vec3u cand{u32(c[0]), u32(c[1]), u32(c[2])};
-            const double d = vlen(vsub(p, {double(c[0]), double(c[1]), double(c[2])}));
-            if (d < best && !at.count(cand)) {
-              best = d;
-              q = cand;
-              found = true;
-            }
+            if (!at.count(cand))
+              candidates.push_back({vlen(vsub(p, {double(c[0]), double(c[1]), double(c[2])})), cand});
           }
-      if (!found) {  // all 27 taken: weld onto the rounded one
+      if (candidates.empty()) {  // all 27 taken: weld onto the rounded one
         id[v] = at.at(base);
         ++welded;
         continue;
       }
+      std::sort(candidates.begin(), candidates.end());
+      q = candidates[0].second;
+      for (const auto& [d, cand] : candidates) {
+        where[v] = toDouble(cand);
+        bool flips = false;
+        for (u32 k = start[v]; k < start[v + 1] && !flips; ++k) {
+          const Triangle& t = r.triangles[around[k]];
+          const Vec3d before = normalOf(r.positions, t);
+          flips = vdot(before, before) > 0 && !(vdot(normalOf(where, t), before) > 0);
+        }
+        if (!flips) {
+          q = cand;
+          break;
+        }
+      }
     }
+    where[v] = toDouble(q);
     id[v] = u32(out.mesh.positions.size());
     at.emplace(q, id[v]);
     out.mesh.positions.push_back(q);
