@@ -269,14 +269,19 @@ TEST(Remesh, RefusesBadOptions) {
 // Real scans at 12 bits: the result is manifold where the input is (no edge gains uses), its boundary is the input's
 // (same length), and no triangle is lost or doubled (the projected area of each relief's triangles... is checked in
 // test_resample; here the total area stays within 2% of the input's, the resampling of a curved surface).
+// A scan of ../shared/data on a 12-bit grid (empty, with a failure, when it cannot be read).
+QuantizedMesh scanAt12Bits(const std::filesystem::path& file) {
+  auto mesh = readMeshFile(file.string());
+  EXPECT_TRUE(mesh.isOk()) << mesh.status().toString();
+  return mesh.isOk() ? quantized(*mesh, 12) : QuantizedMesh{};
+}
+
 TEST(RemeshScans, RealScansStayManifoldWithTheirBoundary) {
   const std::filesystem::path data = testing::sharedDataDir();
   if (!std::filesystem::exists(data)) GTEST_SKIP() << "shared data not found: " << data;
   for (const char* name : {"bun_zipper.ply.zst", "horse.ply.zst"}) {
     SCOPED_TRACE(name);
-    auto mesh = readMeshFile((data / name).string());
-    ASSERT_TRUE(mesh.isOk()) << mesh.status().toString();
-    const QuantizedMesh q = quantized(*mesh, 12);
+    const QuantizedMesh q = scanAt12Bits(data / name);
     const EdgeCheck in = checkEdges(doubles(q), q.triangles);
     auto r = remeshPiecewiseRegular(q, {}, {.tau = 0.2, .spacing = 24});
     ASSERT_TRUE(r.isOk()) << r.status().toString();
@@ -304,9 +309,7 @@ TEST(RemeshScans, RoundingToTheGridFlipsAlmostNoTriangle) {
   if (!std::filesystem::exists(data)) GTEST_SKIP() << "shared data not found: " << data;
   for (const char* name : {"bun_zipper.ply.zst", "horse.ply.zst"}) {
     SCOPED_TRACE(name);
-    auto mesh = readMeshFile((data / name).string());
-    ASSERT_TRUE(mesh.isOk()) << mesh.status().toString();
-    const QuantizedMesh q = quantized(*mesh, 12);
+    const QuantizedMesh q = scanAt12Bits(data / name);
     auto r = remeshPiecewiseRegular(q, {}, {.tau = 0.2, .spacing = 20});
     ASSERT_TRUE(r.isOk()) << r.status().toString();
     auto staged = remeshTile(TileContext{12, {}}, TileView{q, {}}, 0.2, 20);
@@ -330,23 +333,18 @@ TEST(RemeshScans, RoundingToTheGridFlipsAlmostNoTriangle) {
 // The direct fill of a relief's inside (ResampleMethod::kDirect, the default) against slicing and collapsing every
 // triangle as the paper does (kSliceAll), a second implementation: on real scans the two give the same regular
 // triangles, to within the few cells next to the irregular band where the order of collapses differs, with the
-// same grid vertices (positions to rounding), and the direct result passes the same manifold and boundary checks.
+// same grid vertices (positions to rounding). (RealScansStayManifoldWithTheirBoundary checks the direct result, the
+// default, for manifoldness and boundary.)
 TEST(RemeshScans, DirectFillMatchesSlicingEveryTriangle) {
   const std::filesystem::path data = testing::sharedDataDir();
   if (!std::filesystem::exists(data)) GTEST_SKIP() << "shared data not found: " << data;
   for (const char* name : {"bun_zipper.ply.zst", "horse.ply.zst"}) {
     SCOPED_TRACE(name);
-    auto mesh = readMeshFile((data / name).string());
-    ASSERT_TRUE(mesh.isOk()) << mesh.status().toString();
-    const QuantizedMesh q = quantized(*mesh, 12);
-    const EdgeCheck in = checkEdges(doubles(q), q.triangles);
+    const QuantizedMesh q = scanAt12Bits(data / name);
     auto direct = remeshPiecewiseRegular(q, {}, {.tau = 0.2, .spacing = 24});
     auto sliced = remeshPiecewiseRegular(q, {}, {.tau = 0.2, .spacing = 24, .resample = ResampleMethod::kSliceAll});
     ASSERT_TRUE(direct.isOk()) << direct.status().toString();
     ASSERT_TRUE(sliced.isOk()) << sliced.status().toString();
-    const EdgeCheck c = checkEdges(direct->positions, direct->triangles);
-    EXPECT_LE(c.non_manifold, in.non_manifold);
-    EXPECT_NEAR(c.boundary_length, in.boundary_length, 1e-6 * (1 + in.boundary_length));
     // Regular triangles as their corners' positions, rounded to 1e-6 grid units.
     const auto regular = [](const Remeshed& r) {
       std::vector<std::array<int64_t, 9>> out;
