@@ -434,6 +434,18 @@ TEST(Resample, TileBorderPointsLeaveWithoutFlippingATriangle) {
     }
   }
   EXPECT_GT(retriangulated, 100u);
+  // A review's case on quantized coordinates: link vertices exactly on a chord (rounded a hair outside it) once made
+  // the triangulation give up, and the point stayed on the border edge (the remesh stage then kept the tile as it
+  // was). Every point leaves, and nothing flips.
+  const Patch one{{{1029, 769, 1506}, {1028, 794, 1520}, {1012, 791, 1507}}, {{0, 1, 2}}};
+  const std::vector<uint8_t> all_fixed(3, kFixedByCaller);
+  auto r = resampleRelief(one.positions, one.triangles, 4, HexLattice::withSpacing(8), all_fixed);
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  for (size_t v = 0; v < r->positions.size(); ++v)
+    EXPECT_FALSE(r->input_vertex[v] == UINT32_MAX && r->input_edge[v][0] != UINT32_MAX)
+        << "point " << v << " left on an input edge";
+  size_t irregular_inside = 0;
+  expectValid(one, *r, 4, HexLattice::withSpacing(8), all_fixed, &irregular_inside);
 }
 
 TEST(Resample, RefusesBadArguments) {

@@ -80,7 +80,7 @@ struct CrossingHash {
 u64 cellId(int64_t i, int64_t j, bool up) {
   return (u64(i + (int64_t(1) << 30)) << 33) | (u64(j + (int64_t(1) << 30)) << 1) | (up ? 1u : 0u);
 }
-constexpr u64 kNoCell = ~u64(0);  // a triangle that repeats a vertex (never sliced or collapsed)
+constexpr u64 kNoCell = ~u64(0);  // a triangle that repeats a vertex (never sliced) or one of a triangulated hole
 
 double cross2(const double* a, const double* b, const double* c) {
   return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
@@ -851,13 +851,15 @@ class Resampler {
     }
   }
 
-  // Removes point c of an input edge by triangulating the hole its triangles leave, in projection, with the
-  // segment between its two neighbours on that edge as a side: so the edge loses the point without a triangle
-  // folding (a half-edge collapse fans the hole from one corner, which folds when the hole is not star-shaped from
-  // it). c's neighbours must be a path (c on the relief's boundary) from one neighbour on the edge to the other, or
-  // a cycle through both (c inside: the hole is cut in two by that segment). Each part is cut into ears, in
-  // projection counterclockwise with no other corner inside, never making an edge that exists already or that joins
+  // Removes point c of a tile border edge (c on the relief's boundary) by triangulating the hole its triangles
+  // leave, in projection, with the segment between its two neighbours on that edge as a side: so the edge loses the
+  // point without a triangle folding (a half-edge collapse fans the hole from one corner, which folds when the hole
+  // is not star-shaped from it). c's neighbours must form a path from one neighbour on the edge to the other. The
+  // hole is cut into ears, in projection counterclockwise with no other corner inside or within rounding of a side
+  // (quantized scans put link vertices exactly on chords), never making an edge that exists already or that joins
   // two vertices of a boundary shared with another relief. False, with nothing changed, when that is not possible.
+  // (A point inside the relief, on an edge between two fixed vertices that is not on the border, is left alone: it
+  // may be a grid vertex, and nothing needs it gone.)
   bool retriangulateWithout(u32 c) {
     std::vector<std::pair<u32, u32>> ring;  // (a, b) per triangle (c, a, b)
     for (u32 t : incident_[c]) {
@@ -867,6 +869,10 @@ class Resampler {
       if (a == c || b == c || a == b) return false;
       ring.push_back({a, b});
     }
+    std::vector<u32> seconds;  // each neighbour follows at most one other
+    for (const auto& e : ring) seconds.push_back(e.second);
+    std::sort(seconds.begin(), seconds.end());
+    if (std::adjacent_find(seconds.begin(), seconds.end()) != seconds.end()) return false;
     std::sort(ring.begin(), ring.end());
     for (size_t i = 1; i < ring.size(); ++i)
       if (ring[i].first == ring[i - 1].first) return false;
@@ -874,84 +880,58 @@ class Resampler {
       const auto it = std::lower_bound(ring.begin(), ring.end(), std::pair<u32, u32>{a, 0});
       return it != ring.end() && it->first == a ? it->second : kNone;
     };
-    // The link in order: from a start with no predecessor (a path), else from any neighbour (a cycle).
-    u32 start = ring[0].first;
-    bool path = false;
-    for (const auto& [a, b] : ring) {
-      bool has_before = false;
-      for (const auto& [a2, b2] : ring) has_before = has_before || b2 == a;
-      if (!has_before) {
-        start = a;
-        path = true;
-        break;
-      }
-    }
+    // The link in order, from the neighbour with no predecessor: a path from one neighbour on the edge to the other.
+    u32 start = kNone;
+    for (const auto& e : ring)
+      if (!std::binary_search(seconds.begin(), seconds.end(), e.first)) start = e.first;
+    if (start == kNone) return false;  // a cycle: c is inside the relief
     std::vector<u32> link = {start};
     for (size_t steps = 0; steps < ring.size(); ++steps) {
       const u32 b = next(link.back());
       if (b == kNone) return false;
-      if (!path && b == start) break;
       link.push_back(b);
     }
-    if (link.size() != ring.size() + (path ? 1 : 0)) return false;
-    std::vector<std::vector<u32>> holes;
-    u32 x = kNone, y = kNone;
-    if (path) {
-      x = link.front();
-      y = link.back();
-      if (!sameInputEdge(c, x) || !sameInputEdge(c, y) || hasEdge(x, y)) return false;
-      holes.push_back(link);
-    } else {
-      std::vector<size_t> on_edge;
-      for (size_t i = 0; i < link.size(); ++i)
-        if (sameInputEdge(c, link[i])) on_edge.push_back(i);
-      if (on_edge.size() != 2 || hasEdge(link[on_edge[0]], link[on_edge[1]])) return false;
-      x = link[on_edge[0]];
-      y = link[on_edge[1]];
-      holes.emplace_back(link.begin() + std::ptrdiff_t(on_edge[0]), link.begin() + std::ptrdiff_t(on_edge[1]) + 1);
-      std::vector<u32> other(link.begin() + std::ptrdiff_t(on_edge[1]), link.end());
-      other.insert(other.end(), link.begin(), link.begin() + std::ptrdiff_t(on_edge[0]) + 1);
-      holes.push_back(std::move(other));
-    }
+    if (link.size() != ring.size() + 1) return false;
+    const u32 x = link.front(), y = link.back();
+    if (!sameInputEdge(c, x) || !sameInputEdge(c, y) || hasEdge(x, y)) return false;
+    std::vector<u32> poly = std::move(link);
     std::vector<Triangle> made;
     std::vector<std::pair<u32, u32>> diagonals;  // new edges so far (lower first)
-    for (std::vector<u32> poly : holes) {
-      while (poly.size() > 3) {
-        size_t best = poly.size();
-        double best_length = INFINITY;
-        for (size_t i = 0; i < poly.size(); ++i) {
-          const u32 p = poly[(i + poly.size() - 1) % poly.size()], q = poly[i], r = poly[(i + 1) % poly.size()];
-          if (!(cross2(verts_[p].f, verts_[q].f, verts_[r].f) > kMinArea)) continue;
-          bool empty = true;
-          for (u32 o : poly) {
-            if (o == p || o == q || o == r) continue;
-            const double* f = verts_[o].f;
-            if (cross2(verts_[p].f, verts_[q].f, f) >= 0 && cross2(verts_[q].f, verts_[r].f, f) >= 0 &&
-                cross2(verts_[r].f, verts_[p].f, f) >= 0) {
-              empty = false;
-              break;
-            }
-          }
-          if (!empty || hasEdge(p, r) ||
-              std::find(diagonals.begin(), diagonals.end(), std::pair<u32, u32>(std::min(p, r), std::max(p, r))) !=
-                  diagonals.end() ||
-              (fixed_[p] && shared_[p] && fixed_[r] && shared_[r]))
-            continue;
-          const double length = std::hypot(verts_[r].f[0] - verts_[p].f[0], verts_[r].f[1] - verts_[p].f[1]);
-          if (length < best_length) {
-            best_length = length;
-            best = i;
+    while (poly.size() > 3) {
+      size_t best = poly.size();
+      double best_length = INFINITY;
+      for (size_t i = 0; i < poly.size(); ++i) {
+        const u32 p = poly[(i + poly.size() - 1) % poly.size()], q = poly[i], r = poly[(i + 1) % poly.size()];
+        if (!(cross2(verts_[p].f, verts_[q].f, verts_[r].f) > kMinArea)) continue;
+        bool empty = true;
+        for (u32 o : poly) {
+          if (o == p || o == q || o == r) continue;
+          const double* f = verts_[o].f;
+          if (cross2(verts_[p].f, verts_[q].f, f) >= -kMinArea && cross2(verts_[q].f, verts_[r].f, f) >= -kMinArea &&
+              cross2(verts_[r].f, verts_[p].f, f) >= -kMinArea) {
+            empty = false;
+            break;
           }
         }
-        if (best == poly.size()) return false;
-        const u32 p = poly[(best + poly.size() - 1) % poly.size()], r = poly[(best + 1) % poly.size()];
-        made.push_back({p, poly[best], r});
-        diagonals.push_back({std::min(p, r), std::max(p, r)});
-        poly.erase(poly.begin() + std::ptrdiff_t(best));
+        if (!empty || hasEdge(p, r) ||
+            std::find(diagonals.begin(), diagonals.end(), std::pair<u32, u32>(std::min(p, r), std::max(p, r))) !=
+                diagonals.end() ||
+            (fixed_[p] && shared_[p] && fixed_[r] && shared_[r]))
+          continue;
+        const double length = std::hypot(verts_[r].f[0] - verts_[p].f[0], verts_[r].f[1] - verts_[p].f[1]);
+        if (length < best_length) {
+          best_length = length;
+          best = i;
+        }
       }
-      if (!(cross2(verts_[poly[0]].f, verts_[poly[1]].f, verts_[poly[2]].f) > kMinArea)) return false;
-      made.push_back({poly[0], poly[1], poly[2]});
+      if (best == poly.size()) return false;
+      const u32 p = poly[(best + poly.size() - 1) % poly.size()], r = poly[(best + 1) % poly.size()];
+      made.push_back({p, poly[best], r});
+      diagonals.push_back({std::min(p, r), std::max(p, r)});
+      poly.erase(poly.begin() + std::ptrdiff_t(best));
     }
+    if (!(cross2(verts_[poly[0]].f, verts_[poly[1]].f, verts_[poly[2]].f) > kMinArea)) return false;
+    made.push_back({poly[0], poly[1], poly[2]});
     for (u32 t : incident_[c]) {
       dead_[t] = 1;
       for (u32 v : tris_[t])
