@@ -342,19 +342,20 @@ class Resampler {
       good[v] = good[v] && fixed_in_[v] == 0 && std::abs(turn[v] - 2 * std::numbers::pi) < 1 &&
                 closedCycle(std::span(ring).subspan(start[v], start[v + 1] - start[v]));
     std::vector<uint8_t> good_triangle(m, 0);
-    cell_start_.assign(1, 0);
+    std::vector<u32> cell_start = {0};  // per triangle, into tri_cells: the cells it may overlap
+    std::vector<u64> tri_cells;
     bool added;
     for (size_t t = 0; t < m; ++t) {
       const Triangle& tri = triangles_in_[t];
       if (degenerate[t] != kRepeats) {
         good_triangle[t] = !degenerate[t] && good[tri[0]] && good[tri[1]] && good[tri[2]];
         forCells(tri, [&](u64 cell) {
-          tri_cells_.push_back(cell);
+          tri_cells.push_back(cell);
           u32& state = cell_state_.insert(cell, 0, added);
           if (!good_triangle[t]) state |= kBadCell;
         });
       }
-      cell_start_.push_back(u32(tri_cells_.size()));
+      cell_start.push_back(u32(tri_cells.size()));
     }
     // Lattice points in good triangles.
     for (size_t t = 0; t < m; ++t) {
@@ -403,8 +404,8 @@ class Resampler {
     });
     band_.assign(m, 0);
     for (size_t t = 0; t < m; ++t)
-      for (u32 k = cell_start_[t]; k < cell_start_[t + 1] && !band_[t]; ++k)
-        band_[t] = !(*cell_state_.find(tri_cells_[k]) & kInteriorCell);
+      for (u32 k = cell_start[t]; k < cell_start[t + 1] && !band_[t]; ++k)
+        band_[t] = !(*cell_state_.find(tri_cells[k]) & kInteriorCell);
   }
 
   bool interiorCell(u64 cell) const {
@@ -896,7 +897,6 @@ class Resampler {
     if (!sameInputEdge(c, x) || !sameInputEdge(c, y) || hasEdge(x, y)) return false;
     std::vector<u32> poly = std::move(link);
     std::vector<Triangle> made;
-    std::vector<std::pair<u32, u32>> diagonals;  // new edges so far (lower first)
     while (poly.size() > 3) {
       size_t best = poly.size();
       double best_length = INFINITY;
@@ -913,11 +913,8 @@ class Resampler {
             break;
           }
         }
-        if (!empty || hasEdge(p, r) ||
-            std::find(diagonals.begin(), diagonals.end(), std::pair<u32, u32>(std::min(p, r), std::max(p, r))) !=
-                diagonals.end() ||
-            (fixed_[p] && shared_[p] && fixed_[r] && shared_[r]))
-          continue;
+        // (An earlier ear's diagonal is a side of the polygon now, never a diagonal again.)
+        if (!empty || hasEdge(p, r) || (fixed_[p] && shared_[p] && fixed_[r] && shared_[r])) continue;
         const double length = std::hypot(verts_[r].f[0] - verts_[p].f[0], verts_[r].f[1] - verts_[p].f[1]);
         if (length < best_length) {
           best_length = length;
@@ -927,7 +924,6 @@ class Resampler {
       if (best == poly.size()) return false;
       const u32 p = poly[(best + poly.size() - 1) % poly.size()], r = poly[(best + 1) % poly.size()];
       made.push_back({p, poly[best], r});
-      diagonals.push_back({std::min(p, r), std::max(p, r)});
       poly.erase(poly.begin() + std::ptrdiff_t(best));
     }
     if (!(cross2(verts_[poly[0]].f, verts_[poly[1]].f, verts_[poly[2]].f) > kMinArea)) return false;
@@ -1064,10 +1060,8 @@ class Resampler {
   const HexLattice lattice_;
   const bool direct_;        // fill cells inside good triangles directly (planInterior)
   bool needs_full_ = false;  // see needsFull()
-  // The direct fill's plan: per input triangle the cells it may overlap (from cell_start_[t]), each cell's state,
-  // where lattice points are on the input, which triangles to slice, and the kept pieces' lattice vertices.
-  std::vector<u32> cell_start_;
-  std::vector<u64> tri_cells_;
+  // The direct fill's plan: each cell's state, where lattice points are on the input, which triangles to slice,
+  // and the kept pieces' lattice vertices.
   KeyMap cell_state_, located_, lattice_id_;
   std::vector<Location> locations_;
   std::vector<uint8_t> band_;

@@ -9,8 +9,8 @@
 // grid points around it that is free and turns none of its triangles against their normal before rounding (the tiny
 // triangles along relief boundaries flip otherwise), else to the nearest free one (at most 1.5 cells away), so no
 // two vertices share a point (the coders refuse two corners in one cell, and welding would change the topology);
-// only if all 27 are taken is it welded, and triangles that then repeat a vertex are dropped. Input vertices keep their points and
-// identity, so locked vertices stay.
+// only if all 27 are taken is it welded, and triangles that then repeat a vertex are dropped. Input vertices keep
+// their points and identity, so locked vertices stay.
 // Normals and colors: an input vertex that is kept keeps its own; any other vertex lies on an input triangle and
 // takes the barycentric interpolation of that triangle's corners (normals normalised, colors rounded and snapped to
 // the layout's levels).
@@ -107,6 +107,8 @@ Result<StagedTile> remeshTile(const TileContext& ctx, const TileView& tile, doub
   const auto normalOf = [](const std::vector<Vec3d>& p, const Triangle& t) {
     return vcross(vsub(p[t[1]], p[t[0]]), vsub(p[t[2]], p[t[0]]));
   };
+  std::vector<Vec3d> before(r.triangles.size());
+  for (size_t t = 0; t < r.triangles.size(); ++t) before[t] = normalOf(r.positions, r.triangles[t]);
   std::vector<Vec3d> where = r.positions;
   std::vector<std::pair<double, Vec3u>> candidates;
   for (u32 v : order) {
@@ -141,9 +143,8 @@ Result<StagedTile> remeshTile(const TileContext& ctx, const TileView& tile, doub
         where[v] = toDouble(cand);
         bool flips = false;
         for (u32 k = start[v]; k < start[v + 1] && !flips; ++k) {
-          const Triangle& t = r.triangles[around[k]];
-          const Vec3d before = normalOf(r.positions, t);
-          flips = vdot(before, before) > 0 && !(vdot(normalOf(where, t), before) > 0);
+          const Vec3d& n = before[around[k]];
+          flips = vdot(n, n) > 0 && !(vdot(normalOf(where, r.triangles[around[k]]), n) > 0);
         }
         if (!flips) {
           q = cand;
