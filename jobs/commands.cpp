@@ -99,23 +99,25 @@ Result<std::vector<uint64_t>> levelBytes(const ContainerFile& file, const std::v
   return total;
 }
 
-// Decodes the chosen tiles (at `level` when given) and welds them. Tiles decoded at a coarse level carry
-// attributes derived from their own triangles, which differ between tiles along a seam: such tiles weld by
-// position, and the attributes are derived again from the welded mesh.
+// Decodes the chosen tiles (at `level` when given) and welds them. Tiles decoded at a coarse level weld by position
+// (their vertices' attributes differ between tiles along a seam): a welded vertex keeps the first tile's attributes
+// when every tile has its own (kdtree and octree from version 3), else the attributes are derived from the welded
+// mesh.
 Result<QuantizedMesh> decodeChosen(const ContainerFile& file, const std::vector<const TileEntry*>& chosen,
                                    std::optional<uint32_t> level) {
   // Tiles decode independently: in parallel, then welded in index order (deterministic).
   SP_ASSIGN_OR_RETURN(auto tiles, decodeTiles(file, chosen, level));
   std::vector<QuantizedMesh> decoded;
   decoded.reserve(tiles.size());
-  bool all_complete = true;
-  for (DecodedTile& t : tiles) decoded.push_back(std::move(t.mesh)), all_complete &= t.complete;
+  bool all_complete = true, all_own = true;
+  for (DecodedTile& t : tiles)
+    decoded.push_back(std::move(t.mesh)), all_complete &= t.complete, all_own &= t.own_attributes;
   tiles.clear();
   if (decoded.empty()) return QuantizedMesh();
   if (all_complete && decoded.size() == 1) return std::move(decoded[0]);  // what weldTiles would copy
   if (all_complete) return weldTiles(decoded);
   QuantizedMesh welded = weldTiles(decoded, WeldBy::kPosition);
-  deriveAttributes(welded, file.header().layout);
+  if (!all_own) deriveAttributes(welded, file.header().layout);
   return welded;
 }
 

@@ -33,11 +33,11 @@ Result<std::span<const uint8_t>> ContainerFile::readPayload(const TileEntry& ent
   return parseTileChunk(chunk, entry, path());
 }
 
-Result<QuantizedMesh> ContainerFile::decodeTile(const TileEntry& entry, std::optional<uint32_t> level,
-                                                bool* complete) const {
+Result<QuantizedMesh> ContainerFile::decodeTile(const TileEntry& entry, std::optional<uint32_t> level, bool* complete,
+                                                bool* own_attributes) const {
   std::vector<uint8_t> chunk;
   SP_ASSIGN_OR_RETURN(auto payload, readPayload(entry, chunk));
-  return decodeTilePayload(header_, entry, payload, path(), level, complete);
+  return decodeTilePayload(header_, entry, payload, path(), level, complete, own_attributes);
 }
 
 Status ContainerFile::verifyChecksums() const {

@@ -21,7 +21,7 @@ class ContainerFile {
   const TileEntry* findTile(uint32_t tile_id) const;
   // Reads, verifies (both checksums) and decodes one tile (see decodeTilePayload).
   Result<QuantizedMesh> decodeTile(const TileEntry& entry, std::optional<uint32_t> level = std::nullopt,
-                                   bool* complete = nullptr) const;
+                                   bool* complete = nullptr, bool* own_attributes = nullptr) const;
   // Reads every tile's chunk and checks both its checksums, without decoding: with the header, footer and
   // index (checked by open), every checksum of the container. What resume requires of an output before
   // skipping it.

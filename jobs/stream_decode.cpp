@@ -98,18 +98,18 @@ class RecordFile {
   uint64_t flushed_ = 0;
 };
 
-// Welds decoded tiles one after the other, as weldTiles then cropToBox and deriveAttributes would on the whole
-// mesh, writing vertex records and face bytes as it goes.
+// Welds decoded tiles one after the other, as weldTiles then cropToBox and (unless every tile has its own
+// attributes) deriveAttributes would on the whole mesh, writing vertex records and face bytes as it goes.
 class Welder {
  public:
-  Welder(const ContainerHeader& header, const std::vector<Bounds>& bounds, bool all_complete, bool point_cloud,
-         const std::optional<std::array<double, 6>>& crop, MeshFileFormat format, RecordFile& records,
-         ScratchFile& faces)
+  Welder(const ContainerHeader& header, const std::vector<Bounds>& bounds, bool all_complete, bool all_own,
+         bool point_cloud, const std::optional<std::array<double, 6>>& crop, MeshFileFormat format,
+         RecordFile& records, ScratchFile& faces)
       : grid_(header.grid),
         layout_(header.layout),
         bounds_(bounds),
         by_(all_complete ? WeldBy::kPositionAndAttributes : WeldBy::kPosition),
-        derive_(!all_complete),
+        derive_(!all_own),
         point_cloud_(point_cloud),
         crop_(crop),
         format_(format),
@@ -305,9 +305,10 @@ Result<std::vector<DecodedTile>> decodeTiles(const ContainerFile& file, std::spa
   std::vector<Status> errors(tiles.size());
   tbb::parallel_for(size_t(0), tiles.size(), [&](size_t i) {
     try {
-      bool done = true;
-      auto m = file.decodeTile(*tiles[i], level, &done);
+      bool done = true, own = true;
+      auto m = file.decodeTile(*tiles[i], level, &done, &own);
       decoded[i].complete = done;
+      decoded[i].own_attributes = own;
       if (m.isOk()) decoded[i].mesh = std::move(m).value();
       else errors[i] = m.status();
     } catch (const std::exception& e) {
@@ -382,7 +383,7 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
   // Where each tile's vertices lie, whether every tile is complete, whether the decode is a point cloud. From the
   // index for a complete decode; a coarse level is decoded once to measure them.
   std::vector<Bounds> bounds(n);
-  bool all_complete = true;
+  bool all_complete = true, all_own = true;
   uint64_t total_faces = 0;
   if (settings.level) {
     for (auto [a, b] : batches) {
@@ -390,6 +391,7 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
       for (size_t i = a; i < b; ++i) {
         for (const Vec3u& p : tiles[i - a].mesh.positions) bounds[i].add(p);
         all_complete &= tiles[i - a].complete;
+        all_own &= tiles[i - a].own_attributes;
         total_faces += tiles[i - a].mesh.triangles.size();
       }
     }
@@ -399,6 +401,7 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
       if (e.vertices > 0) bounds[i] = Bounds{e.lo, e.hi};
       const CodecInfo* codec = findCodec(e.codec);
       all_complete &= !codec || codec->keeps_attributes;
+      all_own = all_complete;
       total_faces += e.faces;
     }
   }
@@ -408,7 +411,7 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
   ScratchFile faces;
   SP_RETURN_IF_ERROR(records.open(scratch.file("vertices")));
   SP_RETURN_IF_ERROR(faces.open(scratch.file("faces")));
-  Welder welder(header, bounds, all_complete, total_faces == 0, settings.crop, format, records, faces);
+  Welder welder(header, bounds, all_complete, all_own, total_faces == 0, settings.crop, format, records, faces);
   for (auto [a, b] : batches) {
     SP_ASSIGN_OR_RETURN(auto tiles, decodeTiles(file, std::span(chosen).subspan(a, b - a), settings.level));
     for (size_t i = a; i < b; ++i) {

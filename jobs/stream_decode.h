@@ -12,8 +12,9 @@
 //    for welding is therefore proportional to the vertices near tile borders that are still open.
 //  - The vertices (quantized, 20 bytes each) and the faces (already in the output format's bytes) go to scratch
 //    files; the output is written last, when the counts its header needs are known (jobs/mesh_io/mesh_writer.h).
-//    Normals a coarse level derives from the welded triangles (engine/codecs/codec.h, deriveAttributes) are summed
-//    in the same order and patched into the scratch file when the vertex's last tile is done.
+//    Normals a coarse level derives from the welded triangles (engine/codecs/codec.h, deriveAttributes; when some
+//    tile has no attributes of its own at that level) are summed in the same order and patched into the scratch
+//    file when the vertex's last tile is done.
 //  - `crop` numbers vertices by their first use in a kept triangle, as the in-memory crop does.
 // glTF is not written this way (its binary buffer precedes nothing, but its JSON needs bounds and it is one
 // buffer): the caller refuses glTF output over the budget.
@@ -38,7 +39,8 @@ uint64_t inMemoryDecodeBytes(const std::vector<const TileEntry*>& chosen);
 
 struct DecodedTile {
   QuantizedMesh mesh;
-  bool complete = true;  // as decodeTilePayload says (false: a coarse level, or attributes the codec derives)
+  bool complete = true;        // as decodeTilePayload says (false: a coarse level, or attributes the codec derives)
+  bool own_attributes = true;  // as decodeTilePayload says (a coarse level of kdtree or octree from version 3 too)
 };
 // Decodes `tiles` in parallel (at `level` when given), in their order; fails with the first failing tile's error.
 Result<std::vector<DecodedTile>> decodeTiles(const ContainerFile& file, std::span<const TileEntry* const> tiles,

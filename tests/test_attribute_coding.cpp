@@ -341,6 +341,43 @@ TEST_P(AttributeRoundTrip, PredictionsPredict) {
                                    << " bits per vertex";
 }
 
+// Version 3 (kdtree, octree): every vertex of a coarse level shows the normal and color of a point of the tile in its
+// cell, not ones derived from its triangles, decoded from the level's prefix alone. Past the last level whose births
+// are coded (the last with at most max(64, N / 16) vertices, FORMAT.md) a vertex shows those of a point in its
+// ancestor's cell at that level. The sphere's colors are random in two channels and a third of its normals point
+// inward: derived attributes, or a vertex showing another cell's point, fail.
+TEST_P(AttributeRoundTrip, CoarseLevelsShowTheTilesOwnAttributes) {
+  if (!codec().progressive()) GTEST_SKIP() << codec().name << " is single-rate";
+  const QuantizedMesh q = attributedSphere(10, 4, false);
+  const TileContext ctx{12, {10, 4}};
+  auto enc = encodeMesh(codec(), ctx, q);
+  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+  auto levels = codec().levels(ctx, codec().version, enc->payload, limitsOf(enc->decoded));
+  ASSERT_TRUE(levels.isOk());
+  const uint32_t n = uint32_t(q.positions.size());  // distinct points: twins differ in their attributes
+  const uint32_t limit = std::max<uint32_t>(64, n / 16);
+  int last_coded = -1;
+  size_t checked = 0;
+  for (size_t i = 1; i < levels->size(); ++i) {  // level 0 has no segment: its one vertex derives them
+    const CodecLevel& l = (*levels)[i];
+    if (l.complete) continue;
+    SCOPED_TRACE("level " + std::to_string(l.level));
+    auto d = codec().decode_level(ctx, codec().version, std::span(enc->payload.data(), l.end_bytes), l.level,
+                                  limitsOf(enc->decoded));
+    ASSERT_TRUE(d.isOk()) << d.status().toString();
+    ASSERT_EQ(d->normals.size(), d->positions.size());
+    ASSERT_EQ(d->colors.size(), d->positions.size());
+    if (d->positions.size() <= limit) last_coded = int(l.level);
+    ASSERT_GE(last_coded, 0) << "the first levels are coded";
+    EXPECT_EQ(testing::verticesShowingNoPointOfTheirCell(q, *d, 12, last_coded), 0u)
+        << "of " << d->positions.size() << " vertices show a normal and color of no point in their cell at level "
+        << last_coded;
+    checked += d->positions.size();
+  }
+  EXPECT_GT(checked, 1000u);
+  EXPECT_GE(last_coded, int((*levels)[1].level) + 1) << "two levels or more code their births";
+}
+
 std::vector<CodecId> predictingCodecs() { return {CodecId::kKdtree, CodecId::kOctree, CodecId::kEdgebreaker}; }
 
 INSTANTIATE_TEST_SUITE_P(Codecs, AttributeRoundTrip, ::testing::ValuesIn(predictingCodecs()),

@@ -218,6 +218,44 @@ TEST_P(GoldenStream, OlderTilesKeepTheirVersionWhenCopied) {
   }
 }
 
+// The coarse levels of every golden stream whose version codes attributes through its levels (kdtree and octree
+// v3) show, at each vertex, the normal and color of a golden-mesh point in its cell (past the last level that codes
+// its births, the cell of its ancestor at that level), and the levels before it derive them.
+TEST_P(GoldenStream, CoarseLevelsShowTheGoldenMeshsAttributes) {
+  const CodecInfo& codec = *findCodec(GetParam());
+  if (!codec.progressive() || codec.coarse_attributes_from == 0) GTEST_SKIP() << codec.name << ": derived";
+  const Golden& g = golden();
+  for (int version = 1; version <= codec.version; ++version) {
+    const std::string path = goldenPath(codec, version);
+    SCOPED_TRACE(path);
+    const auto bytes = testing::readBytes(path);
+    auto parsed = parseContainer(bytes, path);
+    ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
+    const auto& e = parsed->tiles[0];
+    auto payload = parseTileChunk(std::span(bytes).subspan(e.offset, e.chunk_bytes), e, path);
+    ASSERT_TRUE(payload.isOk());
+    auto levels = tilePayloadLevels(parsed->header, e, *payload, path);
+    ASSERT_TRUE(levels.isOk());
+    const uint32_t limit = std::max<uint32_t>(64, e.vertices / 16);
+    int last_coded = -1;
+    size_t own_levels = 0;
+    for (size_t i = 1; i + 1 < levels->size(); ++i) {
+      const uint32_t level = (*levels)[i].level;
+      bool own = false;
+      auto m = decodeTilePayload(parsed->header, e, *payload, path, level, nullptr, &own);
+      ASSERT_TRUE(m.isOk()) << m.status().toString();
+      EXPECT_EQ(own, version >= codec.coarse_attributes_from) << "level " << level;
+      if (!own) continue;
+      if (m->positions.size() <= limit) last_coded = int(level);
+      ASSERT_GE(last_coded, 0);
+      EXPECT_EQ(testing::verticesShowingNoPointOfTheirCell(g.mesh, *m, g.grid.bits, last_coded), 0u)
+          << "level " << level;
+      ++own_levels;
+    }
+    if (version >= codec.coarse_attributes_from) EXPECT_GE(own_levels, 3u);
+  }
+}
+
 std::vector<CodecId> everyCodec() {
   std::vector<CodecId> ids;
   for (const auto& c : allCodecs()) ids.push_back(c.id);

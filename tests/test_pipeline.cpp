@@ -112,6 +112,70 @@ TEST(Pipeline, CoarseLevelsWeldByPosition) {
   }
 }
 
+// Coarse levels of many kdtree or octree tiles (version 3) show the scan's own normals and colors: each welded vertex
+// has those of an input vertex nearby (a point of its cell, or of its ancestor's cell at the last level whose
+// attributes the tile codes: Codecs/AttributeRoundTrip.CoarseLevelsShowTheTilesOwnAttributes checks that rule). The
+// sphere's colors differ from vertex to vertex: derived ones (grey) or another vertex's fail.
+TEST(Pipeline, CoarseLevelsOfManyTilesShowTheScansOwnAttributes) {
+  testing::TempDir dir;
+  Mesh sphere = icosphere(5);
+  for (size_t i = 0; i < sphere.positions.size(); ++i) {
+    const Vec3d& p = sphere.positions[i];
+    sphere.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
+    sphere.colors.push_back({uint8_t(i * 37), uint8_t(i * 11), uint8_t(128 + 100 * p[2]), 255});
+  }
+  sphere.color_channels = 3;
+  const std::string input = dir.file("sphere.ply");
+  ASSERT_TRUE(writeMeshFile(input, sphere, WriteOptions{}).isOk());
+  for (const char* codec : {"kdtree", "octree"}) {
+    SCOPED_TRACE(codec);
+    EncodeSettings s;
+    s.input = input;
+    s.output = dir.file(std::string(codec) + ".spz");
+    s.codec = codec;
+    s.bits = 12;
+    s.tile_triangles = 1024;
+    auto enc = encodeFile(s);
+    ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+    EXPECT_GE(enc->tiles.size(), 16u);
+    ContainerHeader header;
+    ASSERT_TRUE(decodeContainer(s.output, std::nullopt, &header).isOk());
+    auto q = quantizeMesh(sphere, header.grid, header.layout, nullptr);
+    ASSERT_TRUE(q.isOk());
+    for (uint32_t level : {5u, 7u, 9u}) {
+      SCOPED_TRACE(level);
+      auto m = decodeContainer(s.output, std::nullopt, nullptr, level);
+      ASSERT_TRUE(m.isOk()) << m.status().toString();
+      // Where each (normal, color) of the input is.
+      std::map<std::pair<OctNormal, Rgba8>, std::vector<Vec3u>> where;
+      for (size_t v = 0; v < q->positions.size(); ++v) where[{q->normals[v], q->colors[v]}].push_back(q->positions[v]);
+      ASSERT_EQ(m->normals.size(), m->positions.size());
+      ASSERT_EQ(m->colors.size(), m->positions.size());
+      // A tile of 1024 triangles (about 500 vertices) codes the attributes of its levels with at most 64 vertices,
+      // level 3 or finer on this sphere: the point shown lies in the level-3 cell of the vertex's ancestor, within
+      // 2^9 grid cells on each axis (measured: at most 508). Another vertex's attributes would be up to 4096 away.
+      const int64_t reach = int64_t(1) << 9;
+      size_t foreign = 0, far = 0;
+      for (size_t v = 0; v < m->positions.size(); ++v) {
+        const auto it = where.find({m->normals[v], m->colors[v]});
+        if (it == where.end()) {
+          ++foreign;
+          continue;
+        }
+        bool near = false;
+        for (const Vec3u& p : it->second) {
+          bool inside = true;
+          for (int a = 0; a < 3; ++a) inside &= std::llabs(int64_t(p[a]) - int64_t(m->positions[v][a])) <= reach;
+          near |= inside;
+        }
+        far += !near;
+      }
+      EXPECT_EQ(foreign, 0u) << "of " << m->positions.size() << " vertices show attributes the scan does not have";
+      EXPECT_EQ(far, 0u) << "of " << m->positions.size() << " vertices show a far point's attributes";
+    }
+  }
+}
+
 TEST(Pipeline, IgeaInSixteenTilesIsCrackFree) {
   const std::string path = dataFile("igea.ply.zst");
   if (!fs::exists(path)) GTEST_SKIP() << "shared data not found: " << path;

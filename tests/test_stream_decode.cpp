@@ -109,7 +109,8 @@ TEST_F(StreamDecode, SameBytesAsInMemoryForEveryCodecOptionAndFormat) {
     cases[1].crop = true;
     cases[2].tiles = std::vector<uint32_t>{9, 2, 5, 4, 3, 0};
     if (progressive) {
-      // Coarse levels: vertices off the index's bounds, normals derived from the welded triangles.
+      // Coarse levels: vertices off the index's bounds; kdtree and octree tiles show their own attributes, pm's are
+      // derived from the welded triangles.
       const uint32_t coarse = std::string(codec) == "pm" ? 1 : 8;
       cases.push_back({});
       cases.back().level = coarse;

@@ -101,6 +101,27 @@ class TempDir {
   std::string path_;
 };
 
+// The vertices of `coarse` (a coarse level of a tile of `tile`'s points, on a grid of `bits` bits) whose normal and
+// color are those of no point of `tile` in the vertex's cell of level `level` (cells of 2^(bits - level) grid cells,
+// aligned to the grid): what kdtree's and octree's coarse levels show (version 3, FORMAT.md).
+inline size_t verticesShowingNoPointOfTheirCell(const QuantizedMesh& tile, const QuantizedMesh& coarse, int bits,
+                                                int level) {
+  const int shift = bits - level;
+  const auto cell = [&](const Vec3u& p) { return Vec3u{p[0] >> shift, p[1] >> shift, p[2] >> shift}; };
+  std::map<Vec3u, std::vector<std::pair<OctNormal, Rgba8>>> in_cell;
+  for (size_t v = 0; v < tile.positions.size(); ++v)
+    in_cell[cell(tile.positions[v])].push_back({tile.normals.empty() ? OctNormal{0, 0} : tile.normals[v],
+                                                tile.colors.empty() ? Rgba8{0, 0, 0, 0} : tile.colors[v]});
+  size_t bad = 0;
+  for (size_t v = 0; v < coarse.positions.size(); ++v) {
+    const std::pair<OctNormal, Rgba8> shown{coarse.normals.empty() ? OctNormal{0, 0} : coarse.normals[v],
+                                            coarse.colors.empty() ? Rgba8{0, 0, 0, 0} : coarse.colors[v]};
+    const auto it = in_cell.find(cell(coarse.positions[v]));
+    bad += it == in_cell.end() || std::find(it->second.begin(), it->second.end(), shown) == it->second.end();
+  }
+  return bad;
+}
+
 inline void writeBytes(const std::string& path, const std::string& bytes) {
   std::ofstream(path, std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
 }

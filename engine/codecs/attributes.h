@@ -115,32 +115,107 @@ inline Sum3 scaledSum(const std::array<double, 3>& d) {
   return {i128(std::ldexp(d[0], 60)), i128(std::ldexp(d[1], 60)), i128(std::ldexp(d[2], 60))};
 }
 
+// One normal, predicted by the signed code `pred`; `actual` is the truth's signed code (encoder; anything when
+// decoding). `bin` is the context; `activity` gets the residual's classes. Returns the decoded code.
+template <class Io>
+OctNormal codeNormal(Io& io, AttributeModels& models, int bits, std::array<int, 2> pred, std::array<int, 2> actual,
+                     bool encoding, int bin, int& activity) {
+  const int m = (1 << (bits - 1)) - 1, q = 2 * m + 1;
+  const bool mirror = std::abs(pred[0]) + std::abs(pred[1]) > m;
+  std::array<int, 2> target = actual;
+  if (mirror) pred = foldCode(pred, m), target = foldCode(actual, m);
+  int ku = 0, kv = 0;
+  const int ru = codeResidual(io, models.normal_u[bin], models.normal_sign[0], models.normal_top[0],
+                              wrapCentered(target[0] - pred[0], q), ku);
+  const int rv = codeResidual(io, models.normal_v[bin * 5 + std::min(ku, 4)], models.normal_sign[1],
+                              models.normal_top[1], wrapCentered(target[1] - pred[1], q), kv);
+  std::array<int, 2> code{wrapCentered(pred[0] + ru, q), wrapCentered(pred[1] + rv, q)};
+  if (mirror) {
+    std::array<std::array<int, 2>, 4> pre;
+    const int count = foldPreimages(code, m, pre);
+    u32 index = 0;
+    if (encoding)
+      while (index + 1 < u32(count) && pre[index] != actual) ++index;
+    if (count > 1) index = io.uniform(index, u32(count));
+    code = pre[index];
+  }
+  activity = ku + kv;
+  return {uint16_t(code[0] + m), uint16_t(code[1] + m)};
+}
+
+// One color in levels (2^color_bits per channel), predicted by `pred` (levels); `actual` is the truth's 8-bit color
+// (encoder; null when decoding). Green first, red and blue after green's residual, alpha on its own. Returns the
+// decoded levels; `activity` gets the residuals' classes.
+template <class Io>
+Rgba8 codeColorLevels(Io& io, AttributeModels& models, const AttributeLayout& layout, const int (&pred)[4],
+                      const Rgba8* actual, int bin, int& activity) {
+  const int channels = layout.color_channels, cb = layout.color_bits, levels = 1 << cb;
+  const auto cm = [&](int channel, int green_class) -> SymbolModel& {
+    return models.color[(bin * 4 + channel) * 4 + std::min(green_class, 3)];
+  };
+  auto res = [&](int c) { return actual ? wrapCentered(int(colorLevel((*actual)[c], cb)) - pred[c], levels) : 0; };
+  int kg = 0, kr = 0, kb = 0, ka = 0;
+  const int rg = codeResidual(io, cm(1, 0), models.color_sign[1], models.color_top[1], res(1), kg);
+  const int rr =
+      codeResidual(io, cm(0, kg), models.color_sign[0], models.color_top[0], wrapCentered(res(0) - rg, levels), kr);
+  const int rb =
+      codeResidual(io, cm(2, kg), models.color_sign[2], models.color_top[2], wrapCentered(res(2) - rg, levels), kb);
+  Rgba8 lv{0, 0, 0, 0};
+  const auto wrap = [&](int x) { return u8(((x % levels) + levels) % levels); };
+  lv[1] = wrap(pred[1] + rg);
+  lv[0] = wrap(pred[0] + rg + rr);
+  lv[2] = wrap(pred[2] + rg + rb);
+  if (channels == 4) {
+    const int ra = codeResidual(io, cm(3, 0), models.color_sign[3], models.color_top[3], res(3), ka);
+    lv[3] = wrap(pred[3] + ra);
+  }
+  activity = kg + kr + kb + ka;
+  return lv;
+}
+
+// The 8-bit color of levels `lv` (channels beyond the layout's: 255).
+inline Rgba8 colorOfLevels(const Rgba8& lv, const AttributeLayout& layout) {
+  Rgba8 out{0, 0, 0, 255};
+  for (int c = 0; c < layout.color_channels; ++c) out[c] = colorOfLevel(lv[c], layout.color_bits);
+  return out;
+}
+
+// Payload versions of the attribute coding: raw before kPredictedAttributes, predicted from it on; from
+// kCoarseAttributes (kdtree and octree) coded through the levels too (CoarseAttributes below).
+constexpr uint16_t kPredictedAttributes = 2;
+constexpr uint16_t kCoarseAttributes = 3;
+
 // Normals and colors of the n vertices at positions `pos` with triangles `tris`; `truth` (encoder) holds them in
-// the vertices' order.
+// the vertices' order. `known` (version 3): vertices whose attributes are already in `normals` and `colors` (coded
+// at a coarse level); they are not coded again and count as decoded neighbours wherever they are in the order.
 template <class Io>
 void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::vector<Vec3u>& pos,
                              const std::vector<Triangle>& tris, const Points* truth, std::vector<OctNormal>& normals,
-                             std::vector<Rgba8>& colors) {
+                             std::vector<Rgba8>& colors, const std::vector<u8>* known = nullptr) {
   if (!layout.hasNormals() && !layout.hasColors()) return;
   const u32 n = u32(pos.size());
   const VertexFaces vf(n, tris);
   AttributeModels models(layout);
   std::vector<u8> activity(n, 0);
-  // The mean class of the vertex's decoded neighbours (lower numbers), as a context bin.
+  const auto isKnown = [&](u32 v) { return known && (*known)[v]; };
+  // Whether w's attributes are decoded when v's are coded.
+  const auto decoded = [&](u32 w, u32 v) { return w < v || isKnown(w); };
+  // The mean class of the vertex's decoded neighbours, as a context bin.
   auto neighbourBin = [&](u32 v) {
     u32 sum = 0, count = 0;
     for (u32 t : vf.of(v))
       for (u32 w : tris[t])
-        if (w < v) sum += activity[w], ++count;
+        if (w != v && decoded(w, v)) sum += activity[w], ++count;
     return activityBin(sum, count);
   };
 
   if (layout.hasNormals()) {
-    const int bits = layout.normal_bits, m = (1 << (bits - 1)) - 1, q = 2 * m + 1;
+    const int bits = layout.normal_bits, m = (1 << (bits - 1)) - 1;
     normals.resize(n);
     const std::vector<std::array<double, 3>> geometric = angleWeightedNormals(pos, tris);
     int last_flip = 0;
     for (u32 v = 0; v < n; ++v) {
+      if (isKnown(v)) continue;
       const Sum3 s = scaledSum(geometric[v]);
       std::array<int, 2> pred{0, 0};
       const std::array<int, 2> actual =
@@ -162,42 +237,28 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
       } else {
         pred = {0, 0};
       }
-      const bool mirror = std::abs(pred[0]) + std::abs(pred[1]) > m;
-      std::array<int, 2> target = actual;
-      if (mirror) pred = foldCode(pred, m), target = foldCode(actual, m);
-      const int bin = neighbourBin(v);
-      int ku = 0, kv = 0;
-      const int ru = codeResidual(io, models.normal_u[bin], models.normal_sign[0], models.normal_top[0],
-                                  wrapCentered(target[0] - pred[0], q), ku);
-      const int rv = codeResidual(io, models.normal_v[bin * 5 + std::min(ku, 4)], models.normal_sign[1],
-                                  models.normal_top[1], wrapCentered(target[1] - pred[1], q), kv);
-      std::array<int, 2> code{wrapCentered(pred[0] + ru, q), wrapCentered(pred[1] + rv, q)};
-      if (mirror) {
-        std::array<std::array<int, 2>, 4> pre;
-        const int count = foldPreimages(code, m, pre);
-        u32 index = 0;
-        if (truth)
-          while (index + 1 < u32(count) && pre[index] != actual) ++index;
-        if (count > 1) index = io.uniform(index, u32(count));
-        code = pre[index];
-      }
-      normals[v] = {uint16_t(code[0] + m), uint16_t(code[1] + m)};
-      activity[v] = u8(ku + kv);
+      int act = 0;
+      normals[v] = codeNormal(io, models, bits, pred, actual, truth != nullptr, neighbourBin(v), act);
+      activity[v] = u8(act);
     }
   }
 
   if (layout.hasColors()) {
     // In levels (2^color_bits of them; at 8 bits the values themselves).
     const int channels = layout.color_channels, cb = layout.color_bits, levels = 1 << cb;
-    colors.assign(n, Rgba8{0, 0, 0, 255});
+    if (colors.size() != n) colors.assign(n, Rgba8{0, 0, 0, 255});
     std::vector<Rgba8> level(n, Rgba8{0, 0, 0, 0});
     std::fill(activity.begin(), activity.end(), u8(0));
+    for (u32 v = 0; v < n; ++v)
+      if (isKnown(v))
+        for (int c = 0; c < channels; ++c) level[v][c] = u8(colorLevel(colors[v][c], cb));
     for (u32 v = 0; v < n; ++v) {
+      if (isKnown(v)) continue;
       // One pass over the decoded neighbours: their levels (the prediction) and activity (the context).
       u32 sum[4] = {0, 0, 0, 0}, count = 0, active = 0;
       for (u32 t : vf.of(v))
         for (u32 w : tris[t])
-          if (w < v) {
+          if (w != v && decoded(w, v)) {
             for (int c = 0; c < channels; ++c) sum[c] += level[w][c];
             active += activity[w];
             ++count;
@@ -208,42 +269,123 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
                   : v > 0  ? level[v - 1][c]
                   : c == 3 ? levels - 1
                            : levels / 2;
-      const int bin = activityBin(active, count);
-      const auto cm = [&](int channel, int green_class) -> SymbolModel& {
-        return models.color[(bin * 4 + channel) * 4 + std::min(green_class, 3)];
-      };
-      auto res = [&](int c) {
-        return truth ? wrapCentered(int(colorLevel(truth->colors[v][c], cb)) - pred[c], levels) : 0;
-      };
-      int kg = 0, kr = 0, kb = 0, ka = 0;
-      const int rg = codeResidual(io, cm(1, 0), models.color_sign[1], models.color_top[1], res(1), kg);
-      const int rr = codeResidual(io, cm(0, kg), models.color_sign[0], models.color_top[0],
-                                  wrapCentered(res(0) - rg, levels), kr);
-      const int rb = codeResidual(io, cm(2, kg), models.color_sign[2], models.color_top[2],
-                                  wrapCentered(res(2) - rg, levels), kb);
-      Rgba8& lv = level[v];
-      const auto wrap = [&](int x) { return u8(((x % levels) + levels) % levels); };
-      lv[1] = wrap(pred[1] + rg);
-      lv[0] = wrap(pred[0] + rg + rr);
-      lv[2] = wrap(pred[2] + rg + rb);
-      if (channels == 4) {
-        const int ra = codeResidual(io, cm(3, 0), models.color_sign[3], models.color_top[3], res(3), ka);
-        lv[3] = wrap(pred[3] + ra);
-      }
-      Rgba8& out = colors[v];
-      for (int c = 0; c < channels; ++c) out[c] = colorOfLevel(lv[c], cb);
-      activity[v] = u8(std::min(kg + kr + kb + ka, 255));
+      int act = 0;
+      level[v] = codeColorLevels(io, models, layout, pred, truth ? &truth->colors[v] : nullptr,
+                                 activityBin(active, count), act);
+      colors[v] = colorOfLevels(level[v], layout);
+      activity[v] = u8(std::min(act, 255));
     }
   }
 }
 
-// The attribute coding of a payload version: raw before kPredictedAttributes, predicted from it on.
-constexpr uint16_t kPredictedAttributes = 2;
+// Version 3 of kdtree and octree: coarse levels show the scan's own attributes. Every vertex of a coarse level
+// stands for the points it will split into and shows the attributes of one of them, its representative: the point
+// it keeps through all its splits (kdtree: its cell's first point; octree: its range's first point), so a vertex's
+// attributes never change once it shows its own. While a level has at most coarseLimit(n) vertices, the end of its
+// segment codes the attributes of the vertices born in it, each predicted by its parent's (the context: how coarse
+// the level is); a vertex born later shows its parent's representative's until the last level, whose segment codes
+// every point not coded yet as version 2 does, with the coded ones as known neighbours. Each point's attributes are
+// coded once, so coarse levels cost only the weaker prediction of the few coded early (measured in bench/RESULTS.md).
+// The paper (attributes-selective-refinement §3.4) merges the attributes of contracted vertices into new values;
+// copying one of them keeps every level's attributes the scan's own and codes no value twice.
+inline u32 coarseLimit(u32 n) { return std::max<u32>(64, n / 16); }
+
+class CoarseAttributes {
+ public:
+  static constexpr u32 kNone = UINT32_MAX;
+  CoarseAttributes(const AttributeLayout& layout, uint16_t version, u32 n)
+      : layout_(layout),
+        models_(layout),
+        n_(n),
+        active_(version >= kCoarseAttributes && (layout.hasNormals() || layout.hasColors())) {
+    if (!active_) return;
+    shown_.assign(n, kNone);
+    coded_.assign(n, 0);
+  }
+  bool active() const { return active_; }
+  // Vertex v appears at a split of `parent` (kNone: v is the root).
+  void birth(u32 v, u32 parent) {
+    if (active_) born_.push_back({v, parent});
+  }
+  // The end of a coarse level's segment, which leaves `vertices` vertices of cell size 2^`coarseness` grid cells.
+  // `truth` (encoder): attributes by vertex. `normals` and `colors` are by vertex (n of them).
+  template <class Io, class Neighbours>
+  void endLevel(Io& io, u32 vertices, int coarseness, const Points* truth, std::vector<OctNormal>& normals,
+                std::vector<Rgba8>& colors, const Neighbours& neighbours) {
+    if (!active_) return;
+    if (vertices > coarseLimit(n_)) {
+      for (const auto& [v, p] : born_) shown_[v] = p == kNone ? kNone : shown_[p];
+      born_.clear();
+      return;
+    }
+    const int bin = std::clamp(coarseness, 0, AttributeModels::kActivity - 1);
+    const int nb = layout_.normal_bits, m = (1 << (nb - 1)) - 1, levels = 1 << layout_.color_bits;
+    if (layout_.hasNormals()) normals.resize(n_);
+    if (layout_.hasColors()) colors.resize(n_, Rgba8{0, 0, 0, 255});
+    for (const auto& [v, p] : born_) {
+      const u32 from = p == kNone ? kNone : shown_[p];
+      // The neighbours at this level whose attributes are decoded (not those born later in this segment).
+      Sum3 sum{0, 0, 0};
+      u32 csum[4] = {0, 0, 0, 0}, count = 0;
+      for (u32 w : neighbours(v)) {
+        const u32 r = shown_[w];
+        if (r == kNone) continue;
+        ++count;
+        if (layout_.hasNormals()) {
+          const auto d = octahedralVector({int(normals[r][0]) - m, int(normals[r][1]) - m}, m);
+          for (int a = 0; a < 3; ++a) sum[a] += d[a];
+        }
+        if (layout_.hasColors())
+          for (int c = 0; c < 4; ++c) csum[c] += colorLevel(colors[r][c], layout_.color_bits);
+      }
+      int act = 0;
+      if (layout_.hasNormals()) {
+        std::array<int, 2> pred = from == kNone
+                                      ? std::array<int, 2>{0, 0}
+                                      : std::array<int, 2>{int(normals[from][0]) - m, int(normals[from][1]) - m};
+        if (sum[0] != 0 || sum[1] != 0 || sum[2] != 0) pred = octahedralOfSum(sum, nb);
+        const std::array<int, 2> actual =
+            truth ? std::array<int, 2>{int(truth->normals[v][0]) - m, int(truth->normals[v][1]) - m}
+                  : std::array<int, 2>{0, 0};
+        normals[v] = codeNormal(io, models_, nb, pred, actual, truth != nullptr, bin, act);
+      }
+      if (layout_.hasColors()) {
+        int pred[4];
+        for (int c = 0; c < 4; ++c)
+          pred[c] = count > 0       ? int((csum[c] + count / 2) / count)
+                    : from != kNone ? int(colorLevel(colors[from][c], layout_.color_bits))
+                    : c == 3        ? levels - 1
+                                    : levels / 2;
+        colors[v] =
+            colorOfLevels(codeColorLevels(io, models_, layout_, pred, truth ? &truth->colors[v] : nullptr, bin, act),
+                          layout_);
+      }
+      shown_[v] = v;
+      coded_[v] = 1;
+    }
+    born_.clear();
+  }
+  // The point whose attributes vertex v shows; kNone before the first coarse level.
+  u32 shown(u32 v) const { return shown_[v]; }
+  // Per point: coded at a coarse level (the `known` of codePredictedAttributes).
+  const std::vector<u8>* coded() const { return active_ ? &coded_ : nullptr; }
+
+ private:
+  AttributeLayout layout_;
+  AttributeModels models_;
+  u32 n_;
+  bool active_;
+  std::vector<u32> shown_;
+  std::vector<u8> coded_;
+  std::vector<std::array<u32, 2>> born_;
+};
+
+// The attribute coding of a payload version (from kCoarseAttributes without the points in `known`).
 template <class Io>
 void codeTileAttributes(Io& io, uint16_t version, const AttributeLayout& layout, const std::vector<Vec3u>& pos,
                         const std::vector<Triangle>& tris, const Points* truth, std::vector<OctNormal>& normals,
-                        std::vector<Rgba8>& colors) {
-  if (version >= kPredictedAttributes) codePredictedAttributes(io, layout, pos, tris, truth, normals, colors);
+                        std::vector<Rgba8>& colors, const std::vector<u8>* known = nullptr) {
+  if (version >= kPredictedAttributes) codePredictedAttributes(io, layout, pos, tris, truth, normals, colors, known);
   else codeRawAttributes(io, layout, u32(pos.size()), truth, normals, colors);
 }
 

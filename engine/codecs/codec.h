@@ -164,6 +164,9 @@ struct CodecInfo {
   // False when the codec derives normals and colors from the triangles instead of keeping them (pm): its tiles
   // weld by position even when complete, as coarse levels do, and get attributes derived from the welded mesh.
   bool keeps_attributes = true;
+  // The first version whose coarse levels show the tile's own normals and colors, coded through its levels (kdtree
+  // and octree from 3; 0: coarse levels derive them from their triangles). Its level 0 (no segment) still derives.
+  uint16_t coarse_attributes_from = 0;
   bool progressive() const { return levels != nullptr; }
 };
 

@@ -154,9 +154,9 @@ void writeHeader(const HeaderFormat& f, const Header& h, int bits, const Attribu
 }
 
 Status checkVersion(std::string_view codec, uint16_t version) {
-  if (version < 1 || version > 2)  // 2: predicted attributes (attributes.h)
+  if (version < 1 || version > 3)  // 2: predicted attributes; 3: coarse levels with their own (attributes.h)
     return makeError(ErrorCode::kUnknownVersion, std::string(codec) + " codec version " + std::to_string(version) +
-                                                     " is not known to this build (knows 1 and 2)");
+                                                     " is not known to this build (knows 1 to 3)");
   return Status::ok();
 }
 

@@ -33,15 +33,17 @@
 //    visited breadth-first across shared edges; each codes whether it has one copy oriented as its parent predicts
 //    (almost free on oriented manifolds), one copy the other way, or explicit counts of both orientations.
 //  - Attributes (normals, colors) are coded per vertex in the final segment: raw in v1, predicted from the decoded
-//    positions, triangles and neighbours in v2 (attributes.h). Coarse levels get normals computed from their
-//    triangles and gray colors; attribute coding through the hierarchy is still to come.
+//    positions, triangles and neighbours in v2 (attributes.h). In v2 coarse levels get normals computed from their
+//    triangles and gray colors; from v3 each coarse vertex shows the attributes of a point of its cell, those of
+//    the first levels coded at the end of their segments (attributes.h, CoarseAttributes).
 //
-// Payload v1 and v2 (the same layout; they differ in the attributes' coding):
+// Payload v1, v2 and v3 (the same layout; they differ in the attributes' coding):
 //   varint N (points), varint T (triangles, with multiplicity); if N == 0 nothing follows.
 //   u8 k0 (root level), 3 x varint root cell index (coordinate >> (bits - k0)),
 //   varint S (= bits - k0 + 1 segments), S x varint segment length, then the segments.
-//   Segment i < S-1 holds the splits from level k0+i to k0+i+1 (x, y, z); segment S-1 the unit splits of
-//   coincident vertices, orientation and multiplicity, and the attributes. Each is one range-coder stream.
+//   Segment i < S-1 holds the splits from level k0+i to k0+i+1 (x, y, z), then (v3) the attributes of the cells it
+//   created while there are few; segment S-1 the unit splits of coincident vertices, orientation and multiplicity,
+//   and the attributes (v3: of the points not coded yet). Each is one range-coder stream.
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -260,6 +262,8 @@ class Engine {
   // Decodes (or encodes) up to level `target` (bits: everything, lossless).
   Status run(int target) {
     if (n_ == 0) return Status::ok();
+    coarse_ = std::make_unique<CoarseAttributes>(layout, version, n_);
+    coarse_->birth(0, CoarseAttributes::kNone);
     for (int k = k0_; k < bits_ && k < target; ++k) {
       SP_RETURN_IF_ERROR(io_.begin());
       for (int axis = 0; axis < 3; ++axis) {
@@ -268,6 +272,9 @@ class Engine {
         for (const auto& cell : cells_) SP_RETURN_IF_ERROR(splitCell(cell, d));
         cells_.swap(next_);
       }
+      io_.meter(&CodecStats::attribute_bits);
+      coarse_->endLevel(io_, u32(cells_.size()), bits_ - (k + 1), truth_, normals_, colors_,
+                        [&](u32 v) -> const std::vector<u32>& { return cx_.nb[v]; });
       SP_RETURN_IF_ERROR(io_.end());
       level_ = k + 1;
     }
@@ -305,12 +312,24 @@ class Engine {
     m.triangles = orientedTriangles(triangleKeys());
     for (auto& t : m.triangles)
       for (auto& v : t) v = index[v];
-    deriveAttributes(m, layout);
+    // Version 3: each cell shows its representative's attributes (attributes.h, CoarseAttributes).
+    const bool own = coarse_ && coarse_->active() && std::all_of(cells_.begin(), cells_.end(), [&](const Cell& c) {
+                       return coarse_->shown(c.s) != CoarseAttributes::kNone;
+                     });
+    if (!own) {
+      deriveAttributes(m, layout);
+      return m;
+    }
+    for (const auto& c : cells_) {
+      const u32 r = coarse_->shown(c.s);
+      if (layout.hasNormals()) m.normals.push_back(normals_[r]);
+      if (layout.hasColors()) m.colors.push_back(colors_[r]);
+    }
     return m;
   }
 
-  AttributeLayout layout;                   // set by the caller before run()
-  uint16_t version = kPredictedAttributes;  // the payload's (attribute coding)
+  AttributeLayout layout;                // set by the caller before run()
+  uint16_t version = kCoarseAttributes;  // the payload's (attribute coding)
 
  private:
   struct Cell {
@@ -369,6 +388,7 @@ class Engine {
     const u32 v2 = cell.s + c;
     setCell(cell.s, left, nd);
     setCell(v2, right, nd);
+    coarse_->birth(v2, cell.s);
     next_.push_back({cell.s, v2});
     next_.push_back({v2, cell.e});
     return splitVertex(cell.s, v2, cell.e);
@@ -714,7 +734,7 @@ class Engine {
 
   void codeAttributes() {
     io_.meter(&CodecStats::attribute_bits);
-    codeTileAttributes(io_, version, layout, lo_, triangles_, truth_, normals_, colors_);
+    codeTileAttributes(io_, version, layout, lo_, triangles_, truth_, normals_, colors_, coarse_->coded());
   }
 
  public:
@@ -745,8 +765,9 @@ class Engine {
   size_t split_index_ = 0;
   int level_ = 0;
   std::vector<Triangle> triangles_;
-  std::vector<OctNormal> normals_;
+  std::vector<OctNormal> normals_;  // by point; from version 3 filled in from the first level on
   std::vector<Rgba8> colors_;
+  std::unique_ptr<CoarseAttributes> coarse_;
 };
 
 constexpr HeaderFormat kFormat{"kdtree", false};

@@ -35,13 +35,16 @@
 //  - Vertices at one grid position with different attributes split apart after the last level, one per round,
 //    by the same VS codes with no geometry.
 //  - Attributes (normals, colors) are coded per vertex in the final segment: raw in v1, predicted in v2
-//    (attributes.h). Coarse levels get normals from their triangles and gray colors.
+//    (attributes.h). In v2 coarse levels get normals from their triangles and gray colors; from v3 each coarse
+//    vertex shows the attributes of a point of its cell, those of the first levels coded at the end of their
+//    segments (attributes.h, CoarseAttributes).
 //
-// Payload v1 and v2 (hierarchy.h's header with the axis order byte; they differ in the attributes' coding):
+// Payload v1, v2 and v3 (hierarchy.h's header with the axis order byte; they differ in the attributes' coding):
 //   varint N (points), varint T (triangles, with multiplicity); if N == 0 nothing follows.
 //   u8 k0 (root level), u8 axis order (0..5: xyz xzy yxz yzx zxy zyx, decoder order), 3 x varint root cell index,
 //   varint S (= bits - k0 + 1), S x varint segment length, then the segments, each one range-coder stream.
-//   Segment i < S-1: the root's next split (i = 0 only), then the three split steps from level k0+i to k0+i+1.
+//   Segment i < S-1: the root's next split (i = 0 only), then the three split steps from level k0+i to k0+i+1,
+//   then (v3) the attributes of the vertices they created while there are few.
 //   Segment S-1: (the root's next split if k0 = bits) the rounds of coincident-vertex splits, face flags of the
 //   cliques, orientation and multiplicity, attributes.
 #include <algorithm>
@@ -137,10 +140,15 @@ class Engine {
   // Decodes (or encodes) up to level `target` (bits: everything, lossless).
   Status run(int target) {
     if (n_ == 0) return Status::ok();
+    coarse_ = std::make_unique<CoarseAttributes>(layout, version, n_);
+    coarse_->birth(0, CoarseAttributes::kNone);
     for (int k = k0_; k < bits_ && k < target; ++k) {
       SP_RETURN_IF_ERROR(io_.begin());
       if (k == k0_) SP_RETURN_IF_ERROR(codeNext(0, -1, 2));
       for (int j = 0; j < 3; ++j) SP_RETURN_IF_ERROR(step(3 * (k - k0_) + j));
+      io_.meter(&CodecStats::attribute_bits);
+      coarse_->endLevel(io_, u32(lo_.size()), bits_ - (k + 1), truth_ ? &truth_->by_id : nullptr, normals_, colors_,
+                        [&](u32 v) -> const std::vector<u32>& { return nb_[v]; });
       SP_RETURN_IF_ERROR(io_.end());
       level_ = k + 1;
     }
@@ -156,7 +164,8 @@ class Engine {
       return makeError(ErrorCode::kInternal, "octree encoder: split sequence mismatch");
     SP_RETURN_IF_ERROR(codeFaces());
     io_.meter(&CodecStats::attribute_bits);
-    codeTileAttributes(io_, version, layout, lo_, triangles_, truth_ ? &truth_->by_id : nullptr, normals_, colors_);
+    codeTileAttributes(io_, version, layout, lo_, triangles_, truth_ ? &truth_->by_id : nullptr, normals_, colors_,
+                       coarse_->coded());
     SP_RETURN_IF_ERROR(io_.end());
     level_ = bits_;
     complete_ = true;
@@ -196,14 +205,26 @@ class Engine {
     });
     SP_RETURN_IF_ERROR(status);
     m.triangles = orientedTriangles(keys);
-    deriveAttributes(m, layout);
+    // Version 3: each vertex shows its representative's attributes (attributes.h, CoarseAttributes).
+    const u32 count = u32(m.positions.size());
+    bool own = coarse_ && coarse_->active();
+    for (u32 v = 0; v < count && own; ++v) own = coarse_->shown(v) != CoarseAttributes::kNone;
+    if (!own) {
+      deriveAttributes(m, layout);
+      return m;
+    }
+    for (u32 v = 0; v < count; ++v) {
+      const u32 r = coarse_->shown(v);
+      if (layout.hasNormals()) m.normals.push_back(normals_[r]);
+      if (layout.hasColors()) m.colors.push_back(colors_[r]);
+    }
     return m;
   }
 
-  AttributeLayout layout;                   // set by the caller before run()
-  uint16_t version = kPredictedAttributes;  // the payload's (attribute coding)
-  u64 max_cliques_ = kMaxTriangles;         // coarse levels' triangles (set by the decoder from the index)
-  bool flat_ = false;                       // one model per symbol kind (measuring the contexts' gain)
+  AttributeLayout layout;                // set by the caller before run()
+  uint16_t version = kCoarseAttributes;  // the payload's (attribute coding)
+  u64 max_cliques_ = kMaxTriangles;      // coarse levels' triangles (set by the decoder from the index)
+  bool flat_ = false;                    // one model per symbol kind (measuring the contexts' gain)
   u64 splits_ = 0;
   std::vector<std::array<u32, 2>> range_;   // encoder: the points [s, e) of each vertex
   std::vector<std::array<u32, 2>> events_;  // planning: the splits in order
@@ -315,6 +336,7 @@ class Engine {
       range_[v] = {s, m};
       range_.push_back({m, e});
     }
+    if (axis >= 0) coarse_->birth(w, v);
     if (planning()) events_.push_back({v, w});
     else SP_RETURN_IF_ERROR(splitEdges(v, w, axis, plane2, half));
     SP_RETURN_IF_ERROR(codeNext(v, t, 0));
@@ -486,8 +508,9 @@ class Engine {
   std::vector<u32> mark_;  // per vertex: 1 + its index among the split vertex's neighbours, 0 otherwise
   std::vector<u8> cls_, pushed_;
   std::vector<Triangle> triangles_;
-  std::vector<OctNormal> normals_;
+  std::vector<OctNormal> normals_;  // by vertex id; from version 3 filled in from the first level on
   std::vector<Rgba8> colors_;
+  std::unique_ptr<CoarseAttributes> coarse_;
 };
 
 // Decoder axis order: the tile's longest extent first (the encoder merges along the shortest first).

@@ -828,7 +828,9 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   std::vector<uint8_t> streams;
   Header h;
   h.base_codec = uint8_t(best->id);
-  h.base_version = best->version;
+  // The base mesh has no attributes, where kdtree's and octree's version 3 payloads are their version 2 bytes: the
+  // base keeps naming 2, as pm v2 always has (its golden bytes).
+  h.base_version = std::min<uint16_t>(best->version, 2);
   h.base_bytes = best_payload.size();
   h.base_vertices = best_decoded.positions.size();
   h.base_faces = best_decoded.triangles.size();

@@ -351,18 +351,20 @@ Result<std::vector<CodecLevel>> tilePayloadLevels(const ContainerHeader& header,
 
 Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const TileEntry& e,
                                         std::span<const uint8_t> payload, const std::string& what,
-                                        std::optional<uint32_t> level, bool* complete) {
+                                        std::optional<uint32_t> level, bool* complete, bool* own_attributes) {
   const std::string where = what + ": tile " + std::to_string(e.tile_id);
   SP_ASSIGN_OR_RETURN(const CodecInfo* codec, codecOf(e, where));
   const TileContext ctx{header.grid.bits, header.layout};
   const DecodeLimits limits = limitsOf(e);
-  bool partial = false;
+  bool partial = false, coarse_own = false;
   if (level) {
     if (!codec->decode_level)
       return makeError(ErrorCode::kInvalidArgument, where + ": codec " + std::string(codec->name) +
                                                         " is single-rate; it has no levels to choose from");
     SP_ASSIGN_OR_RETURN(auto levels, tilePayloadLevels(header, e, payload, what));
     partial = !levels.empty() && *level < levels.back().level;
+    coarse_own = partial && codec->coarse_attributes_from != 0 && e.codec_version >= codec->coarse_attributes_from &&
+                 *level > levels.front().level;
   }
   try {
     auto mesh = partial ? codec->decode_level(ctx, e.codec_version, payload, *level, limits)
@@ -370,6 +372,7 @@ Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const Til
     if (!mesh.isOk()) return mesh.status().withContext(where);
     // A codec that derives attributes never yields the tile's own: its tiles weld as coarse ones do.
     if (complete) *complete = !partial && codec->keeps_attributes;
+    if (own_attributes) *own_attributes = partial ? coarse_own : codec->keeps_attributes;
     if (partial) return mesh;
     if (mesh->positions.size() != e.vertices || mesh->triangles.size() != e.faces)
       return makeError(ErrorCode::kMalformed, where + ": decoded " + std::to_string(mesh->positions.size()) +

@@ -127,11 +127,14 @@ DecodeLimits limitsOf(const TileEntry& entry);
 // claims more is kMalformed before anything is allocated), and checks that the complete tile has exactly the
 // index's counts. With a `level` (progressive codecs only; kInvalidArgument otherwise) the tile's mesh at that
 // level (see CodecLevel); `complete` says whether that was the tile's last level with its own attributes (false
-// for a codec that derives them, CodecInfo::keeps_attributes: such tiles weld by position). Running out of memory
+// for a codec that derives them, CodecInfo::keeps_attributes: such tiles weld by position); `own_attributes` whether
+// the mesh's normals and colors are the tile's own (a complete tile, or a coarse level coded with them,
+// CodecInfo::coarse_attributes_from) rather than derived from its triangles. Running out of memory
 // while decoding is a data error (kMalformed): only a hostile payload can ask for more than its index allows.
 Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const TileEntry& entry,
                                         std::span<const uint8_t> payload, const std::string& what,
-                                        std::optional<uint32_t> level = std::nullopt, bool* complete = nullptr);
+                                        std::optional<uint32_t> level = std::nullopt, bool* complete = nullptr,
+                                        bool* own_attributes = nullptr);
 // The levels of a progressive tile's payload (empty for single-rate codecs).
 Result<std::vector<CodecLevel>> tilePayloadLevels(const ContainerHeader& header, const TileEntry& entry,
                                                   std::span<const uint8_t> payload, const std::string& what);
