@@ -100,24 +100,28 @@ Result<std::vector<uint64_t>> levelBytes(const ContainerFile& file, const std::v
 }
 
 // Decodes the chosen tiles (at `level` when given) and welds them. Tiles decoded at a coarse level weld by position
-// (their vertices' attributes differ between tiles along a seam): a welded vertex keeps the first tile's attributes
-// when every tile has its own (kdtree and octree from version 3), else the attributes are derived from the welded
-// mesh.
+// (their vertices' attributes differ between tiles along a seam): a welded vertex keeps its first tile's attributes
+// when that tile has its own (kdtree and octree from version 3), else gets them derived from the welded mesh.
 Result<QuantizedMesh> decodeChosen(const ContainerFile& file, const std::vector<const TileEntry*>& chosen,
                                    std::optional<uint32_t> level) {
   // Tiles decode independently: in parallel, then welded in index order (deterministic).
   SP_ASSIGN_OR_RETURN(auto tiles, decodeTiles(file, chosen, level));
   std::vector<QuantizedMesh> decoded;
   decoded.reserve(tiles.size());
-  bool all_complete = true, all_own = true;
+  bool all_complete = true;
+  std::vector<uint8_t> own;
   for (DecodedTile& t : tiles)
-    decoded.push_back(std::move(t.mesh)), all_complete &= t.complete, all_own &= t.own_attributes;
+    decoded.push_back(std::move(t.mesh)), all_complete &= t.complete, own.push_back(t.own_attributes);
   tiles.clear();
   if (decoded.empty()) return QuantizedMesh();
   if (all_complete && decoded.size() == 1) return std::move(decoded[0]);  // what weldTiles would copy
   if (all_complete) return weldTiles(decoded);
-  QuantizedMesh welded = weldTiles(decoded, WeldBy::kPosition);
-  if (!all_own) deriveAttributes(welded, file.header().layout);
+  if (std::find(own.begin(), own.end(), 0) == own.end()) return weldTiles(decoded, WeldBy::kPosition);
+  std::vector<uint32_t> owner;
+  QuantizedMesh welded = weldTiles(decoded, WeldBy::kPosition, &owner);
+  std::vector<uint8_t> keep(owner.size());
+  for (size_t v = 0; v < owner.size(); ++v) keep[v] = own[owner[v]];
+  deriveAttributes(welded, file.header().layout, keep);
   return welded;
 }
 

@@ -58,7 +58,8 @@ struct Bounds {
 // A welded vertex while it can still be used: its output number (once it has one), what its record holds, and the
 // sum of its triangles' normals when the attributes are derived.
 struct Welded {
-  uint32_t owner = 0;  // the tile (decode order) that created it
+  uint32_t owner = 0;   // the tile (decode order) that created it
+  bool derive = false;  // its attributes are derived (its owner tile has none of its own)
   uint32_t out = kUnassigned;
   ScratchVertex record{};
   Vec3d normal_sum{0, 0, 0};
@@ -98,18 +99,20 @@ class RecordFile {
   uint64_t flushed_ = 0;
 };
 
-// Welds decoded tiles one after the other, as weldTiles then cropToBox and (unless every tile has its own
-// attributes) deriveAttributes would on the whole mesh, writing vertex records and face bytes as it goes.
+// Welds decoded tiles one after the other, as weldTiles then cropToBox and deriveAttributes (for the vertices of
+// tiles without attributes of their own, `own` by tile in decode order) would on the whole mesh, writing vertex
+// records and face bytes as it goes.
 class Welder {
  public:
-  Welder(const ContainerHeader& header, const std::vector<Bounds>& bounds, bool all_complete, bool all_own,
+  Welder(const ContainerHeader& header, const std::vector<Bounds>& bounds, bool all_complete, std::vector<uint8_t> own,
          bool point_cloud, const std::optional<std::array<double, 6>>& crop, MeshFileFormat format,
          RecordFile& records, ScratchFile& faces)
       : grid_(header.grid),
         layout_(header.layout),
         bounds_(bounds),
         by_(all_complete ? WeldBy::kPositionAndAttributes : WeldBy::kPosition),
-        derive_(!all_own),
+        own_(std::move(own)),
+        derive_(std::find(own_.begin(), own_.end(), 0) != own_.end()),
         point_cloud_(point_cloud),
         crop_(crop),
         format_(format),
@@ -150,9 +153,10 @@ class Welder {
         }
       }
       w->owner = t;
-      w->record = ScratchVertex{p, derive_ || m.normals.empty() ? OctNormal{0, 0} : m.normals[v],
+      w->derive = !own_[t];
+      w->record = ScratchVertex{p, w->derive || m.normals.empty() ? OctNormal{0, 0} : m.normals[v],
                                 m.colors.empty() ? Rgba8{0, 0, 0, 0} : m.colors[v]};
-      if (derive_ && layout_.hasColors()) w->record.c = Rgba8{128, 128, 128, 255};
+      if (w->derive && layout_.hasColors()) w->record.c = Rgba8{128, 128, 128, 255};
       ref_[v] = w;
       if (!crop_ || (point_cloud_ && inside(p))) SP_RETURN_IF_ERROR(emit(*w));
     }
@@ -214,7 +218,7 @@ class Welder {
   }
   // The vertex's last triangle is in: its derived normal is final.
   Status finish(const Welded& w) {
-    if (!derive_ || !layout_.hasNormals() || w.out == kUnassigned) return Status::ok();
+    if (!w.derive || !layout_.hasNormals() || w.out == kUnassigned) return Status::ok();
     const Vec3d& a = w.normal_sum;
     return records_.setNormal(w.out,
                               encodeOctahedral(Vec3f{float(a[0]), float(a[1]), float(a[2])}, layout_.normal_bits));
@@ -232,7 +236,8 @@ class Welder {
   const AttributeLayout& layout_;
   const std::vector<Bounds>& bounds_;
   const WeldBy by_;
-  const bool derive_, point_cloud_;
+  const std::vector<uint8_t> own_;
+  const bool derive_, point_cloud_;  // derive_: some tile has no attributes of its own
   const std::optional<std::array<double, 6>>& crop_;
   const MeshFileFormat format_;
   RecordFile& records_;
@@ -383,7 +388,8 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
   // Where each tile's vertices lie, whether every tile is complete, whether the decode is a point cloud. From the
   // index for a complete decode; a coarse level is decoded once to measure them.
   std::vector<Bounds> bounds(n);
-  bool all_complete = true, all_own = true;
+  bool all_complete = true;
+  std::vector<uint8_t> own(n, 1);
   uint64_t total_faces = 0;
   if (settings.level) {
     for (auto [a, b] : batches) {
@@ -391,7 +397,7 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
       for (size_t i = a; i < b; ++i) {
         for (const Vec3u& p : tiles[i - a].mesh.positions) bounds[i].add(p);
         all_complete &= tiles[i - a].complete;
-        all_own &= tiles[i - a].own_attributes;
+        own[i] = tiles[i - a].own_attributes;
         total_faces += tiles[i - a].mesh.triangles.size();
       }
     }
@@ -401,7 +407,7 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
       if (e.vertices > 0) bounds[i] = Bounds{e.lo, e.hi};
       const CodecInfo* codec = findCodec(e.codec);
       all_complete &= !codec || codec->keeps_attributes;
-      all_own = all_complete;
+      own[i] = !codec || codec->keeps_attributes;
       total_faces += e.faces;
     }
   }
@@ -411,7 +417,7 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
   ScratchFile faces;
   SP_RETURN_IF_ERROR(records.open(scratch.file("vertices")));
   SP_RETURN_IF_ERROR(faces.open(scratch.file("faces")));
-  Welder welder(header, bounds, all_complete, all_own, total_faces == 0, settings.crop, format, records, faces);
+  Welder welder(header, bounds, all_complete, std::move(own), total_faces == 0, settings.crop, format, records, faces);
   for (auto [a, b] : batches) {
     SP_ASSIGN_OR_RETURN(auto tiles, decodeTiles(file, std::span(chosen).subspan(a, b - a), settings.level));
     for (size_t i = a; i < b; ++i) {

@@ -23,8 +23,12 @@ WeldKey weldKey(const QuantizedMesh& mesh, size_t v, WeldBy by) {
                  !attributes || mesh.colors.empty() ? Rgba8{0, 0, 0, 0} : mesh.colors[v]};
 }
 
-QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by) {
-  if (tiles.size() == 1) return tiles[0];
+QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by, std::vector<uint32_t>* owner) {
+  if (owner) owner->clear();
+  if (tiles.size() == 1) {
+    if (owner) owner->assign(tiles[0].positions.size(), 0);
+    return tiles[0];
+  }
   QuantizedMesh out;
   struct Owner {
     uint32_t index;
@@ -50,6 +54,7 @@ QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by) {
       }
       remap[v] = next;
       out.positions.push_back(tile.positions[v]);
+      if (owner) owner->push_back(t);
       if (!tile.normals.empty()) out.normals.push_back(tile.normals[v]);
       if (!tile.colors.empty()) out.colors.push_back(tile.colors[v]);
     }

@@ -4,8 +4,9 @@
 // the same integer coordinates (and attributes) in every tile that holds it. weldTiles concatenates tiles and
 // merges vertices of different tiles that share the weld key. By default the key is position, normal and color:
 // two different scan vertices at one quantized position with different attributes stay apart (their attributes
-// survive). Tiles decoded at a coarse level carry attributes each tile derived on its own, which differ along a
-// seam: those weld by position alone (the caller derives their attributes again). Vertices that share a position
+// survive). Tiles decoded at a coarse level carry attributes that differ along a seam (each tile's own
+// representatives, or attributes it derived on its own): those weld by position alone, a welded vertex keeping its
+// first tile's attributes (the caller derives them again where that tile has none of its own). Vertices that share a position
 // inside one tile are left as the codec returned them: welding never changes what one tile decodes to.
 #pragma once
 
@@ -32,6 +33,8 @@ struct WeldKeyHash {
 // The key of vertex `v` of `mesh`.
 WeldKey weldKey(const QuantizedMesh& mesh, size_t v, WeldBy by);
 
-QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by = WeldBy::kPositionAndAttributes);
+// `owner` (when given): per vertex of the result, the index of the tile it comes from (its first).
+QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by = WeldBy::kPositionAndAttributes,
+                        std::vector<uint32_t>* owner = nullptr);
 
 }  // namespace scanpress

@@ -341,32 +341,32 @@ TEST_P(AttributeRoundTrip, PredictionsPredict) {
                                    << " bits per vertex";
 }
 
-// Version 3 (kdtree, octree): every vertex of a coarse level shows the normal and color of a point of the tile in its
-// cell, not ones derived from its triangles, decoded from the level's prefix alone. Past the last level whose births
-// are coded (the last with at most max(64, N / 16) vertices, FORMAT.md) a vertex shows those of a point in its
-// ancestor's cell at that level. The sphere's colors are random in two channels and a third of its normals point
-// inward: derived attributes, or a vertex showing another cell's point, fail.
-TEST_P(AttributeRoundTrip, CoarseLevelsShowTheTilesOwnAttributes) {
-  if (!codec().progressive()) GTEST_SKIP() << codec().name << " is single-rate";
-  const QuantizedMesh q = attributedSphere(10, 4, false);
-  const TileContext ctx{12, {10, 4}};
-  auto enc = encodeMesh(codec(), ctx, q);
+void expectCoarseLevelsShowTheTilesOwnAttributes(const CodecInfo& codec, const AttributeLayout& layout) {
+  SCOPED_TRACE(std::to_string(layout.normal_bits) + " normal bits, " + std::to_string(layout.color_channels) +
+               " channels");
+  QuantizedMesh q = attributedSphere(layout.hasNormals() ? layout.normal_bits : 10, 4, false);
+  if (!layout.hasNormals()) q.normals.clear();
+  if (!layout.hasColors()) q.colors.clear();
+  for (auto& c : q.colors)
+    if (layout.color_channels == 3) c[3] = 255;
+  const TileContext ctx{12, layout};
+  auto enc = encodeMesh(codec, ctx, q);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-  auto levels = codec().levels(ctx, codec().version, enc->payload, limitsOf(enc->decoded));
+  auto levels = codec.levels(ctx, codec.version, enc->payload, limitsOf(enc->decoded));
   ASSERT_TRUE(levels.isOk());
   const uint32_t n = uint32_t(q.positions.size());  // distinct points: twins differ in their attributes
   const uint32_t limit = std::max<uint32_t>(64, n / 16);
   int last_coded = -1;
   size_t checked = 0;
-  for (size_t i = 1; i < levels->size(); ++i) {  // level 0 has no segment: its one vertex derives them
+  for (size_t i = 1; i < levels->size(); ++i) {  // the root level has no segment: its one vertex derives them
     const CodecLevel& l = (*levels)[i];
     if (l.complete) continue;
     SCOPED_TRACE("level " + std::to_string(l.level));
-    auto d = codec().decode_level(ctx, codec().version, std::span(enc->payload.data(), l.end_bytes), l.level,
-                                  limitsOf(enc->decoded));
+    auto d = codec.decode_level(ctx, codec.version, std::span(enc->payload.data(), l.end_bytes), l.level,
+                                limitsOf(enc->decoded));
     ASSERT_TRUE(d.isOk()) << d.status().toString();
-    ASSERT_EQ(d->normals.size(), d->positions.size());
-    ASSERT_EQ(d->colors.size(), d->positions.size());
+    ASSERT_EQ(d->normals.size(), layout.hasNormals() ? d->positions.size() : 0u);
+    ASSERT_EQ(d->colors.size(), layout.hasColors() ? d->positions.size() : 0u);
     if (d->positions.size() <= limit) last_coded = int(l.level);
     ASSERT_GE(last_coded, 0) << "the first levels are coded";
     EXPECT_EQ(testing::verticesShowingNoPointOfTheirCell(q, *d, 12, last_coded), 0u)
@@ -376,6 +376,41 @@ TEST_P(AttributeRoundTrip, CoarseLevelsShowTheTilesOwnAttributes) {
   }
   EXPECT_GT(checked, 1000u);
   EXPECT_GE(last_coded, int((*levels)[1].level) + 1) << "two levels or more code their births";
+}
+
+// Version 3 (kdtree, octree): every vertex of a coarse level shows the normal and color of a point of the tile in its
+// cell, not ones derived from its triangles, decoded from the level's prefix alone. Past the last level whose births
+// are coded (the last with at most max(64, N / 16) vertices, FORMAT.md) a vertex shows those of a point in its
+// ancestor's cell at that level. The sphere's colors are random in two channels and a third of its normals point
+// inward: derived attributes, or a vertex showing another cell's point, fail.
+TEST_P(AttributeRoundTrip, CoarseLevelsShowTheTilesOwnAttributes) {
+  if (!codec().progressive()) GTEST_SKIP() << codec().name << " is single-rate";
+  for (const AttributeLayout layout : {AttributeLayout{10, 4}, AttributeLayout{0, 3}, AttributeLayout{12, 0}})
+    expectCoarseLevelsShowTheTilesOwnAttributes(codec(), layout);
+}
+
+// A tile whose points share one grid position (different attributes: its root cube is the last level's cell)
+// decodes at every level: one vertex with derived attributes before the last.
+TEST_P(AttributeRoundTrip, ATileAtOneGridPositionDecodesAtEveryLevel) {
+  if (!codec().progressive()) GTEST_SKIP() << codec().name << " is single-rate";
+  QuantizedMesh q;
+  q.positions = {{5, 6, 7}, {5, 6, 7}};
+  q.normals = {{1, 2}, {3, 4}};
+  q.colors = {{1, 2, 3, 255}, {4, 5, 6, 255}};
+  const TileContext ctx{12, {10, 3}};
+  auto enc = encodeMesh(codec(), ctx, q);
+  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+  for (uint32_t level : {0u, 5u, 11u}) {
+    auto d = codec().decode_level(ctx, codec().version, enc->payload, level, limitsOf(enc->decoded));
+    ASSERT_TRUE(d.isOk()) << "level " << level << ": " << d.status().toString();
+    ASSERT_EQ(d->positions.size(), 1u);
+    EXPECT_EQ(d->positions[0], (Vec3u{5, 6, 7}));
+    EXPECT_EQ(d->normals.size(), 1u);
+    EXPECT_EQ(d->colors.size(), 1u);
+  }
+  auto d = codec().decode(ctx, codec().version, enc->payload, limitsOf(enc->decoded));
+  ASSERT_TRUE(d.isOk()) << d.status().toString();
+  EXPECT_TRUE(vertexMultiset(*d) == vertexMultiset(q));
 }
 
 std::vector<CodecId> predictingCodecs() { return {CodecId::kKdtree, CodecId::kOctree, CodecId::kEdgebreaker}; }

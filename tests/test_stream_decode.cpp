@@ -118,6 +118,10 @@ TEST_F(StreamDecode, SameBytesAsInMemoryForEveryCodecOptionAndFormat) {
       cases.back().level = coarse + 2;
       cases.back().box = box;
       cases.back().crop = true;
+      if (std::string(codec) != "pm") {  // a level where some tiles are at their root cube and derive (FORMAT.md)
+        cases.push_back({});
+        cases.back().level = 2;
+      }
     }
     for (size_t c = 0; c < cases.size(); ++c) {
       SCOPED_TRACE("case " + std::to_string(c));

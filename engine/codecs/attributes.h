@@ -282,8 +282,8 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
 // stands for the points it will split into and shows the attributes of one of them, its representative: the point
 // it keeps through all its splits (kdtree: its cell's first point; octree: its range's first point), so a vertex's
 // attributes never change once it shows its own. While a level has at most coarseLimit(n) vertices, the end of its
-// segment codes the attributes of the vertices born in it, each predicted by its parent's (the context: how coarse
-// the level is); a vertex born later shows its parent's representative's until the last level, whose segment codes
+// segment codes the attributes of the vertices born in it, each predicted from its decoded neighbours' at the level
+// (else its parent's; the context: how coarse the level is); a vertex born later shows its parent's representative's until the last level, whose segment codes
 // every point not coded yet as version 2 does, with the coded ones as known neighbours. Each point's attributes are
 // coded once, so coarse levels cost only the weaker prediction of the few coded early (measured in bench/RESULTS.md).
 // The paper (attributes-selective-refinement §3.4) merges the attributes of contracted vertices into new values;
@@ -319,7 +319,8 @@ class CoarseAttributes {
       return;
     }
     const int bin = std::clamp(coarseness, 0, AttributeModels::kActivity - 1);
-    const int nb = layout_.normal_bits, m = (1 << (nb - 1)) - 1, levels = 1 << layout_.color_bits;
+    const int nb = layout_.normal_bits, m = layout_.hasNormals() ? (1 << (nb - 1)) - 1 : 0;
+    const int levels = 1 << layout_.color_bits;
     if (layout_.hasNormals()) normals.resize(n_);
     if (layout_.hasColors()) colors.resize(n_, Rgba8{0, 0, 0, 255});
     for (const auto& [v, p] : born_) {

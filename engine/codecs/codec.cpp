@@ -147,7 +147,10 @@ Vec3d triangleCross(const std::vector<Vec3u>& positions, const Triangle& t) {
   return {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
 }
 
-void deriveAttributes(QuantizedMesh& m, const AttributeLayout& layout) {
+void deriveAttributes(QuantizedMesh& m, const AttributeLayout& layout, std::span<const uint8_t> keep) {
+  std::vector<OctNormal> old_normals;
+  std::vector<Rgba8> old_colors;
+  if (!keep.empty()) old_normals.swap(m.normals), old_colors.swap(m.colors);
   m.normals.clear();
   m.colors.clear();
   if (layout.hasNormals()) {
@@ -162,6 +165,11 @@ void deriveAttributes(QuantizedMesh& m, const AttributeLayout& layout) {
       m.normals.push_back(encodeOctahedral(Vec3f{float(a[0]), float(a[1]), float(a[2])}, layout.normal_bits));
   }
   if (layout.hasColors()) m.colors.assign(m.positions.size(), Rgba8{128, 128, 128, 255});
+  for (size_t v = 0; v < keep.size() && v < m.positions.size(); ++v)
+    if (keep[v]) {
+      if (v < old_normals.size() && !m.normals.empty()) m.normals[v] = old_normals[v];
+      if (v < old_colors.size() && !m.colors.empty()) m.colors[v] = old_colors[v];
+    }
 }
 
 Status validateTile(const TileContext& ctx, const QuantizedMesh& mesh) {

@@ -165,7 +165,7 @@ struct CodecInfo {
   // weld by position even when complete, as coarse levels do, and get attributes derived from the welded mesh.
   bool keeps_attributes = true;
   // The first version whose coarse levels show the tile's own normals and colors, coded through its levels (kdtree
-  // and octree from 3; 0: coarse levels derive them from their triangles). Its level 0 (no segment) still derives.
+  // and octree from 3; 0: coarse levels derive them from their triangles). The root level (no segment) still derives.
   uint16_t coarse_attributes_from = 0;
   bool progressive() const { return levels != nullptr; }
 };
@@ -192,7 +192,8 @@ Status checkLimits(std::string_view what, uint64_t vertices, uint64_t faces, con
 TileSummary summarize(const QuantizedMesh& mesh);
 // Coarse-level attributes derived from geometry: area-weighted normals from the triangles, gray colors (as the
 // layout asks); replaces whatever normals and colors the mesh had.
-void deriveAttributes(QuantizedMesh& mesh, const AttributeLayout& layout);
+// `keep` (when not empty, one per vertex): the vertices that keep the normals and colors they have.
+void deriveAttributes(QuantizedMesh& mesh, const AttributeLayout& layout, std::span<const uint8_t> keep = {});
 // A triangle's cross product on the grid (edges from its first corner, in double): the area-weighted normal that
 // deriveAttributes sums at each corner, in triangle order.
 Vec3d triangleCross(const std::vector<Vec3u>& positions, const Triangle& t);

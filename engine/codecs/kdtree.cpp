@@ -285,6 +285,7 @@ class Engine {
     SP_RETURN_IF_ERROR(codeTriangles());
     codeAttributes();
     SP_RETURN_IF_ERROR(io_.end());
+    complete_ = true;
     if (truth_ && split_index_ != truth_->splits.size())
       return makeError(ErrorCode::kInternal, "kdtree encoder: split sequence mismatch");
     return Status::ok();
@@ -295,7 +296,9 @@ class Engine {
   QuantizedMesh mesh(const AttributeLayout& layout) {
     QuantizedMesh m;
     if (n_ == 0) return m;
-    if (level_ == bits_) {
+    // The lossless level once its segment is decoded (a tile whose points share one grid position has k0 = bits:
+    // its root level is the last level's cells, but not yet its points).
+    if (complete_) {
       m.positions = std::move(lo_);
       m.triangles = std::move(triangles_);
       m.normals = std::move(normals_);
@@ -764,6 +767,7 @@ class Engine {
   std::vector<Cell> cells_, next_;
   size_t split_index_ = 0;
   int level_ = 0;
+  bool complete_ = false;
   std::vector<Triangle> triangles_;
   std::vector<OctNormal> normals_;  // by point; from version 3 filled in from the first level on
   std::vector<Rgba8> colors_;
