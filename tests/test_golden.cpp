@@ -195,6 +195,23 @@ TEST_P(GoldenStream, DecodesToItsMeshAndTheEncoderStillWritesIt) {
       << " differently from its golden stream: a format change needs a new version";
 }
 
+// A golden stream's one tile: the file's bytes, the parsed container, the tile's payload (a view into the bytes).
+struct GoldenTile {
+  std::vector<uint8_t> bytes;
+  ParsedContainer parsed;
+  std::span<const uint8_t> payload;
+};
+void readGoldenTile(const std::string& path, GoldenTile& out) {
+  out.bytes = testing::readBytes(path);
+  auto parsed = parseContainer(out.bytes, path);
+  ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
+  out.parsed = std::move(parsed).value();
+  const auto& e = out.parsed.tiles[0];
+  auto payload = parseTileChunk(std::span(out.bytes).subspan(e.offset, e.chunk_bytes), e, path);
+  ASSERT_TRUE(payload.isOk());
+  out.payload = *payload;
+}
+
 // A tile of an older version copied into a new container (as `merge` does with parts from an older build) keeps
 // its version and still decodes to its mesh.
 TEST_P(GoldenStream, OlderTilesKeepTheirVersionWhenCopied) {
@@ -202,17 +219,15 @@ TEST_P(GoldenStream, OlderTilesKeepTheirVersionWhenCopied) {
   const Golden& g = golden();
   for (int version = 1; version < codec.version; ++version) {
     const std::string path = goldenPath(codec, version);
-    const auto bytes = testing::readBytes(path);
-    auto parsed = parseContainer(bytes, path);
-    ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
-    const auto& e = parsed->tiles[0];
-    auto payload = parseTileChunk(std::span(bytes).subspan(e.offset, e.chunk_bytes), e, path);
-    ASSERT_TRUE(payload.isOk());
+    GoldenTile tile;
+    ASSERT_NO_FATAL_FAILURE(readGoldenTile(path, tile));
+    const auto& e = tile.parsed.tiles[0];
     std::vector<uint8_t> copy;
     VectorSink sink(copy);
     ContainerWriter writer(sink, g.grid, g.layout);
     ASSERT_TRUE(writer.begin().isOk());
-    ASSERT_TRUE(writer.addTile(0, codec, TileSummary{e.vertices, e.faces, e.lo, e.hi}, *payload, e.codec_version).isOk());
+    ASSERT_TRUE(writer.addTile(0, codec, TileSummary{e.vertices, e.faces, e.lo, e.hi}, tile.payload, e.codec_version)
+                    .isOk());
     ASSERT_TRUE(writer.finish().isOk());
     expectDecodesToGolden(codec, version, copy, path + " (copied)");
   }
@@ -228,13 +243,10 @@ TEST_P(GoldenStream, CoarseLevelsShowTheGoldenMeshsAttributes) {
   for (int version = 1; version <= codec.version; ++version) {
     const std::string path = goldenPath(codec, version);
     SCOPED_TRACE(path);
-    const auto bytes = testing::readBytes(path);
-    auto parsed = parseContainer(bytes, path);
-    ASSERT_TRUE(parsed.isOk()) << parsed.status().toString();
-    const auto& e = parsed->tiles[0];
-    auto payload = parseTileChunk(std::span(bytes).subspan(e.offset, e.chunk_bytes), e, path);
-    ASSERT_TRUE(payload.isOk());
-    auto levels = tilePayloadLevels(parsed->header, e, *payload, path);
+    GoldenTile tile;
+    ASSERT_NO_FATAL_FAILURE(readGoldenTile(path, tile));
+    const auto& e = tile.parsed.tiles[0];
+    auto levels = tilePayloadLevels(tile.parsed.header, e, tile.payload, path);
     ASSERT_TRUE(levels.isOk());
     const uint32_t limit = std::max<uint32_t>(64, e.vertices / 16);
     int last_coded = -1;
@@ -242,7 +254,7 @@ TEST_P(GoldenStream, CoarseLevelsShowTheGoldenMeshsAttributes) {
     for (size_t i = 1; i + 1 < levels->size(); ++i) {
       const uint32_t level = (*levels)[i].level;
       bool own = false;
-      auto m = decodeTilePayload(parsed->header, e, *payload, path, level, nullptr, &own);
+      auto m = decodeTilePayload(tile.parsed.header, e, tile.payload, path, level, nullptr, &own);
       ASSERT_TRUE(m.isOk()) << m.status().toString();
       EXPECT_EQ(own, version >= codec.coarse_attributes_from) << "level " << level;
       if (!own) continue;
