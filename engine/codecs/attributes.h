@@ -283,9 +283,10 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
 // it keeps through all its splits (kdtree: its cell's first point; octree: its range's first point), so a vertex's
 // attributes never change once it shows its own. While a level has at most coarseLimit(n) vertices, the end of its
 // segment codes the attributes of the vertices born in it, each predicted from its decoded neighbours' at the level
-// (else its parent's; the context: how coarse the level is); a vertex born later shows its parent's representative's until the last level, whose segment codes
-// every point not coded yet as version 2 does, with the coded ones as known neighbours. Each point's attributes are
-// coded once, so coarse levels cost only the weaker prediction of the few coded early (measured in bench/RESULTS.md).
+// (else its parent's; the context: how coarse the level is); a vertex born later shows its parent's
+// representative's until the last level, whose segment codes every point not coded yet as version 2 does, with the
+// coded ones as known neighbours. Each point's attributes are coded once, so coarse levels cost only the weaker
+// prediction of the few coded early (measured in bench/RESULTS.md).
 // The paper (attributes-selective-refinement §3.4) merges the attributes of contracted vertices into new values;
 // copying one of them keeps every level's attributes the scan's own and codes no value twice.
 inline u32 coarseLimit(u32 n) { return std::max<u32>(64, n / 16); }
@@ -366,8 +367,22 @@ class CoarseAttributes {
     }
     born_.clear();
   }
-  // The point whose attributes vertex v shows; kNone before the first coarse level.
-  u32 shown(u32 v) const { return shown_[v]; }
+  // A coarse level's attributes: its vertex i (of `count`) is vertex id(i) and shows its representative's, from
+  // `normals` and `colors` (by vertex), appended to `m`. False, and nothing appended, while some vertex shows none
+  // (the root level): the caller derives them.
+  template <class Id>
+  bool show(u32 count, const Id& id, const std::vector<OctNormal>& normals, const std::vector<Rgba8>& colors,
+            QuantizedMesh& m) const {
+    if (!active_) return false;
+    for (u32 i = 0; i < count; ++i)
+      if (shown_[id(i)] == kNone) return false;
+    for (u32 i = 0; i < count; ++i) {
+      const u32 r = shown_[id(i)];
+      if (layout_.hasNormals()) m.normals.push_back(normals[r]);
+      if (layout_.hasColors()) m.colors.push_back(colors[r]);
+    }
+    return true;
+  }
   // Per point: coded at a coarse level (the `known` of codePredictedAttributes).
   const std::vector<u8>* coded() const { return active_ ? &coded_ : nullptr; }
 

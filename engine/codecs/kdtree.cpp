@@ -316,18 +316,9 @@ class Engine {
     for (auto& t : m.triangles)
       for (auto& v : t) v = index[v];
     // Version 3: each cell shows its representative's attributes (attributes.h, CoarseAttributes).
-    const bool own = coarse_ && coarse_->active() && std::all_of(cells_.begin(), cells_.end(), [&](const Cell& c) {
-                       return coarse_->shown(c.s) != CoarseAttributes::kNone;
-                     });
-    if (!own) {
+    if (!coarse_ || !coarse_->show(
+                        u32(cells_.size()), [&](u32 i) { return cells_[i].s; }, normals_, colors_, m))
       deriveAttributes(m, layout);
-      return m;
-    }
-    for (const auto& c : cells_) {
-      const u32 r = coarse_->shown(c.s);
-      if (layout.hasNormals()) m.normals.push_back(normals_[r]);
-      if (layout.hasColors()) m.colors.push_back(colors_[r]);
-    }
     return m;
   }
 

@@ -206,18 +206,9 @@ class Engine {
     SP_RETURN_IF_ERROR(status);
     m.triangles = orientedTriangles(keys);
     // Version 3: each vertex shows its representative's attributes (attributes.h, CoarseAttributes).
-    const u32 count = u32(m.positions.size());
-    bool own = coarse_ && coarse_->active();
-    for (u32 v = 0; v < count && own; ++v) own = coarse_->shown(v) != CoarseAttributes::kNone;
-    if (!own) {
+    if (!coarse_ || !coarse_->show(
+                        u32(m.positions.size()), [](u32 i) { return i; }, normals_, colors_, m))
       deriveAttributes(m, layout);
-      return m;
-    }
-    for (u32 v = 0; v < count; ++v) {
-      const u32 r = coarse_->shown(v);
-      if (layout.hasNormals()) m.normals.push_back(normals_[r]);
-      if (layout.hasColors()) m.colors.push_back(colors_[r]);
-    }
     return m;
   }
 
