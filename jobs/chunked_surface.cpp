@@ -93,8 +93,8 @@ class FileSource : public ChunkedSurface::Source {
   }
 };
 
-// A container's tiles, one per chunk, dequantized (a tile whose codec derives its attributes gets the gray colors
-// the in-memory decode gives it).
+// A container's tiles, one per chunk, dequantized (a tile without attributes of its own gets the gray colors the
+// in-memory decode gives it).
 class ContainerSource : public ChunkedSurface::Source {
  public:
   explicit ContainerSource(ContainerFile f) : file(std::move(f)) {
@@ -104,11 +104,11 @@ class ContainerSource : public ChunkedSurface::Source {
   std::vector<const TileEntry*> tiles;
 
   Result<std::shared_ptr<const Mesh>> load(size_t i) const override {
-    bool complete = true;
-    SP_ASSIGN_OR_RETURN(QuantizedMesh q, file.decodeTile(*tiles[i], std::nullopt, &complete));
+    bool own = true;
+    SP_ASSIGN_OR_RETURN(QuantizedMesh q, file.decodeTile(*tiles[i], std::nullopt, nullptr, &own));
     const ContainerHeader& h = file.header();
     auto m = std::make_shared<Mesh>(dequantizeMesh(q, h.grid, h.layout));
-    if (!complete && h.layout.hasColors()) m->colors.assign(m->positions.size(), Rgba8{128, 128, 128, 255});
+    if (!own && h.layout.hasColors()) m->colors.assign(m->positions.size(), Rgba8{128, 128, 128, 255});
     return std::shared_ptr<const Mesh>(std::move(m));
   }
 };

@@ -407,7 +407,7 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
       if (e.vertices > 0) bounds[i] = Bounds{e.lo, e.hi};
       const CodecInfo* codec = findCodec(e.codec);
       all_complete &= !codec || codec->keeps_attributes;
-      own[i] = !codec || codec->keeps_attributes;
+      own[i] = !codec || codec->showsOwnAttributes(e.codec_version, false, false);
       total_faces += e.faces;
     }
   }

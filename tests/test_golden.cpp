@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <cstdlib>
 #include <filesystem>
+#include <map>
+#include <set>
 
 #include "engine/container/container.h"
 #include "engine/io/bytes.h"
@@ -116,7 +118,8 @@ void expectDecodesToGolden(const CodecInfo& codec, int version, const std::vecto
   auto decoded = decodeTilePayload(parsed->header, e, *payload, path);
   ASSERT_TRUE(decoded.isOk()) << decoded.status().toString();
   if (codec.id == CodecId::kPm) {
-    // pm keeps triangles over positions (welded, without those repeating a position) and derives attributes.
+    // pm keeps triangles over positions (welded, without those repeating a position); before v3 it derives
+    // attributes.
     auto positional = [](const QuantizedMesh& m) {
       std::vector<testing::PosTriangle> out;
       for (const auto& t : testing::triangleMultiset(m))
@@ -125,6 +128,20 @@ void expectDecodesToGolden(const CodecInfo& codec, int version, const std::vecto
     };
     EXPECT_TRUE(positional(*decoded) == positional(g.mesh));
     EXPECT_EQ(decoded->normals.size(), decoded->positions.size());
+    if (version >= 3) {
+      // From v3 each position shows the attributes of the golden mesh's first vertex there.
+      std::map<Vec3u, size_t> first;
+      for (size_t v = 0; v < g.mesh.positions.size(); ++v) first.emplace(g.mesh.positions[v], v);
+      for (size_t v = 0; v < decoded->positions.size(); ++v) {
+        const size_t o = first.at(decoded->positions[v]);
+        if (g.layout.hasNormals()) {
+          EXPECT_EQ(decoded->normals[v], g.mesh.normals[o]) << v;
+        }
+        if (g.layout.hasColors()) {
+          EXPECT_EQ(decoded->colors[v], g.mesh.colors[o]) << v;
+        }
+      }
+    }
   } else if (codec.id == CodecId::kPrm) {
     // prm's stream is its coder's: the remeshing before it is the encoder's choice (it improves without a new
     // version), so the golden stream is checked against the coder alone. It was remeshed (not the golden mesh),
@@ -233,7 +250,7 @@ TEST_P(GoldenStream, OlderTilesKeepTheirVersionWhenCopied) {
   }
 }
 
-// The coarse levels of every golden stream whose version codes attributes through its levels (kdtree and octree
+// The coarse levels of every golden stream whose version codes attributes through its levels (kdtree, octree and pm
 // v3) show, at each vertex, the normal and color of a golden-mesh point in its cell (past the last level that codes
 // its births, the cell of its ancestor at that level), and the levels before it derive them.
 TEST_P(GoldenStream, CoarseLevelsShowTheGoldenMeshsAttributes) {
@@ -248,6 +265,30 @@ TEST_P(GoldenStream, CoarseLevelsShowTheGoldenMeshsAttributes) {
     const auto& e = tile.parsed.tiles[0];
     auto levels = tilePayloadLevels(tile.parsed.header, e, tile.payload, path);
     ASSERT_TRUE(levels.isOk());
+    if (codec.id == CodecId::kPm) {
+      // pm's vertex i of every level is vertex i of the last level (each split appends): from v3 it shows its own
+      // attributes (those it has at the last level, which expectDecodesToGolden checks) or, where its level defers
+      // them, those of an ancestor (a lower vertex number); the base's vertices show their own.
+      auto full = decodeTilePayload(tile.parsed.header, e, tile.payload, path);
+      ASSERT_TRUE(full.isOk());
+      for (const CodecLevel& l : *levels) {
+        bool own = false;
+        auto m = decodeTilePayload(tile.parsed.header, e, tile.payload, path, l.level, nullptr, &own);
+        ASSERT_TRUE(m.isOk()) << m.status().toString();
+        EXPECT_EQ(own, version >= codec.coarse_attributes_from) << "level " << l.level;
+        if (!own) continue;
+        std::set<std::pair<OctNormal, Rgba8>> lower;  // what vertices 0..v show at the last level
+        for (size_t v = 0; v < m->positions.size(); ++v) {
+          lower.insert({full->normals[v], full->colors[v]});
+          if (v < levels->front().vertices) {
+            ASSERT_EQ(m->normals[v], full->normals[v]) << "level " << l.level << " vertex " << v;
+            ASSERT_EQ(m->colors[v], full->colors[v]) << "level " << l.level << " vertex " << v;
+          }
+          ASSERT_TRUE(lower.count({m->normals[v], m->colors[v]})) << "level " << l.level << " vertex " << v;
+        }
+      }
+      continue;
+    }
     const uint32_t limit = std::max<uint32_t>(64, e.vertices / 16);
     int last_coded = -1;
     size_t own_levels = 0;
@@ -264,8 +305,25 @@ TEST_P(GoldenStream, CoarseLevelsShowTheGoldenMeshsAttributes) {
           << "level " << level;
       ++own_levels;
     }
-    if (version >= codec.coarse_attributes_from) EXPECT_GE(own_levels, 3u);
+    if (version >= codec.coarse_attributes_from) {
+      EXPECT_GE(own_levels, 3u);
+    }
   }
+}
+
+// Without normals and colors, pm v3 writes v2's bytes (FORMAT.md, "Attributes of pm levels"): the golden mesh
+// without its attributes codes to the payload of the v2 golden stream (v2 kept none).
+TEST(GoldenStreamPm, WithoutAttributesVersion3WritesVersion2Bytes) {
+  const CodecInfo& pm = *findCodec(CodecId::kPm);
+  const Golden& g = golden();
+  GoldenTile tile;
+  ASSERT_NO_FATAL_FAILURE(readGoldenTile(goldenPath(pm, 2), tile));
+  QuantizedMesh bare = g.mesh;
+  bare.normals.clear();
+  bare.colors.clear();
+  auto now = pm.encode(TileContext{g.grid.bits, {}}, TileView{bare, {}}, goldenOptions());
+  ASSERT_TRUE(now.isOk()) << now.status().toString();
+  EXPECT_TRUE(std::equal(now->payload.begin(), now->payload.end(), tile.payload.begin(), tile.payload.end()));
 }
 
 std::vector<CodecId> everyCodec() {

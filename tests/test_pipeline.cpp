@@ -118,15 +118,21 @@ TEST(Pipeline, CoarseLevelsWeldByPosition) {
 // sphere's colors differ from vertex to vertex: derived ones (grey) or another vertex's fail. At the coarsest levels
 // some tiles are at (or above) their root cube, whose one vertex derives its attributes: only that vertex does, the
 // other tiles' keep their own.
-TEST(Pipeline, CoarseLevelsOfManyTilesShowTheScansOwnAttributes) {
-  testing::TempDir dir;
-  Mesh sphere = icosphere(5);
+// A sphere whose normals are its directions and whose colors vary from vertex to vertex.
+Mesh attributedSphere(int subdivisions) {
+  Mesh sphere = icosphere(subdivisions);
   for (size_t i = 0; i < sphere.positions.size(); ++i) {
     const Vec3d& p = sphere.positions[i];
     sphere.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
     sphere.colors.push_back({uint8_t(i * 37), uint8_t(i * 11), uint8_t(128 + 100 * p[2]), 255});
   }
   sphere.color_channels = 3;
+  return sphere;
+}
+
+TEST(Pipeline, CoarseLevelsOfManyTilesShowTheScansOwnAttributes) {
+  testing::TempDir dir;
+  const Mesh sphere = attributedSphere(5);
   const std::string input = dir.file("sphere.ply");
   ASSERT_TRUE(writeMeshFile(input, sphere, WriteOptions{}).isOk());
   for (const char* codec : {"kdtree", "octree"}) {
@@ -185,9 +191,77 @@ TEST(Pipeline, CoarseLevelsOfManyTilesShowTheScansOwnAttributes) {
       EXPECT_LE(foreign, at_root) << "of " << m->positions.size()
                                   << " vertices show attributes the scan does not have; tiles at their root level: "
                                   << at_root;
-      if (level >= 3) EXPECT_LT(at_root, roots.size() / 2);
+      if (level >= 3) {
+        EXPECT_LT(at_root, roots.size() / 2);
+      }
       EXPECT_EQ(far, 0u) << "of " << m->positions.size() << " vertices show a far point's attributes";
     }
+  }
+}
+
+// pm v3 through the pipeline: every level of a tiled encode shows the scan's own normals and colors (each vertex
+// those of a scan vertex near it: its own, or before the last level its base ancestor's), and the whole decode shows
+// at each position exactly the scan's there.
+TEST(Pipeline, PmLevelsOfManyTilesShowTheScansOwnAttributes) {
+  testing::TempDir dir;
+  const Mesh sphere = attributedSphere(5);
+  const std::string input = dir.file("sphere.ply");
+  ASSERT_TRUE(writeMeshFile(input, sphere, WriteOptions{}).isOk());
+  EncodeSettings s;
+  s.input = input;
+  s.output = dir.file("pm.spz");
+  s.codec = "pm";
+  s.bits = 12;
+  s.tile_triangles = 2048;
+  auto enc = encodeFile(s);
+  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+  EXPECT_GE(enc->tiles.size(), 8u);
+  ContainerHeader header;
+  auto whole = decodeContainer(s.output, std::nullopt, &header);
+  ASSERT_TRUE(whole.isOk()) << whole.status().toString();
+  auto read = readMeshFile(input);  // the positions as the file holds them
+  ASSERT_TRUE(read.isOk());
+  auto q = quantizeMesh(*read, header.grid, header.layout, nullptr);
+  ASSERT_TRUE(q.isOk());
+  std::map<Vec3u, std::pair<OctNormal, Rgba8>> at;
+  for (size_t v = 0; v < q->positions.size(); ++v) at.emplace(q->positions[v], std::pair{q->normals[v], q->colors[v]});
+  ASSERT_EQ(whole->normals.size(), whole->positions.size());
+  ASSERT_EQ(whole->colors.size(), whole->positions.size());
+  for (size_t v = 0; v < whole->positions.size(); ++v) {
+    const auto& [normal, color] = at.at(whole->positions[v]);
+    ASSERT_EQ(whole->normals[v], normal) << v;
+    ASSERT_EQ(whole->colors[v], color) << v;
+  }
+  std::map<std::pair<OctNormal, Rgba8>, std::vector<Vec3u>> where;
+  for (size_t v = 0; v < q->positions.size(); ++v) where[{q->normals[v], q->colors[v]}].push_back(q->positions[v]);
+  for (uint32_t level : {0u, 1u, 2u, 4u}) {
+    SCOPED_TRACE(level);
+    auto m = decodeContainer(s.output, std::nullopt, nullptr, level);
+    ASSERT_TRUE(m.isOk()) << m.status().toString();
+    ASSERT_EQ(m->normals.size(), m->positions.size());
+    ASSERT_EQ(m->colors.size(), m->positions.size());
+    EXPECT_LT(m->positions.size(), whole->positions.size());
+    // A coarse vertex stands for the scan vertices collapsed into it, its base ancestor among them: a base vertex
+    // stands for the region that collapsed into it, about 8 vertices (measured: at most 980 grid cells away, some 12
+    // of this sphere's edges; a tile spans about 1500).
+    const int64_t reach = 1024;
+    size_t foreign = 0, far = 0;
+    for (size_t v = 0; v < m->positions.size(); ++v) {
+      const auto it = where.find({m->normals[v], m->colors[v]});
+      if (it == where.end()) {
+        ++foreign;
+        continue;
+      }
+      bool near = false;
+      for (const Vec3u& p : it->second) {
+        bool inside = true;
+        for (int a = 0; a < 3; ++a) inside &= std::llabs(int64_t(p[a]) - int64_t(m->positions[v][a])) <= reach;
+        near |= inside;
+      }
+      far += !near;
+    }
+    EXPECT_EQ(foreign, 0u) << "of " << m->positions.size() << " vertices show attributes the scan does not have";
+    EXPECT_EQ(far, 0u) << "of " << m->positions.size() << " vertices show a far point's attributes";
   }
 }
 

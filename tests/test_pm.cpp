@@ -262,62 +262,180 @@ TEST(Pm, UglyMeshesRoundTrip) {
   expectLevelsReplay(ctx, soup, {}, PmOptions{});
 }
 
-TEST(Pm, AttributesAreDerived) {
-  const TileContext ctx{12, AttributeLayout{10, 3}};
-  Mesh s = icosphere(3);
-  for (const auto& p : s.positions) {
-    s.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
-    s.colors.push_back({1, 2, 3, 255});
+// A sphere with normals (its own directions, jittered) and 8-bit RGBA colors that name their vertex (so a decoded
+// color says which input vertex it came from), plus a twin of every 7th vertex at its position with other
+// attributes, its color naming it too (pm welds by position: the first vertex's attributes stay).
+QuantizedMesh attributedSphere(const AttributeLayout& layout, int subdivisions) {
+  Mesh s = icosphere(subdivisions);
+  std::mt19937 rng(5);
+  std::normal_distribution<float> jitter(0.f, 0.05f);
+  const size_t n = s.positions.size();
+  for (size_t v = 0; v < n; ++v) {
+    const auto& p = s.positions[v];
+    s.normals.push_back({float(p[0]) + jitter(rng), float(p[1]) + jitter(rng), float(p[2]) + jitter(rng)});
+    s.colors.push_back({uint8_t(v & 0xFF), uint8_t((v >> 8) & 0xFF), uint8_t(v >> 16), 200});
   }
-  s.color_channels = 3;
+  for (size_t v = 0; v < n; v += 7) {
+    const uint32_t twin = uint32_t(s.positions.size());
+    s.positions.push_back(s.positions[v]);
+    s.normals.push_back({-s.normals[v][0], -s.normals[v][1], -s.normals[v][2]});
+    s.colors.push_back({uint8_t(v & 0xFF), uint8_t((v >> 8) & 0xFF), 1, 100});
+    for (auto& t : s.triangles)
+      if (t[0] == v && (&t - s.triangles.data()) % 2 == 0) t[0] = twin;
+  }
+  s.color_channels = 4;
   auto grid = makeGrid(boundingBox(s), 12);
-  auto q = quantizeMesh(s, *grid, ctx.layout, nullptr);
-  ASSERT_TRUE(q.isOk());
-  auto e = encodeMesh(pm(), ctx, *q);
-  ASSERT_TRUE(e.isOk()) << e.status().toString();
-  auto d = pm().decode(ctx, pm().version, e->payload, limitsOf(e->decoded));
+  EXPECT_TRUE(grid.isOk());
+  auto q = quantizeMesh(s, *grid, layout, nullptr);
+  EXPECT_TRUE(q.isOk());
+  return *q;
+}
+
+// Per position, the attributes of the first input vertex there: what pm keeps (RGB colors decode with alpha 255).
+std::map<Vec3u, std::pair<OctNormal, Rgba8>> firstAttributes(const QuantizedMesh& m, const AttributeLayout& layout) {
+  std::map<Vec3u, std::pair<OctNormal, Rgba8>> out;
+  for (size_t v = 0; v < m.positions.size(); ++v) {
+    Rgba8 c = m.colors.empty() ? Rgba8{} : m.colors[v];
+    if (layout.color_channels == 3) c[3] = 255;
+    out.emplace(m.positions[v], std::pair{m.normals.empty() ? OctNormal{} : m.normals[v], c});
+  }
+  return out;
+}
+
+// v3: every level shows the tile's own normals and colors. pm's vertex order is fixed by the payload (each split
+// appends its vertex), so vertex i of a level is vertex i of the last level; the last level's attributes are the
+// first input vertex's at each position (lossless), or a kept input vertex's (lossy: no two vertices show the same
+// one).
+TEST(Pm, EveryLevelShowsTheTilesOwnAttributes) {
+  for (const AttributeLayout layout :
+       {AttributeLayout{10, 4}, AttributeLayout{12, 0}, AttributeLayout{0, 4}, AttributeLayout{6, 3, 5}}) {
+    SCOPED_TRACE(::testing::Message() << int(layout.normal_bits) << " " << int(layout.color_channels) << " "
+                                      << int(layout.color_bits));
+    const TileContext ctx{12, layout};
+    const QuantizedMesh tile = attributedSphere(layout, 4);
+    const auto first = firstAttributes(tile, layout);
+    for (const double ratio : {1.0, 0.2}) {
+      SCOPED_TRACE(ratio);
+      PmOptions opt;
+      opt.ratio = ratio;
+      const Encoded enc = encodeTile(ctx, tile, {}, opt);
+      ASSERT_GE(enc.levels.size(), 3u);
+      auto full = pm().decode(ctx, pm().version, enc.tile.payload, limitsOf(enc.tile.decoded));
+      ASSERT_TRUE(full.isOk()) << full.status().toString();
+      ASSERT_TRUE(validateTile(ctx, *full).isOk());
+      ASSERT_EQ(full->normals.size(), layout.hasNormals() ? full->positions.size() : 0u);
+      ASSERT_EQ(full->colors.size(), layout.hasColors() ? full->positions.size() : 0u);
+      if (ratio == 1.0) {
+        EXPECT_TRUE(weldedTriangles(*full) == weldedTriangles(tile));
+        for (size_t v = 0; v < full->positions.size(); ++v) {
+          const auto& [normal, color] = first.at(full->positions[v]);
+          if (layout.hasNormals()) {
+            EXPECT_EQ(full->normals[v], normal) << v;
+          }
+          if (layout.hasColors()) {
+            EXPECT_EQ(full->colors[v], color) << v;
+          }
+        }
+      } else if (layout.hasColors() && layout.color_bits == 8) {
+        // The colors name input vertices: each shown once, and never a twin's (welded away).
+        std::set<Rgba8> seen;
+        std::set<Rgba8> firsts;
+        for (const auto& [p, a] : first) firsts.insert(a.second);
+        for (const Rgba8& c : full->colors) {
+          EXPECT_TRUE(seen.insert(c).second) << "two vertices show one input vertex's color";
+          EXPECT_TRUE(firsts.count(c)) << "a color that no kept input vertex has";
+        }
+      }
+      // The base's vertices show their own at every level; a vertex a later level adds shows, until the last
+      // level, what its parent shows, so one of the base's.
+      const size_t base = enc.levels.front().vertices;
+      std::set<std::pair<OctNormal, Rgba8>> base_shows;
+      for (size_t v = 0; v < base; ++v)
+        base_shows.insert({layout.hasNormals() ? full->normals[v] : OctNormal{},
+                           layout.hasColors() ? full->colors[v] : Rgba8{}});
+      std::map<size_t, std::pair<OctNormal, Rgba8>> deferred;  // what a vertex past the base shows before the last
+      for (const CodecLevel& l : enc.levels) {
+        auto d = pm().decode_level(ctx, pm().version, std::span(enc.tile.payload).first(l.end_bytes), l.level,
+                                   limitsOf(enc.tile.decoded));
+        ASSERT_TRUE(d.isOk()) << d.status().toString();
+        ASSERT_TRUE(validateTile(ctx, *d).isOk());
+        ASSERT_EQ(d->positions.size(), l.vertices);
+        for (size_t v = 0; v < d->positions.size(); ++v) {
+          const std::pair<OctNormal, Rgba8> shown{layout.hasNormals() ? d->normals[v] : OctNormal{},
+                                                  layout.hasColors() ? d->colors[v] : Rgba8{}};
+          if (v < base || l.complete) {
+            if (layout.hasNormals()) {
+              ASSERT_EQ(d->normals[v], full->normals[v]) << "level " << l.level << " vertex " << v;
+            }
+            if (layout.hasColors()) {
+              ASSERT_EQ(d->colors[v], full->colors[v]) << "level " << l.level << " vertex " << v;
+            }
+          } else {
+            ASSERT_TRUE(base_shows.count(shown)) << "level " << l.level << " vertex " << v << " shows no base vertex's";
+            // Its base ancestor does not change from level to level.
+            const auto [it, fresh] = deferred.emplace(v, shown);
+            ASSERT_TRUE(fresh || it->second == shown) << "level " << l.level << " vertex " << v << " changed";
+          }
+        }
+      }
+    }
+  }
+}
+
+// Version 2 payloads (no attributes coded) still decode, with attributes derived from the triangles.
+TEST(Pm, Version2DerivesAttributes) {
+  const AttributeLayout layout{10, 3};
+  const TileContext ctx{12, layout};
+  const QuantizedMesh tile = attributedSphere(AttributeLayout{}, 3);
+  const Encoded enc = encodeTile(TileContext{12, {}}, tile, {});  // without attributes: v3's bytes are v2's
+  auto d = pm().decode(ctx, 2, enc.tile.payload, limitsOf(enc.tile.decoded));
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   EXPECT_EQ(d->normals.size(), d->positions.size());
   EXPECT_EQ(d->colors.size(), d->positions.size());
-  EXPECT_TRUE(weldedTriangles(*d) == weldedTriangles(*q));
+  for (const Rgba8& c : d->colors) EXPECT_EQ(c, (Rgba8{128, 128, 128, 255}));
+  EXPECT_TRUE(weldedTriangles(*d) == weldedTriangles(tile));
 }
 
 TEST(Pm, EveryTruncationFailsCleanlyOrDecodesALevel) {
-  const TileContext ctx{12, {}};
-  const QuantizedMesh sphere = quantized(icosphere(2), 12);
-  const Encoded enc = encodeTile(ctx, sphere, {});
-  ASSERT_GE(enc.levels.size(), 3u);
-  const auto& bytes = enc.tile.payload;
-  const DecodeLimits limits = limitsOf(enc.tile.decoded);
-  for (size_t cut = 0; cut < bytes.size(); ++cut) {
-    const auto part = std::span(bytes).first(cut);
-    EXPECT_FALSE(pm().decode(ctx, pm().version, part, limits).isOk()) << cut;
-    EXPECT_FALSE(pm().levels(ctx, pm().version, part, limits).isOk()) << cut;
-    for (const CodecLevel& l : enc.levels) {
-      auto d = pm().decode_level(ctx, pm().version, part, l.level, limits);
-      EXPECT_EQ(d.isOk(), cut >= l.end_bytes) << "cut " << cut << " level " << l.level;
-      if (d.isOk()) {
-        EXPECT_EQ(d->positions.size(), l.vertices);
+  for (const AttributeLayout layout : {AttributeLayout{}, AttributeLayout{10, 4}}) {
+    const TileContext ctx{12, layout};
+    const QuantizedMesh sphere = attributedSphere(layout, 2);
+    const Encoded enc = encodeTile(ctx, sphere, {});
+    ASSERT_GE(enc.levels.size(), 3u);
+    const auto& bytes = enc.tile.payload;
+    const DecodeLimits limits = limitsOf(enc.tile.decoded);
+    for (size_t cut = 0; cut < bytes.size(); ++cut) {
+      const auto part = std::span(bytes).first(cut);
+      EXPECT_FALSE(pm().decode(ctx, pm().version, part, limits).isOk()) << cut;
+      EXPECT_FALSE(pm().levels(ctx, pm().version, part, limits).isOk()) << cut;
+      for (const CodecLevel& l : enc.levels) {
+        auto d = pm().decode_level(ctx, pm().version, part, l.level, limits);
+        EXPECT_EQ(d.isOk(), cut >= l.end_bytes) << "cut " << cut << " level " << l.level;
+        if (d.isOk()) {
+          EXPECT_EQ(d->positions.size(), l.vertices);
+        }
       }
     }
   }
 }
 
 TEST(Pm, CorruptPayloadsFailCleanlyOrStayWithinLimits) {
-  const TileContext ctx{12, {}};
-  const QuantizedMesh sphere = quantized(icosphere(3), 12);
-  const Encoded enc = encodeTile(ctx, sphere, {});
-  const DecodeLimits limits = limitsOf(enc.tile.decoded);
-  std::mt19937 rng(7);
-  for (int trial = 0; trial < 3000; ++trial) {
-    std::vector<uint8_t> bad = enc.tile.payload;
-    const int flips = 1 + int(rng() % 3);
-    for (int f = 0; f < flips; ++f) bad[rng() % bad.size()] ^= uint8_t(1u << (rng() % 8));
-    auto d = pm().decode(ctx, pm().version, bad, limits);
-    if (d.isOk()) {
-      EXPECT_LE(d->positions.size(), limits.vertices);
-      EXPECT_LE(d->triangles.size(), limits.faces);
-      EXPECT_TRUE(validateTile(ctx, *d).isOk());
+  for (const AttributeLayout layout : {AttributeLayout{}, AttributeLayout{10, 4}}) {
+    const TileContext ctx{12, layout};
+    const QuantizedMesh sphere = attributedSphere(layout, 3);
+    const Encoded enc = encodeTile(ctx, sphere, {});
+    const DecodeLimits limits = limitsOf(enc.tile.decoded);
+    std::mt19937 rng(7);
+    for (int trial = 0; trial < 1500; ++trial) {
+      std::vector<uint8_t> bad = enc.tile.payload;
+      const int flips = 1 + int(rng() % 3);
+      for (int f = 0; f < flips; ++f) bad[rng() % bad.size()] ^= uint8_t(1u << (rng() % 8));
+      auto d = pm().decode(ctx, pm().version, bad, limits);
+      if (d.isOk()) {
+        EXPECT_LE(d->positions.size(), limits.vertices);
+        EXPECT_LE(d->triangles.size(), limits.faces);
+        EXPECT_TRUE(validateTile(ctx, *d).isOk());
+      }
     }
   }
 }

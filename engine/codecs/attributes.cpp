@@ -34,26 +34,51 @@ i128 absolute(i128 x) { return x < 0 ? -x : x; }
 int roundDiv(i128 num, i128 den) { return num >= 0 ? int((num + den / 2) / den) : -int((-num + den / 2) / den); }
 }  // namespace
 
+namespace {
+// Triangle t's cross product `c` (from its first corner; exact) and, per corner k, the weight w[k] that makes
+// c * w[k] the unit normal times the angle at corner k. False for a zero-area triangle (no normal).
+bool normalTerms(const std::vector<Vec3u>& pos, const Triangle& t, double (&c)[3], double (&w)[3]) {
+  int64_t e[3][3];  // e[k]: from corner k to corner k + 1
+  for (int k = 0; k < 3; ++k)
+    for (int i = 0; i < 3; ++i) e[k][i] = int64_t(pos[t[(k + 1) % 3]][i]) - pos[t[k]][i];
+  // Exact in int64 (coordinates below 2^24) and in double (below 2^53); the same from every corner.
+  c[0] = double(e[0][1] * -e[2][2] - e[0][2] * -e[2][1]);
+  c[1] = double(e[0][2] * -e[2][0] - e[0][0] * -e[2][2]);
+  c[2] = double(e[0][0] * -e[2][1] - e[0][1] * -e[2][0]);
+  const double len = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+  if (len == 0) return false;
+  for (int k = 0; k < 3; ++k) {
+    const int64_t* a = e[k];            // to the next corner
+    const int64_t* b = e[(k + 2) % 3];  // from the previous corner: the edge to it is -b
+    const double dot = -double(a[0] * b[0] + a[1] * b[1] + a[2] * b[2]);
+    w[k] = arctangent(len, dot) / len;
+  }
+  return true;
+}
+}  // namespace
+
 std::vector<std::array<double, 3>> angleWeightedNormals(const std::vector<Vec3u>& pos,
                                                         const std::vector<Triangle>& tris) {
   std::vector<std::array<double, 3>> sum(pos.size(), {0.0, 0.0, 0.0});
+  double c[3], w[3];
   for (const Triangle& t : tris) {
-    int64_t e[3][3];  // e[k]: from corner k to corner k + 1
+    if (!normalTerms(pos, t, c, w)) continue;
     for (int k = 0; k < 3; ++k)
-      for (int i = 0; i < 3; ++i) e[k][i] = int64_t(pos[t[(k + 1) % 3]][i]) - pos[t[k]][i];
-    // Exact in int64 (coordinates below 2^24) and in double (below 2^53); the same from every corner.
-    const double c[3] = {double(e[0][1] * -e[2][2] - e[0][2] * -e[2][1]),
-                         double(e[0][2] * -e[2][0] - e[0][0] * -e[2][2]),
-                         double(e[0][0] * -e[2][1] - e[0][1] * -e[2][0])};
-    const double len = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
-    if (len == 0) continue;  // a zero-area triangle has no normal
-    for (int k = 0; k < 3; ++k) {
-      const int64_t* a = e[k];            // to the next corner
-      const int64_t* b = e[(k + 2) % 3];  // from the previous corner: the edge to it is -b
-      const double dot = -double(a[0] * b[0] + a[1] * b[1] + a[2] * b[2]);
-      const double w = arctangent(len, dot) / len;
-      for (int i = 0; i < 3; ++i) sum[t[k]][i] += c[i] * w;
-    }
+      for (int i = 0; i < 3; ++i) sum[t[k]][i] += c[i] * w[k];
+  }
+  return sum;
+}
+
+std::array<double, 3> angleWeightedNormalAt(const std::vector<Vec3u>& pos, const std::vector<Triangle>& tris,
+                                            std::span<const u32> faces, u32 v) {
+  std::array<double, 3> sum{0.0, 0.0, 0.0};
+  double c[3], w[3];
+  for (u32 f : faces) {
+    const Triangle& t = tris[f];
+    if (!normalTerms(pos, t, c, w)) continue;
+    for (int k = 0; k < 3; ++k)
+      if (t[k] == v)
+        for (int i = 0; i < 3; ++i) sum[i] += c[i] * w[k];
   }
   return sum;
 }

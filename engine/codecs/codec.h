@@ -164,10 +164,21 @@ struct CodecInfo {
   // False when the codec derives normals and colors from the triangles instead of keeping them (pm): its tiles
   // weld by position even when complete, as coarse levels do, and get attributes derived from the welded mesh.
   bool keeps_attributes = true;
-  // The first version whose coarse levels show the tile's own normals and colors, coded through its levels (kdtree
-  // and octree from 3; 0: coarse levels derive them from their triangles). The root level (no segment) still derives.
+  // The first version whose levels show the tile's own normals and colors, coded through its levels (kdtree and
+  // octree from 3, pm from 3; 0: coarse levels derive them from their triangles). A codec that welds by position
+  // (keeps_attributes false) shows its own at its last level too from this version on.
   uint16_t coarse_attributes_from = 0;
+  // Whether the first level shows them as well (pm: its base mesh codes them). kdtree's and octree's root level has
+  // no segment: it derives them.
+  bool root_level_attributes = false;
   bool progressive() const { return levels != nullptr; }
+  // Whether a payload of `version` decodes with the tile's own attributes: whole (`level` = nullopt) or at a coarse
+  // level (`root`: the first level).
+  bool showsOwnAttributes(uint16_t version, bool coarse, bool root) const {
+    const bool coded = coarse_attributes_from != 0 && version >= coarse_attributes_from;
+    if (!coarse) return keeps_attributes || coded;
+    return coded && (!root || root_level_attributes);
+  }
 };
 
 std::span<const CodecInfo> allCodecs();

@@ -32,13 +32,22 @@
 //    step; each level is one range-coder stream (models carry over), so a payload cut after a level's end decodes it.
 //  - The encoder welds vertices sharing a grid position and drops triangles that repeat a vertex after the weld:
 //    the last level is the tile as triangles over positions (with multiplicity and orientation), not its vertex
-//    list. Normals and colors are not kept (v1, v2): every level derives them from its triangles (deriveAttributes).
+//    list. Normals and colors are not kept in v1 and v2: every level derives them from its triangles
+//    (deriveAttributes).
+//  - Attributes (v3; ../shared/papers/attributes-selective-refinement.md §3): a vertex's normal and color are the
+//    ones it has in the last level (a welded position takes its first input vertex's). The base codec codes the base
+//    vertices' with the base mesh; a vertex a split adds shows its parent's until the last level, whose stream ends
+//    with the attributes of every vertex the splits added, predicted from the finest geometry as kdtree's last level
+//    predicts its (LevelAttributes). Every level thus shows the scan's own values. Where the paper merges the
+//    attributes of a collapse into new values, we keep one of them (the kept vertex's): no value is coded twice,
+//    and no level shows a value the scan does not have.
 //
-// Payload v1 and v2 (FORMAT.md, "Codec pm"):
+// Payload v1, v2 and v3 (FORMAT.md, "Codec pm"):
 //   u8 base codec id (1 store, 2 kdtree, 3 octree), varint base codec version, varint base payload bytes B,
 //   varint base vertices V0, varint base faces F0, f32 base error (grid cells, little-endian bits),
 //   varint L (levels after the base), L x { varint batches, varint vertices, varint faces, f32 error,
-//   varint stream bytes }, then the base payload (B bytes), then the L level streams.
+//   varint stream bytes }, then the base payload (B bytes), then the L level streams (v3 with normals or colors: the
+//   last one ends with the attributes of the vertices the splits added).
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -47,6 +56,7 @@
 #include <numeric>
 #include <string>
 
+#include "engine/codecs/attributes.h"
 #include "engine/codecs/codec.h"
 #include "engine/entropy/range_coder.h"
 #include "engine/io/bytes.h"
@@ -55,7 +65,10 @@ namespace scanpress {
 namespace {
 
 // 2: the same layout as 1; its base payloads are kdtree's and octree's version 2 (so are its golden bytes).
-constexpr uint16_t kVersion = 2;
+// 3: normals and colors at every level (the base's in the base payload, the split vertices' at the end of the last
+// level's stream); without them the bytes of v2.
+constexpr uint16_t kVersion = 3;
+constexpr uint16_t kAttributesFrom = 3;
 // A level closes once it has at least this many splits and grew the vertex count by this factor (or at the last
 // batch): fewer, larger levels pay less per-level overhead (a 4-byte flush and the table entry).
 constexpr uint64_t kMinLevelSplits = 64;
@@ -114,6 +127,22 @@ struct DecodeSide {
   void uniform(uint32_t& v, uint32_t count) { v = d.decodeUniform(count); }
 };
 
+// The same coders with the interface of the attribute coding (attributes.h): each call returns the value.
+struct AttributeEncodeIo {
+  RangeEncoder& e;
+  int bit(BitModel& m, int b) { return e.encodeBit(m, b), b; }
+  uint32_t sym(SymbolModel& m, uint32_t s) { return e.encodeSymbol(m, s), s; }
+  uint32_t uniform(uint32_t v, uint32_t n) { return e.encodeUniform(v, n), v; }
+  uint32_t bits(uint32_t v, int n) { return e.encodeBits(v, n), v; }
+};
+struct AttributeDecodeIo {
+  RangeDecoder& d;
+  int bit(BitModel& m, int) { return d.decodeBit(m); }
+  uint32_t sym(SymbolModel& m, uint32_t) { return d.decodeSymbol(m); }
+  uint32_t uniform(uint32_t, uint32_t n) { return d.decodeUniform(n); }
+  uint32_t bits(uint32_t, int n) { return d.decodeBits(n); }
+};
+
 template <class C>
 void codeCount(C& c, SymbolModel& m, uint64_t& n) {
   uint32_t s = n >= kCountEscape ? kCountEscape : uint32_t(n);
@@ -132,6 +161,9 @@ struct PmState {
   std::vector<Vec3u> pos;
   std::vector<Triangle> faces;
   std::vector<std::vector<uint32_t>> vf;
+  std::vector<OctNormal> normals;  // v3, with normals: per coded vertex
+  std::vector<Rgba8> colors;       // v3, with colors: per coded vertex
+  std::vector<uint32_t> parent;    // per vertex: the vertex it split from (a base vertex: itself)
 
   void addFace(const Triangle& t) {
     const uint32_t id = uint32_t(faces.size());
@@ -209,6 +241,50 @@ struct PmState {
   mutable std::vector<std::array<uint32_t, 3>> keyed_;
   mutable std::vector<uint8_t> visited_;
   mutable std::vector<uint32_t> group_next_;
+};
+
+// v3's attributes through the levels (FORMAT.md, "Attributes of pm levels"): the base codec codes the base
+// vertices'; a vertex a split adds shows what its parent shows (so one of the base's) until the payload's last level,
+// whose stream ends with the attributes of every vertex the splits added, predicted from the finest geometry and the
+// decoded neighbours as kdtree's last level predicts its (attributes.h; the angle-weighted normal sums each vertex's
+// faces in its face-list order). Coding each level's new vertices at its own end, from its coarser geometry, showed
+// every vertex's own at every level but cost 7-38% more attribute bytes (bench/RESULTS.md); kdtree's rule (levels
+// of at most max(64, N/16) vertices code theirs) would code none here, as the base already has about N/8.
+class LevelAttributes {
+ public:
+  LevelAttributes(const AttributeLayout& layout, uint32_t base_vertices)
+      : layout_(layout), base_(base_vertices), shows_(base_vertices) {
+    std::iota(shows_.begin(), shows_.end(), 0u);
+  }
+  // The end of a level's stream (`last`: the payload's last level). `truth` (encoder): attributes by vertex.
+  template <class Io>
+  void endLevel(Io& io, PmState& st, bool last, const hierarchy::Points* truth) {
+    const uint32_t n = uint32_t(st.pos.size());
+    if (!last) {
+      for (uint32_t v = uint32_t(shows_.size()); v < n; ++v) shows_.push_back(shows_[st.parent[v]]);
+      return;
+    }
+    hierarchy::PredictedAttributeState state(layout_);
+    hierarchy::codePredictedRange(
+        io, state, layout_, base_, n, st.faces, [&](uint32_t v) { return std::span<const uint32_t>(st.vf[v]); },
+        [&](uint32_t v) { return hierarchy::angleWeightedNormalAt(st.pos, st.faces, st.vf[v], v); },
+        [](uint32_t) { return false; }, truth, st.normals, st.colors);
+    shows_.resize(n);
+    std::iota(shows_.begin(), shows_.end(), 0u);
+  }
+  // The decoded level's attributes, by vertex.
+  void show(const PmState& st, QuantizedMesh& out) const {
+    const uint32_t n = uint32_t(st.pos.size());
+    if (layout_.hasNormals())
+      for (uint32_t v = 0; v < n; ++v) out.normals.push_back(st.normals[shows_[v]]);
+    if (layout_.hasColors())
+      for (uint32_t v = 0; v < n; ++v) out.colors.push_back(st.colors[shows_[v]]);
+  }
+
+ private:
+  AttributeLayout layout_;
+  uint32_t base_;
+  std::vector<uint32_t> shows_;  // per vertex: the vertex whose attributes it shows
 };
 
 // One vertex split in the state's indices: k splits into k (at vs) and a new vertex (at vr).
@@ -436,6 +512,7 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
   // Apply.
   st.pos[k] = s.vs;
   st.pos.push_back(s.vr);
+  st.parent.push_back(k);
   st.vf.emplace_back();
   std::vector<uint32_t> stay;
   stay.reserve(fan.size());
@@ -474,7 +551,7 @@ void putF32(ByteWriter& w, float f) {
 Status checkVersion(uint16_t version) {
   if (version < 1 || version > kVersion)
     return makeError(ErrorCode::kUnknownVersion,
-                     "pm codec version " + std::to_string(version) + " is not known to this build (knows 1 and 2)");
+                     "pm codec version " + std::to_string(version) + " is not known to this build (knows 1 to 3)");
   return Status::ok();
 }
 
@@ -555,7 +632,13 @@ PmState initialState(const QuantizedMesh& base, std::vector<uint32_t>* order_out
   PmState st;
   st.pos.reserve(order.size());
   for (uint32_t v : order) st.pos.push_back(base.positions[v]);
+  if (!base.normals.empty())
+    for (uint32_t v : order) st.normals.push_back(base.normals[v]);
+  if (!base.colors.empty())
+    for (uint32_t v : order) st.colors.push_back(base.colors[v]);
   st.vf.resize(order.size());
+  st.parent.resize(order.size());
+  std::iota(st.parent.begin(), st.parent.end(), 0u);
   for (const auto& t : base.triangles) st.addFace({rank[t[0]], rank[t[1]], rank[t[2]]});
   if (order_out) *order_out = order;
   return st;
@@ -570,7 +653,8 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
     return makeError(ErrorCode::kTruncated, "pm payload ends inside its base mesh");
   const CodecInfo* base_codec = findCodec(CodecId(h.base_codec));
   if (!base_codec) return makeError(ErrorCode::kMalformed, "pm: unknown base codec");
-  const TileContext base_ctx{ctx.bits, {}};
+  const bool attributes = version >= kAttributesFrom && (ctx.layout.hasNormals() || ctx.layout.hasColors());
+  const TileContext base_ctx{ctx.bits, attributes ? ctx.layout : AttributeLayout{}};
   SP_ASSIGN_OR_RETURN(QuantizedMesh base,
                       base_codec->decode(base_ctx, uint16_t(h.base_version),
                                          payload.subspan(h.base_offset, h.base_bytes),
@@ -580,6 +664,9 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   for (const auto& t : base.triangles)
     if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2])
       return makeError(ErrorCode::kMalformed, "pm: a base triangle repeats a vertex");
+  if (attributes && ((ctx.layout.hasNormals() && base.normals.size() != base.positions.size()) ||
+                     (ctx.layout.hasColors() && base.colors.size() != base.positions.size())))
+    return makeError(ErrorCode::kMalformed, "pm: the base mesh lacks the layout's attributes");
   const uint64_t final_v = target == 0 ? h.base_vertices : h.levels[target - 1].vertices;
   const uint64_t final_f = target == 0 ? h.base_faces : h.levels[target - 1].faces;
   PmState st = initialState(base, nullptr);
@@ -588,6 +675,7 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   st.faces.reserve(final_f);
   const uint32_t max_coord = uint32_t((uint64_t(1) << ctx.bits) - 1);
   Models m;
+  LevelAttributes level_attributes(ctx.layout, uint32_t(h.base_vertices));
   std::vector<uint32_t> blocked;  // == mark: within two edges of a split of the current batch
   uint32_t mark = 0;
   size_t offset = h.base_offset + h.base_bytes;
@@ -617,6 +705,10 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
       // Checked per batch too: a stream that runs dry must not make the decoder walk every vertex per batch.
       if (rd.overrun()) return makeError(ErrorCode::kTruncated, "pm: level stream ends early");
     }
+    if (attributes) {
+      AttributeDecodeIo io{rd};
+      level_attributes.endLevel(io, st, li + 1 == h.levels.size(), nullptr);
+    }
     if (rd.overrun()) return makeError(ErrorCode::kTruncated, "pm: level stream ends early");
     if (st.pos.size() != le.vertices || st.faces.size() != le.faces)
       return makeError(ErrorCode::kMalformed,
@@ -624,9 +716,12 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
     offset += le.bytes;
   }
   QuantizedMesh out;
+  if (attributes) level_attributes.show(st, out);
   out.positions = std::move(st.pos);
   out.triangles = std::move(st.faces);
-  deriveAttributes(out, ctx.layout);
+  if (!attributes) {
+    deriveAttributes(out, ctx.layout);
+  }
   SP_RETURN_IF_ERROR(validateTile(ctx, out));
   return out;
 }
@@ -658,7 +753,13 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   const QuantizedMesh& in = tile.mesh;
   if (in.positions.size() >= UINT32_MAX || in.triangles.size() >= UINT32_MAX)
     return makeError(ErrorCode::kLimitExceeded, "tile has more than 2^32-2 vertices or triangles");
-  // Weld by position; lock flags are OR-ed.
+  // Weld by position; lock flags are OR-ed; attributes (v3) are the first input vertex's at the position.
+  const AttributeLayout& layout = ctx.layout;
+  const bool with_normals = layout.hasNormals(), with_colors = layout.hasColors();
+  const bool attributes = with_normals || with_colors;
+  if ((with_normals && in.normals.size() != in.positions.size()) ||
+      (with_colors && in.colors.size() != in.positions.size()))
+    return makeError(ErrorCode::kInvalidArgument, "pm: the tile lacks the layout's attributes");
   QuantizedMesh welded;
   std::vector<uint8_t> locked;
   {
@@ -668,6 +769,8 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
       const uint32_t v = order[i];
       if (i == 0 || in.positions[v] != welded.positions.back()) {
         welded.positions.push_back(in.positions[v]);
+        if (with_normals) welded.normals.push_back(in.normals[v]);
+        if (with_colors) welded.colors.push_back(in.colors[v]);
         locked.push_back(0);
       }
       map[v] = uint32_t(welded.positions.size() - 1);
@@ -706,6 +809,8 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
       if (!gone[v]) {
         map[v] = uint32_t(last.positions.size());
         last.positions.push_back(s1.mesh.positions[v]);
+        if (with_normals) last.normals.push_back(welded.normals[v]);
+        if (with_colors) last.colors.push_back(welded.colors[v]);
         last_locked.push_back(locked[v]);
       }
     for (const auto& t : s1.mesh.triangles) {
@@ -768,14 +873,17 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   std::vector<uint32_t> base_to_last;
   std::vector<uint32_t> last_to_base(nl, UINT32_MAX);
   for (uint32_t v = 0; v < nl; ++v)
-    if (alive_v[v])
+    if (alive_v[v]) {
       last_to_base[v] = uint32_t(base.positions.size()), base_to_last.push_back(v), base.positions.push_back(fw.pos[v]);
+      if (with_normals) base.normals.push_back(last.normals[v]);
+      if (with_colors) base.colors.push_back(last.colors[v]);
+    }
   for (uint32_t f = 0; f < fw.faces.size(); ++f)
     if (alive_face[f]) {
       const Triangle& t = fw.faces[f];
       base.triangles.push_back({last_to_base[t[0]], last_to_base[t[1]], last_to_base[t[2]]});
     }
-  const TileContext base_ctx{ctx.bits, {}};
+  const TileContext base_ctx{ctx.bits, attributes ? layout : AttributeLayout{}};
   std::vector<uint32_t> sorted_base = canonicalOrder(base.positions);
   bool unique_positions = true;
   for (size_t i = 1; i < sorted_base.size(); ++i)
@@ -792,6 +900,9 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
     if (best && enc->payload.size() >= best_payload.size()) continue;
     auto dec = codec.decode(base_ctx, codec.version, enc->payload, limitsOf(enc->decoded));
     if (!dec.isOk() || dec->positions.size() != base.positions.size()) continue;
+    if ((with_normals && dec->normals.size() != dec->positions.size()) ||
+        (with_colors && dec->colors.size() != dec->positions.size()))
+      continue;
     // Decoded vertex -> base vertex: by position when positions are unique, else only an order-keeping decode.
     std::vector<uint32_t> map(dec->positions.size());
     bool ok = true;
@@ -805,6 +916,10 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
         ok = dec->positions[i] == base.positions[i];
         map[i] = i;
       }
+      // Each base vertex's attributes come back as they were (the levels predict from them).
+      if (ok && with_normals) ok = dec->normals[i] == base.normals[map[i]];
+      if (ok && with_colors)
+        for (int c = 0; c < layout.color_channels; ++c) ok &= dec->colors[i][c] == base.colors[map[i]][c];
     }
     if (!ok) continue;
     std::vector<Triangle> mapped;
@@ -828,15 +943,16 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   std::vector<uint8_t> streams;
   Header h;
   h.base_codec = uint8_t(best->id);
-  // The base mesh has no attributes, where kdtree's and octree's version 3 payloads are their version 2 bytes: the
-  // base keeps naming 2, as pm v2 always has (its golden bytes).
-  h.base_version = std::min<uint16_t>(best->version, 2);
+  // Without attributes kdtree's and octree's version 3 payloads are their version 2 bytes: such a base keeps naming
+  // 2, as pm v2 always has (the same bytes as v2, golden ones included).
+  h.base_version = attributes ? best->version : std::min<uint16_t>(best->version, 2);
   h.base_bytes = best_payload.size();
   h.base_vertices = best_decoded.positions.size();
   h.base_faces = best_decoded.triangles.size();
   h.base_error = last_error + (s2.pass_errors.empty() ? 0.f : s2.pass_errors.back());
   const uint32_t max_coord = uint32_t((uint64_t(1) << ctx.bits) - 1);
   Models m;
+  LevelAttributes level_attributes(layout, uint32_t(st.pos.size()));
   std::vector<uint32_t> blocked;
   uint32_t mark = 0;
   std::vector<uint8_t> level_bytes;
@@ -855,8 +971,10 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
       splits.push_back({k, ci});
     }
     std::sort(splits.begin(), splits.end());
-    if (splits.empty() && p != 0) continue;  // an empty pass codes no batch
-    const uint32_t n_start = uint32_t(st.pos.size());
+    // An empty pass codes no batch (the last one still closes its level; the simplifier records none, but a batch
+    // of zero flags outside the level's count would put bits where the decoder reads the attributes).
+    if (splits.empty() && p != 0) continue;
+    const uint32_t n_start = splits.empty() ? 0 : uint32_t(st.pos.size());
     size_t next = 0;
     int prev = 0;
     std::vector<uint32_t> fan;
@@ -902,6 +1020,16 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
     if (!splits.empty()) ++cur.batches;
     const uint64_t grown = st.pos.size() - level_start_v;
     if (p == 0 || (grown >= kMinLevelSplits && double(st.pos.size()) >= kLevelGrowth * double(level_start_v))) {
+      // The last level (the last with splits) ends with the attributes of every vertex the splits added.
+      if (attributes && cur.batches > 0 && st.pos.size() == nl) {
+        hierarchy::Points truth;  // by state index
+        for (uint32_t i = 0; i < nl; ++i) {
+          if (with_normals) truth.normals.push_back(last.normals[last_of[i]]);
+          if (with_colors) truth.colors.push_back(last.colors[last_of[i]]);
+        }
+        AttributeEncodeIo io{*re};
+        level_attributes.endLevel(io, st, true, &truth);
+      }
       re->finish();
       re.reset();
       if (cur.batches == 0) {

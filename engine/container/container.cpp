@@ -363,16 +363,17 @@ Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const Til
                                                         " is single-rate; it has no levels to choose from");
     SP_ASSIGN_OR_RETURN(auto levels, tilePayloadLevels(header, e, payload, what));
     partial = !levels.empty() && *level < levels.back().level;
-    coarse_own = partial && codec->coarse_attributes_from != 0 && e.codec_version >= codec->coarse_attributes_from &&
-                 *level > levels.front().level;
+    coarse_own = partial && codec->showsOwnAttributes(e.codec_version, true, *level <= levels.front().level);
   }
   try {
     auto mesh = partial ? codec->decode_level(ctx, e.codec_version, payload, *level, limits)
                         : codec->decode(ctx, e.codec_version, payload, limits);
     if (!mesh.isOk()) return mesh.status().withContext(where);
-    // A codec that derives attributes never yields the tile's own: its tiles weld as coarse ones do.
+    // A codec that welds by position (pm) never yields a complete tile: its tiles weld as coarse ones do, with their
+    // own attributes from the version that codes them.
     if (complete) *complete = !partial && codec->keeps_attributes;
-    if (own_attributes) *own_attributes = partial ? coarse_own : codec->keeps_attributes;
+    if (own_attributes)
+      *own_attributes = partial ? coarse_own : codec->showsOwnAttributes(e.codec_version, false, false);
     if (partial) return mesh;
     if (mesh->positions.size() != e.vertices || mesh->triangles.size() != e.faces)
       return makeError(ErrorCode::kMalformed, where + ": decoded " + std::to_string(mesh->positions.size()) +

@@ -126,10 +126,10 @@ DecodeLimits limitsOf(const TileEntry& entry);
 // Decodes a verified payload with the entry's codec, within the limits of the entry's counts (a payload that
 // claims more is kMalformed before anything is allocated), and checks that the complete tile has exactly the
 // index's counts. With a `level` (progressive codecs only; kInvalidArgument otherwise) the tile's mesh at that
-// level (see CodecLevel); `complete` says whether that was the tile's last level with its own attributes (false
-// for a codec that derives them, CodecInfo::keeps_attributes: such tiles weld by position); `own_attributes` whether
-// the mesh's normals and colors are the tile's own (a complete tile, or a coarse level coded with them,
-// CodecInfo::coarse_attributes_from) rather than derived from its triangles. Running out of memory
+// level (see CodecLevel); `complete` says whether that was the tile's last level with its vertices as given (false
+// for a codec that welds by position, CodecInfo::keeps_attributes: such tiles weld by position); `own_attributes`
+// whether the mesh's normals and colors are the tile's own (CodecInfo::showsOwnAttributes: a complete tile of a
+// codec that keeps them, or levels coded with them) rather than derived from its triangles. Running out of memory
 // while decoding is a data error (kMalformed): only a hostile payload can ask for more than its index allows.
 Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const TileEntry& entry,
                                         std::span<const uint8_t> payload, const std::string& what,
