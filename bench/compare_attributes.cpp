@@ -1,10 +1,12 @@
 // scanpress-compare's attribute comparison (issue 22): on scans with normals or colors, the bytes that attributes
-// add to a file, for scanpress's lossless codecs and for Draco -cl 10, at the same precisions.
+// add to a file, for scanpress's lossless codecs (pm lossless among them) and for Draco -cl 10, at the same
+// precisions.
 //
 // Both coders get the same values: the scan's normals quantized to scanpress's octahedral codes (then given to
 // Draco as the unit vectors those codes name, with -qn at the same bits) and its 8-bit colors (Draco does not
 // quantize integer attributes). A configuration's attribute bytes are the file's bytes minus those of the same
-// coder on the positions and triangles alone. scanpress must give back its codes exactly; for Draco the table shows
+// coder on the positions and triangles alone. scanpress must give back its codes exactly (pm: per position, those of
+// the scan's first vertex there, as its weld keeps them); for Draco the table shows
 // the largest angle between its decoded normals and the input's (its octahedral grid is not ours).
 #include <draco/compression/decode.h>
 #include <draco/compression/encode.h>
@@ -123,7 +125,7 @@ void runAttributes(const std::string& scan, const Mesh& mesh, int bits, std::vec
   if (has_normals && has_colors) configs.push_back({"all (normals 12)", 12, true});
   const QuantizedMesh bare = *quantizeMesh(mesh, grid, {}, nullptr);
   std::map<std::string, size_t> geometry;  // per coder
-  for (const char* codec : {"kdtree", "octree", "edgebreaker"}) {
+  for (const char* codec : {"kdtree", "octree", "edgebreaker", "pm"}) {
     auto e = encodeMesh(*findCodec(codec), TileContext{bits, {}}, bare);
     geometry[std::string("scanpress ") + codec] = e.isOk() ? e->payload.size() : 0;
   }
@@ -141,7 +143,7 @@ void runAttributes(const std::string& scan, const Mesh& mesh, int bits, std::vec
       r.geometry_bytes = geometry[codec];
       return r;
     };
-    for (const char* name : {"kdtree", "octree", "edgebreaker"}) {
+    for (const char* name : {"kdtree", "octree", "edgebreaker", "pm"}) {
       const CodecInfo& codec = *findCodec(name);
       AttributeRow r = base(std::string("scanpress ") + name);
       const TileContext ctx{bits, layout};
@@ -152,12 +154,20 @@ void runAttributes(const std::string& scan, const Mesh& mesh, int bits, std::vec
       }
       r.bytes = e->payload.size();
       auto d = codec.decode(ctx, codec.version, e->payload, limitsOf(e->decoded));
-      if (d.isOk()) {  // exact: the same (position, normal code, color) vertices
-        auto key = [](const QuantizedMesh& m) {
+      if (d.isOk()) {                                // exact: the same (position, normal code, color) vertices
+        const bool welds = !codec.keeps_attributes;  // pm: one vertex per position, the first's attributes
+        auto key = [&](const QuantizedMesh& m) {
           std::vector<std::tuple<Vec3u, OctNormal, Rgba8>> v;
           for (size_t i = 0; i < m.positions.size(); ++i)
             v.emplace_back(m.positions[i], m.normals.empty() ? OctNormal{} : m.normals[i],
                            m.colors.empty() ? Rgba8{} : m.colors[i]);
+          if (welds) {
+            std::stable_sort(v.begin(), v.end(),
+                             [](const auto& a, const auto& b) { return std::get<0>(a) < std::get<0>(b); });
+            v.erase(std::unique(v.begin(), v.end(),
+                                [](const auto& a, const auto& b) { return std::get<0>(a) == std::get<0>(b); }),
+                    v.end());
+          }
           std::sort(v.begin(), v.end());
           v.erase(std::unique(v.begin(), v.end()), v.end());
           return v;
