@@ -130,6 +130,35 @@ Mesh attributedSphere(int subdivisions) {
   return sphere;
 }
 
+// Where each (normal, color) of a mesh is.
+using AttributePlaces = std::map<std::pair<OctNormal, Rgba8>, std::vector<Vec3u>>;
+AttributePlaces placesOf(const QuantizedMesh& q) {
+  AttributePlaces where;
+  for (size_t v = 0; v < q.positions.size(); ++v) where[{q.normals[v], q.colors[v]}].push_back(q.positions[v]);
+  return where;
+}
+
+// Of m's vertices, those whose (normal, color) the scan has nowhere (foreign), and those that have it only farther
+// than `reach` grid cells on some axis (far).
+std::pair<size_t, size_t> foreignAndFar(const QuantizedMesh& m, const AttributePlaces& where, int64_t reach) {
+  size_t foreign = 0, far = 0;
+  for (size_t v = 0; v < m.positions.size(); ++v) {
+    const auto it = where.find({m.normals[v], m.colors[v]});
+    if (it == where.end()) {
+      ++foreign;
+      continue;
+    }
+    bool near = false;
+    for (const Vec3u& p : it->second) {
+      bool inside = true;
+      for (int a = 0; a < 3; ++a) inside &= std::llabs(int64_t(p[a]) - int64_t(m.positions[v][a])) <= reach;
+      near |= inside;
+    }
+    far += !near;
+  }
+  return {foreign, far};
+}
+
 TEST(Pipeline, CoarseLevelsOfManyTilesShowTheScansOwnAttributes) {
   testing::TempDir dir;
   const Mesh sphere = attributedSphere(5);
@@ -164,30 +193,14 @@ TEST(Pipeline, CoarseLevelsOfManyTilesShowTheScansOwnAttributes) {
       const size_t at_root = size_t(std::count_if(roots.begin(), roots.end(), [&](uint32_t r) { return r >= level; }));
       auto m = decodeContainer(s.output, std::nullopt, nullptr, level);
       ASSERT_TRUE(m.isOk()) << m.status().toString();
-      // Where each (normal, color) of the input is.
-      std::map<std::pair<OctNormal, Rgba8>, std::vector<Vec3u>> where;
-      for (size_t v = 0; v < q->positions.size(); ++v) where[{q->normals[v], q->colors[v]}].push_back(q->positions[v]);
+      const AttributePlaces where = placesOf(*q);
       ASSERT_EQ(m->normals.size(), m->positions.size());
       ASSERT_EQ(m->colors.size(), m->positions.size());
       // A tile of 1024 triangles (about 500 vertices) codes the attributes of its levels with at most 64 vertices,
       // level 3 or finer on this sphere: the point shown lies in the level-3 cell of the vertex's ancestor, within
       // 2^9 grid cells on each axis (measured: at most 508). Another vertex's attributes would be up to 4096 away.
       const int64_t reach = int64_t(1) << std::max(9, 12 - int(level));
-      size_t foreign = 0, far = 0;
-      for (size_t v = 0; v < m->positions.size(); ++v) {
-        const auto it = where.find({m->normals[v], m->colors[v]});
-        if (it == where.end()) {
-          ++foreign;
-          continue;
-        }
-        bool near = false;
-        for (const Vec3u& p : it->second) {
-          bool inside = true;
-          for (int a = 0; a < 3; ++a) inside &= std::llabs(int64_t(p[a]) - int64_t(m->positions[v][a])) <= reach;
-          near |= inside;
-        }
-        far += !near;
-      }
+      const auto [foreign, far] = foreignAndFar(*m, where, reach);
       EXPECT_LE(foreign, at_root) << "of " << m->positions.size()
                                   << " vertices show attributes the scan does not have; tiles at their root level: "
                                   << at_root;
@@ -232,8 +245,7 @@ TEST(Pipeline, PmLevelsOfManyTilesShowTheScansOwnAttributes) {
     ASSERT_EQ(whole->normals[v], normal) << v;
     ASSERT_EQ(whole->colors[v], color) << v;
   }
-  std::map<std::pair<OctNormal, Rgba8>, std::vector<Vec3u>> where;
-  for (size_t v = 0; v < q->positions.size(); ++v) where[{q->normals[v], q->colors[v]}].push_back(q->positions[v]);
+  const AttributePlaces where = placesOf(*q);
   for (uint32_t level : {0u, 1u, 2u, 4u}) {
     SCOPED_TRACE(level);
     auto m = decodeContainer(s.output, std::nullopt, nullptr, level);
@@ -245,21 +257,7 @@ TEST(Pipeline, PmLevelsOfManyTilesShowTheScansOwnAttributes) {
     // stands for the region that collapsed into it, about 8 vertices (measured: at most 980 grid cells away, some 12
     // of this sphere's edges; a tile spans about 1500).
     const int64_t reach = 1024;
-    size_t foreign = 0, far = 0;
-    for (size_t v = 0; v < m->positions.size(); ++v) {
-      const auto it = where.find({m->normals[v], m->colors[v]});
-      if (it == where.end()) {
-        ++foreign;
-        continue;
-      }
-      bool near = false;
-      for (const Vec3u& p : it->second) {
-        bool inside = true;
-        for (int a = 0; a < 3; ++a) inside &= std::llabs(int64_t(p[a]) - int64_t(m->positions[v][a])) <= reach;
-        near |= inside;
-      }
-      far += !near;
-    }
+    const auto [foreign, far] = foreignAndFar(*m, where, reach);
     EXPECT_EQ(foreign, 0u) << "of " << m->positions.size() << " vertices show attributes the scan does not have";
     EXPECT_EQ(far, 0u) << "of " << m->positions.size() << " vertices show a far point's attributes";
   }
