@@ -252,6 +252,7 @@ struct PmState {
 // of at most max(64, N/16) vertices code theirs) would code none here, as the base already has about N/8.
 class LevelAttributes {
  public:
+  // `base_vertices`: 0 when the payload codes no attributes (nothing is kept then).
   LevelAttributes(const AttributeLayout& layout, uint32_t base_vertices)
       : layout_(layout), base_(base_vertices), shows_(base_vertices) {
     std::iota(shows_.begin(), shows_.end(), 0u);
@@ -675,7 +676,7 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   st.faces.reserve(final_f);
   const uint32_t max_coord = uint32_t((uint64_t(1) << ctx.bits) - 1);
   Models m;
-  LevelAttributes level_attributes(ctx.layout, uint32_t(h.base_vertices));
+  LevelAttributes level_attributes(ctx.layout, attributes ? uint32_t(h.base_vertices) : 0);
   std::vector<uint32_t> blocked;  // == mark: within two edges of a split of the current batch
   uint32_t mark = 0;
   size_t offset = h.base_offset + h.base_bytes;
@@ -952,7 +953,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   h.base_error = last_error + (s2.pass_errors.empty() ? 0.f : s2.pass_errors.back());
   const uint32_t max_coord = uint32_t((uint64_t(1) << ctx.bits) - 1);
   Models m;
-  LevelAttributes level_attributes(layout, uint32_t(st.pos.size()));
+  LevelAttributes level_attributes(layout, attributes ? uint32_t(st.pos.size()) : 0);
   std::vector<uint32_t> blocked;
   uint32_t mark = 0;
   std::vector<uint8_t> level_bytes;
