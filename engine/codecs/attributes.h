@@ -189,30 +189,21 @@ inline Rgba8 colorOfLevels(const Rgba8& lv, const AttributeLayout& layout) {
 constexpr uint16_t kPredictedAttributes = 2;
 constexpr uint16_t kCoarseAttributes = 3;
 
-// What the predicted coding carries from one vertex to the next: the models, and per vertex the classes of its
-// residuals (the activity its later neighbours take as context). One per tile.
-struct PredictedAttributeState {
-  explicit PredictedAttributeState(const AttributeLayout& layout) : models(layout) {}
-  AttributeModels models;
-  std::vector<u8> normal_activity, color_activity;
-  int last_flip = 0;
-};
-
 // The predicted coding of the vertices v in [first, n) that are not known(v), in vertex order. A vertex w's
-// attributes count as decoded when v's are coded if w < v or known(w). faces_of(v): v's triangles (indices into
+// attributes count as decoded when v's are coded if w < v or known(w) (its activity: 0 when it was not coded here). faces_of(v): v's triangles (indices into
 // `tris`, a triangle once per corner naming v); geometric(v): v's angle-weighted normal sum. `truth` (encoder):
 // attributes by vertex; `normals` and `colors` hold the known vertices' and get the coded ones' (n of each).
 template <class Io, class FacesOf, class Geometric, class Known>
-void codePredictedRange(Io& io, PredictedAttributeState& st, const AttributeLayout& layout, u32 first, u32 n,
-                        const std::vector<Triangle>& tris, const FacesOf& faces_of, const Geometric& geometric,
-                        const Known& known, const Points* truth, std::vector<OctNormal>& normals,
-                        std::vector<Rgba8>& colors) {
+void codePredictedRange(Io& io, const AttributeLayout& layout, u32 first, u32 n, const std::vector<Triangle>& tris,
+                        const FacesOf& faces_of, const Geometric& geometric, const Known& known, const Points* truth,
+                        std::vector<OctNormal>& normals, std::vector<Rgba8>& colors) {
   const auto decoded = [&](u32 w, u32 v) { return w < v || known(w); };
+  AttributeModels models(layout);
+  std::vector<u8> activity(n, 0);  // per vertex: its residuals' classes (the context of its later neighbours)
   if (layout.hasNormals()) {
     const int bits = layout.normal_bits, m = (1 << (bits - 1)) - 1;
     normals.resize(n);
-    st.normal_activity.resize(n, 0);
-    auto& activity = st.normal_activity;
+    int last_flip = 0;
     for (u32 v = first; v < n; ++v) {
       if (known(v)) continue;
       const Sum3 s = scaledSum(geometric(v));
@@ -228,8 +219,8 @@ void codePredictedRange(Io& io, PredictedAttributeState& st, const AttributeLayo
           const auto a = octahedralVector(actual, m), p = octahedralVector(pred, m);
           flip = a[0] * p[0] + a[1] * p[1] + a[2] * p[2] < 0;
         }
-        flip = io.bit(st.models.flip[st.last_flip], flip);
-        st.last_flip = flip;
+        flip = io.bit(models.flip[last_flip], flip);
+        last_flip = flip;
         if (flip) pred = octahedralOfSum(Sum3{-s[0], -s[1], -s[2]}, bits);
       } else if (v > 0) {
         pred = {int(normals[v - 1][0]) - m, int(normals[v - 1][1]) - m};
@@ -240,18 +231,19 @@ void codePredictedRange(Io& io, PredictedAttributeState& st, const AttributeLayo
         for (u32 w : tris[t])
           if (w != v && decoded(w, v)) sum += activity[w], ++count;
       int act = 0;
-      normals[v] = codeNormal(io, st.models, bits, pred, actual, truth != nullptr, activityBin(sum, count), act);
+      normals[v] = codeNormal(io, models, bits, pred, actual, truth != nullptr, activityBin(sum, count), act);
       activity[v] = u8(act);
     }
   }
   if (layout.hasColors()) {
-    // In levels (2^color_bits of them; at 8 bits the values themselves): a decoded color's levels are
-    // colorLevel of its 8-bit value, exactly.
+    // In levels (2^color_bits of them; at 8 bits the values themselves).
     const int channels = layout.color_channels, cb = layout.color_bits, levels = 1 << cb;
     colors.resize(n, Rgba8{0, 0, 0, 255});
-    st.color_activity.resize(n, 0);
-    auto& activity = st.color_activity;
-    const auto levelOf = [&](u32 w, int c) { return c < channels ? int(colorLevel(colors[w][c], cb)) : 0; };
+    std::vector<Rgba8> level(n, Rgba8{0, 0, 0, 0});
+    for (u32 v = 0; v < n; ++v)
+      if (v < first || known(v))
+        for (int c = 0; c < channels; ++c) level[v][c] = u8(colorLevel(colors[v][c], cb));
+    std::fill(activity.begin(), activity.end(), u8(0));
     for (u32 v = first; v < n; ++v) {
       if (known(v)) continue;
       // One pass over the decoded neighbours: their levels (the prediction) and activity (the context).
@@ -259,26 +251,26 @@ void codePredictedRange(Io& io, PredictedAttributeState& st, const AttributeLayo
       for (u32 t : faces_of(v))
         for (u32 w : tris[t])
           if (w != v && decoded(w, v)) {
-            for (int c = 0; c < channels; ++c) sum[c] += u32(levelOf(w, c));
+            for (int c = 0; c < channels; ++c) sum[c] += level[w][c];
             active += activity[w];
             ++count;
           }
       int pred[4];
       for (int c = 0; c < 4; ++c)
         pred[c] = count    ? int((sum[c] + count / 2) / count)
-                  : v > 0  ? levelOf(v - 1, c)
+                  : v > 0  ? level[v - 1][c]
                   : c == 3 ? levels - 1
                            : levels / 2;
       int act = 0;
-      const Rgba8 lv = codeColorLevels(io, st.models, layout, pred, truth ? &truth->colors[v] : nullptr,
-                                       activityBin(active, count), act);
-      colors[v] = colorOfLevels(lv, layout);
+      level[v] = codeColorLevels(io, models, layout, pred, truth ? &truth->colors[v] : nullptr,
+                                 activityBin(active, count), act);
+      colors[v] = colorOfLevels(level[v], layout);
       activity[v] = u8(std::min(act, 255));
     }
   }
 }
 
-// Normals and colors of the n vertices at positions `pos` with triangles `tris` (one state for the tile); `truth`
+// Normals and colors of the n vertices at positions `pos` with triangles `tris`; `truth`
 // (encoder) holds them in the vertices' order. `known` (version 3): vertices whose attributes are already in
 // `normals` and `colors` (coded at a coarse level); they are not coded again and count as decoded neighbours
 // wherever they are in the order.
@@ -289,11 +281,10 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
   if (!layout.hasNormals() && !layout.hasColors()) return;
   const u32 n = u32(pos.size());
   const VertexFaces vf(n, tris);
-  PredictedAttributeState st(layout);
   std::vector<std::array<double, 3>> geometric;
   if (layout.hasNormals()) geometric = angleWeightedNormals(pos, tris);
   codePredictedRange(
-      io, st, layout, 0, n, tris, [&](u32 v) { return vf.of(v); }, [&](u32 v) { return geometric[v]; },
+      io, layout, 0, n, tris, [&](u32 v) { return vf.of(v); }, [&](u32 v) { return geometric[v]; },
       [&](u32 v) { return known && (*known)[v] != 0; }, truth, normals, colors);
 }
 

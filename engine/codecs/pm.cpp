@@ -265,9 +265,8 @@ class LevelAttributes {
       for (uint32_t v = uint32_t(shows_.size()); v < n; ++v) shows_.push_back(shows_[st.parent[v]]);
       return;
     }
-    hierarchy::PredictedAttributeState state(layout_);
     hierarchy::codePredictedRange(
-        io, state, layout_, base_, n, st.faces, [&](uint32_t v) { return std::span<const uint32_t>(st.vf[v]); },
+        io, layout_, base_, n, st.faces, [&](uint32_t v) { return std::span<const uint32_t>(st.vf[v]); },
         [&](uint32_t v) { return hierarchy::angleWeightedNormalAt(st.pos, st.faces, st.vf[v], v); },
         [](uint32_t) { return false; }, truth, st.normals, st.colors);
     shows_.resize(n);
