@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets (clang, ASan+UBSan, build-fuzz/) and runs each: first a replay of its whole corpus
-# (tests/fuzz/corpus/<target>/), then SECONDS of fuzzing from that corpus.
+# (tests/fuzz/corpus/<target>/), then SECONDS of fuzzing from that corpus. The targets run side by side, one per
+# core.
 #
 #   bash scripts/fuzz.sh [SECONDS]   seconds per target: the argument, else $SCANPRESS_FUZZ_SECONDS, else 60;
 #                                    0 only replays
@@ -29,11 +30,10 @@ build_targets=()
 for t in $targets; do build_targets+=("fuzz_$t"); done
 cmake --build "$dir" -j "$(nproc)" --target "${build_targets[@]}"
 
-status=0
-failed=()
 mkdir -p "$dir/logs"
+rm -f "$dir/logs/failed"
 # Runs a fuzzer with its output in build-fuzz/logs/ (libFuzzer's progress lines and dictionary run to thousands of
-# lines); prints the last lines, and keeps the log's name when it fails.
+# lines); prints the last lines, and lists the log in build-fuzz/logs/failed when it fails.
 run_logged() {
   local t=$1 phase=$2 log="$dir/logs/$1.$2.log"
   shift 2
@@ -41,16 +41,17 @@ run_logged() {
     grep -E '^(Done|stat::)' "$log" || true
   else
     tail -n 30 "$log"
-    failed+=("$log")
+    echo "$log" >>"$dir/logs/failed"
     return 1
   fi
 }
-for t in $targets; do
-  corpus=tests/fuzz/corpus/$t
+# One target: the replay of its corpus, then the fuzzing.
+run_target() {
+  local t=$1 corpus=tests/fuzz/corpus/$1 status=0
   mkdir -p "$dir/corpus/$t" "$dir/crashers/$t"
   # -malloc_limit_mb: no single allocation over 256 MiB (issue 18: no container under 1 MB may need more).
-  flags=(-rss_limit_mb=2048 -malloc_limit_mb=256 -timeout=10 -artifact_prefix="$dir/crashers/$t/" -print_final_stats=1
-    -seed="${SCANPRESS_FUZZ_SEED:-1}")
+  local flags=(-rss_limit_mb=2048 -malloc_limit_mb=256 -timeout=10 -artifact_prefix="$dir/crashers/$t/"
+    -print_final_stats=1 -seed="${SCANPRESS_FUZZ_SEED:-1}")
   echo "== fuzz_$t: replaying $(find "$corpus" -type f | wc -l) corpus files"
   run_logged "$t" replay "$dir/bin/fuzz_$t" "${flags[@]}" -runs=0 "$corpus" || status=1
   if [ "$seconds" -gt 0 ]; then
@@ -58,7 +59,28 @@ for t in $targets; do
     run_logged "$t" fuzz "$dir/bin/fuzz_$t" "${flags[@]}" -max_total_time="$seconds" "$dir/corpus/$t" "$corpus" ||
       status=1
   fi
+  return "$status"
+}
+# The targets run side by side, one per core (each fuzzer is one process on one core): the same inputs per target
+# as one after the other (the seed is fixed), in less wall time. Each one's output is printed whole when it ends.
+status=0
+running=0
+for t in $targets; do
+  if [ "$running" -ge "$(nproc)" ]; then
+    wait -n || status=1
+    running=$((running - 1))
+  fi
+  (run_target "$t" >"$dir/logs/$t.out" 2>&1 && code=0 || code=$?
+    cat "$dir/logs/$t.out"
+    exit "$code") &
+  running=$((running + 1))
 done
+while [ "$running" -gt 0 ]; do
+  wait -n || status=1
+  running=$((running - 1))
+done
+failed=()
+if [ -f "$dir/logs/failed" ]; then mapfile -t failed <"$dir/logs/failed"; fi
 if [ "$status" != 0 ]; then
   # Repeated at the end, where a CI log's tail shows it: which target failed, the report, the input.
   echo "fuzz.sh: a target failed; its input is in $dir/crashers/" >&2

@@ -30,6 +30,12 @@ inline int runScanpress(const std::string& args, std::string* out = nullptr, con
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+// runScanpress without extra environment: `run("encode a.ply a.spz", &out)`.
+inline int run(const std::string& args, std::string* out = nullptr) { return runScanpress(args, out); }
+
+// The Stanford bunny scan committed in the repo (data/).
+inline const std::string kBunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
+
 // The Khronos glTF validator (npm package gltf-validator, scripts/install-test-tools.sh) on `path`: its summary,
 // "errors=E warnings=W infos=I [first messages]", or "SKIP: why" when node or the validator is missing. `work`: a
 // directory for the script.

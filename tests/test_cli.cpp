@@ -18,10 +18,10 @@
 namespace scanpress {
 namespace {
 
-namespace fs = std::filesystem;
+using testing::kBunny;
+using testing::run;
 
-int run(const std::string& args, std::string* out = nullptr) { return testing::runScanpress(args, out); }
-std::string slurp(const std::string& path) { return testing::readText(path); }
+namespace fs = std::filesystem;
 
 // Files in `dir` whose names contain ".tmp-" (left-over temporaries).
 int temporaries(const std::string& dir) {
@@ -30,8 +30,6 @@ int temporaries(const std::string& dir) {
     n += e.path().filename().string().find(".tmp-") != std::string::npos;
   return n;
 }
-
-const std::string kBunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
 
 TEST(Cli, UsageErrorsExitOne) {
   std::string out;
@@ -459,23 +457,24 @@ TEST(Cli, StdinAndStdoutThroughPipes) {
   ASSERT_EQ(sh("cat '" + kBunny + "' | " + bin + " encode - - --format ply.zst --codec kdtree 2>'" +
                dir.file("err.txt") + "' > '" + dir.file("pipe.spz") + "'"),
             0);
-  EXPECT_EQ(slurp(dir.file("pipe.spz")), slurp(dir.file("file.spz")));
-  EXPECT_NE(slurp(dir.file("err.txt")).find("<stdin> -> <stdout>"), std::string::npos) << slurp(dir.file("err.txt"));
+  EXPECT_EQ(testing::readText(dir.file("pipe.spz")), testing::readText(dir.file("file.spz")));
+  EXPECT_NE(testing::readText(dir.file("err.txt")).find("<stdin> -> <stdout>"), std::string::npos)
+      << testing::readText(dir.file("err.txt"));
   ASSERT_EQ(sh(bin + " decode - - --format ply --quiet < '" + dir.file("pipe.spz") + "' > '" + dir.file("pipe.ply") +
                "'"),
             0);
-  EXPECT_EQ(slurp(dir.file("pipe.ply")), slurp(dir.file("file.ply")));
+  EXPECT_EQ(testing::readText(dir.file("pipe.ply")), testing::readText(dir.file("file.ply")));
   // The report on stdout, the container to a file.
   ASSERT_EQ(sh(bin + " encode '" + kBunny + "' '" + dir.file("r.spz") + "' --report - > '" + dir.file("r.json") +
                "' 2>/dev/null"),
             0);
-  EXPECT_EQ(nlohmann::json::parse(slurp(dir.file("r.json")))["faces"], 69451);
+  EXPECT_EQ(nlohmann::json::parse(testing::readText(dir.file("r.json")))["faces"], 69451);
   // Failures: a clear message naming <stdin>, exit 2, nothing on stdout, nothing left in the temporary directory.
   EXPECT_EQ(sh("printf garbage | " + bin + " encode - - --format ply > '" + dir.file("bad.spz") + "' 2>'" +
                dir.file("err.txt") + "'"),
             2);
-  EXPECT_NE(slurp(dir.file("err.txt")).find("<stdin>:1: not a PLY file"), std::string::npos)
-      << slurp(dir.file("err.txt"));
+  EXPECT_NE(testing::readText(dir.file("err.txt")).find("<stdin>:1: not a PLY file"), std::string::npos)
+      << testing::readText(dir.file("err.txt"));
   EXPECT_EQ(fs::file_size(dir.file("bad.spz")), 0u);
   EXPECT_EQ(sh("printf garbage | " + bin + " decode - '" + dir.file("x.ply") + "' 2>/dev/null"), 2);
   EXPECT_TRUE(fs::is_empty(dir.file("tmp")));
@@ -524,7 +523,7 @@ TEST(Cli, DecodeToEveryFormat) {
     SCOPED_TRACE(name);
     ASSERT_EQ(run("decode '" + spz + "' '" + dir.file(name) + "' --quiet", &out), 0) << out;
     // The document: from the JSON chunk of the .glb, or the .gltf itself.
-    std::string text = slurp(dir.file(name));
+    std::string text = testing::readText(dir.file(name));
     if (text.compare(0, 4, "glTF") == 0) {
       uint32_t len = 0;
       std::memcpy(&len, text.data() + 12, 4);

@@ -17,11 +17,9 @@
 namespace scanpress {
 namespace {
 
+using testing::run;
+
 namespace fs = std::filesystem;
-
-int run(const std::string& args, std::string* out = nullptr) { return testing::runScanpress(args, out); }
-
-std::string slurp(const std::string& path) { return testing::readText(path); }
 
 struct BadConfig {
   const char* name;
@@ -123,8 +121,8 @@ TEST(JobConfig, EveryExampleParsesAndTheReferenceListsEveryKey) {
     ++parsed;
   }
   EXPECT_GE(parsed, 4u);
-  const std::string ref_md = slurp(std::string(SCANPRESS_CONFIGS) + "/REFERENCE.md");
-  const auto ref_json = nlohmann::json::parse(slurp(std::string(SCANPRESS_CONFIGS) + "/reference.json"));
+  const std::string ref_md = testing::readText(std::string(SCANPRESS_CONFIGS) + "/REFERENCE.md");
+  const auto ref_json = nlohmann::json::parse(testing::readText(std::string(SCANPRESS_CONFIGS) + "/reference.json"));
   for (const auto& key : knownConfigKeys()) {
     EXPECT_NE(ref_md.find("`" + key + "`"), std::string::npos) << key << " missing from REFERENCE.md";
     EXPECT_TRUE(ref_json.contains(nlohmann::json::json_pointer(key))) << key << " missing from reference.json";
@@ -210,7 +208,7 @@ TEST(Batch, BadFileIsReportedOthersCompleteResumeSkipsForceRedoes) {
   writeJob(16);
   std::string out;
   EXPECT_EQ(run("run '" + job + "' --quiet", &out), 2) << out;
-  auto summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  auto summary = nlohmann::json::parse(testing::readText(dir.file("out/summary.json")));
   ASSERT_EQ(summary["files"].size(), 3u);
   std::map<std::string, std::string> status;
   for (const auto& f : summary["files"]) status[fs::path(f["input"].get<std::string>()).filename()] = f["status"];
@@ -236,7 +234,7 @@ TEST(Batch, BadFileIsReportedOthersCompleteResumeSkipsForceRedoes) {
 
   // Resume: complete outputs with the same settings are skipped.
   EXPECT_EQ(run("run '" + job + "' --quiet", &out), 2);
-  summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  summary = nlohmann::json::parse(testing::readText(dir.file("out/summary.json")));
   for (const auto& f : summary["files"]) {
     if (fs::path(f["input"].get<std::string>()).filename() != "broken.ply") {
       EXPECT_EQ(f["status"], "skipped");
@@ -253,7 +251,7 @@ TEST(Batch, BadFileIsReportedOthersCompleteResumeSkipsForceRedoes) {
   // A truncated container is not complete: it is redone.
   fs::resize_file(dir.file("out/octa.spz"), 40);
   EXPECT_EQ(run("run '" + job + "' --quiet", &out), 2);
-  summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  summary = nlohmann::json::parse(testing::readText(dir.file("out/summary.json")));
   for (const auto& f : summary["files"]) {
     if (fs::path(f["input"].get<std::string>()).filename() == "octa.obj") {
       EXPECT_EQ(f["status"], "ok");
@@ -263,10 +261,10 @@ TEST(Batch, BadFileIsReportedOthersCompleteResumeSkipsForceRedoes) {
   // Other settings: redone. --force: redone.
   writeJob(12);
   EXPECT_EQ(run("run '" + job + "' --quiet", &out), 2);
-  summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  summary = nlohmann::json::parse(testing::readText(dir.file("out/summary.json")));
   EXPECT_EQ(summary["totals"]["ok"], 2);
   EXPECT_EQ(run("run '" + job + "' --quiet --force", &out), 2);
-  summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  summary = nlohmann::json::parse(testing::readText(dir.file("out/summary.json")));
   EXPECT_EQ(summary["totals"]["ok"], 2);
   EXPECT_EQ(summary["totals"]["skipped"], 0);
   for (const auto& e : fs::directory_iterator(dir.file("out"))) {
@@ -310,7 +308,7 @@ TEST(Batch, SubfoldersMirrorInputsAndGlobsSpanDirectories) {
                         "o1/scan_001/mesh.json", "o1/deep/x/scan_003/mesh.json"})
     EXPECT_TRUE(fs::is_regular_file(dir.file(f))) << f;
   EXPECT_FALSE(fs::exists(dir.file("o1/.hidden"))) << "wildcards do not match hidden names";
-  EXPECT_EQ(nlohmann::json::parse(slurp(dir.file("o1/summary.json")))["files"].size(), 3u);
+  EXPECT_EQ(nlohmann::json::parse(testing::readText(dir.file("o1/summary.json")))["files"].size(), 3u);
   ASSERT_EQ(runWith("[\"archive/scan_*/mesh.obj\"]", "", "o2"), 0) << out;
   EXPECT_TRUE(fs::is_regular_file(dir.file("o2/scan_002/mesh.spz")));
   EXPECT_FALSE(fs::exists(dir.file("o2/deep")));
@@ -366,11 +364,11 @@ TEST(Batch, ResultsPeopleRead) {
     EXPECT_EQ(summary["totals"]["input_bytes"], total_in);
     EXPECT_GT(summary["totals"]["worst_error_max_relative"].get<double>(), 0);
   };
-  const auto first = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  const auto first = nlohmann::json::parse(testing::readText(dir.file("out/summary.json")));
   check(first);
   ASSERT_EQ(run("run '" + job + "'", &out), 0) << out;
   EXPECT_NE(out.find("2 files: 0 ok, 2 skipped, 0 failed; "), std::string::npos) << out;
-  const auto resumed = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  const auto resumed = nlohmann::json::parse(testing::readText(dir.file("out/summary.json")));
   check(resumed);
   for (size_t i = 0; i < 2; ++i)
     EXPECT_EQ(resumed["files"][i]["error_rms_relative"], first["files"][i]["error_rms_relative"]);
@@ -438,15 +436,15 @@ TEST(Shards, ArrayTasksAndMergeEqualOneProcess) {
   ASSERT_EQ(run("run '" + split + "' --quiet --shard 2/3", &out), 0) << out;
   ASSERT_EQ(run("run '" + split + "' --merge", &out), 0) << out;
   EXPECT_NE(out.find("merged 6 files"), std::string::npos) << out;
-  const auto a = nlohmann::json::parse(slurp(dir.file("whole/summary.json")));
-  const auto b = nlohmann::json::parse(slurp(dir.file("split/summary.json")));
+  const auto a = nlohmann::json::parse(testing::readText(dir.file("whole/summary.json")));
+  const auto b = nlohmann::json::parse(testing::readText(dir.file("split/summary.json")));
   ASSERT_EQ(a["files"].size(), 6u);
   ASSERT_EQ(b["files"].size(), 6u);
   for (size_t i = 0; i < 6; ++i) {
     EXPECT_EQ(a["files"][i]["input"], b["files"][i]["input"]);
     EXPECT_EQ(a["files"][i]["bytes"], b["files"][i]["bytes"]);
     const std::string name = fs::path(a["files"][i]["output"].get<std::string>()).filename();
-    EXPECT_EQ(slurp(dir.file("whole/" + name)), slurp(dir.file("split/" + name))) << name;
+    EXPECT_EQ(testing::readText(dir.file("whole/" + name)), testing::readText(dir.file("split/" + name))) << name;
   }
   EXPECT_EQ(a["totals"]["bytes"], b["totals"]["bytes"]);
   EXPECT_EQ(b["shards"], 3);
@@ -499,7 +497,7 @@ TEST(Batch, ExceptionInOneInputFailsOnlyThatInput) {
     }
   }
   EXPECT_EQ(batch->exitCode(), 4);
-  const auto summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  const auto summary = nlohmann::json::parse(testing::readText(dir.file("out/summary.json")));
   EXPECT_EQ(summary["files"].size(), 3u);
 }
 
@@ -518,7 +516,7 @@ TEST(Batch, ReplacingAnotherJobsSummaryIsWarned) {
   EXPECT_EQ(out.find("replacing the summary"), std::string::npos) << out;
   ASSERT_EQ(run("run '" + second + "' --quiet", &out), 0) << out;
   EXPECT_NE(out.find("replacing the summary of another job (" + first + ")"), std::string::npos) << out;
-  EXPECT_EQ(nlohmann::json::parse(slurp(dir.file("out/summary.json")))["job"], second);
+  EXPECT_EQ(nlohmann::json::parse(testing::readText(dir.file("out/summary.json")))["job"], second);
 }
 
 TEST(Batch, StrictFailsInputsThatWouldDropData) {
@@ -536,12 +534,12 @@ TEST(Batch, StrictFailsInputsThatWouldDropData) {
   EXPECT_EQ(run("run '" + job + "'", &out), 0) << out;
   EXPECT_NE(out.find("scanpress: warning: " + dir.file("scans/tex.obj") + ": dropped obj vt x 1"), std::string::npos)
       << out;
-  auto report = nlohmann::json::parse(slurp(dir.file("out/tex.report.json")));
+  auto report = nlohmann::json::parse(testing::readText(dir.file("out/tex.report.json")));
   ASSERT_EQ(report["dropped"].size(), 1u);
 
   writeJob(true);
   EXPECT_EQ(run("run '" + job + "' --quiet", &out), 2) << out;
-  const auto summary = nlohmann::json::parse(slurp(dir.file("out/summary.json")));
+  const auto summary = nlohmann::json::parse(testing::readText(dir.file("out/summary.json")));
   for (const auto& f : summary["files"]) {
     const std::string name = fs::path(f["input"].get<std::string>()).filename();
     if (name == "tex.obj") {

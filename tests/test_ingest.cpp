@@ -24,9 +24,8 @@
 namespace scanpress {
 namespace {
 
-const std::string kBunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
-
-int run(const std::string& args, std::string* out = nullptr) { return testing::runScanpress(args, out); }
+using testing::kBunny;
+using testing::run;
 
 Mesh bunny() {
   auto m = readMeshFile(kBunny);

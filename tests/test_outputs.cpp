@@ -30,11 +30,10 @@
 namespace scanpress {
 namespace {
 
+using testing::kBunny;
+using testing::run;
+
 namespace fs = std::filesystem;
-
-int run(const std::string& args, std::string* out = nullptr) { return testing::runScanpress(args, out); }
-
-const std::string kBunny = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
 
 std::string slurp(const std::string& path) {
   std::ifstream f(path, std::ios::binary);

@@ -18,18 +18,13 @@
 namespace scanpress {
 namespace {
 
+using testing::quantized;
+using testing::rawMesh;
+
 using testing::PosTriangle;
 using testing::triangleMultiset;
 
 const CodecInfo& pm() { return *findCodec(CodecId::kPm); }
-
-QuantizedMesh quantized(const Mesh& m, int bits) {
-  auto grid = makeGrid(boundingBox(m), bits);
-  EXPECT_TRUE(grid.isOk());
-  auto q = quantizeMesh(m, *grid, AttributeLayout{}, nullptr);
-  EXPECT_TRUE(q.isOk());
-  return *q;
-}
 
 // The tile as pm's last level keeps it: triangles over positions, without those repeating a position.
 std::vector<PosTriangle> weldedTriangles(const QuantizedMesh& m) {
@@ -167,13 +162,6 @@ void expectLevelsReplay(const TileContext& ctx, const QuantizedMesh& tile, std::
   EXPECT_EQ(got.faces, enc.tile.decoded.faces);
   EXPECT_EQ(got.lo, enc.tile.decoded.lo);
   EXPECT_EQ(got.hi, enc.tile.decoded.hi);
-}
-
-QuantizedMesh rawMesh(std::vector<Vec3u> p, std::vector<Triangle> t) {
-  QuantizedMesh m;
-  m.positions = std::move(p);
-  m.triangles = std::move(t);
-  return m;
 }
 
 TEST(Pm, SphereEveryLevelReplaysTheCollapses) {

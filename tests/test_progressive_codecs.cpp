@@ -14,18 +14,13 @@
 namespace scanpress {
 namespace {
 
+using testing::quantized;
+using testing::rawMesh;
+
 class Progressive : public ::testing::TestWithParam<CodecId> {
  protected:
   const CodecInfo& codec() const { return *findCodec(GetParam()); }
 };
-
-QuantizedMesh quantized(const Mesh& m, int bits, const AttributeLayout& layout = {}) {
-  auto grid = makeGrid(boundingBox(m), bits);
-  EXPECT_TRUE(grid.isOk());
-  auto q = quantizeMesh(m, *grid, layout, nullptr);
-  EXPECT_TRUE(q.isOk());
-  return *q;
-}
 
 EncodedTile encode(const CodecInfo& codec, const TileContext& ctx, const QuantizedMesh& q) {
   auto e = encodeMesh(codec, ctx, q);
@@ -68,13 +63,6 @@ void expectRoundTrip(const CodecInfo& codec, const TileContext& ctx, const Quant
     return p;
   };
   EXPECT_EQ(positions(*d), positions(q));
-}
-
-QuantizedMesh rawMesh(std::vector<Vec3u> p, std::vector<Triangle> t) {
-  QuantizedMesh m;
-  m.positions = std::move(p);
-  m.triangles = std::move(t);
-  return m;
 }
 
 TEST_P(Progressive, ClosedManifolds) {

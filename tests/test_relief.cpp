@@ -19,10 +19,7 @@
 namespace scanpress {
 namespace {
 
-QuantizedMesh quantized(const Mesh& m, int bits) {
-  const Grid grid = *makeGrid(boundingBox(m), bits);
-  return *quantizeMesh(m, grid, {}, nullptr);
-}
+using testing::quantized;
 
 Vec3d normalOf(const std::vector<Vec3d>& p, const Triangle& t) {
   return vcross(vsub(p[t[1]], p[t[0]]), vsub(p[t[2]], p[t[0]]));

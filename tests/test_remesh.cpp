@@ -25,10 +25,7 @@
 namespace scanpress {
 namespace {
 
-QuantizedMesh quantized(const Mesh& m, int bits) {
-  const Grid grid = *makeGrid(boundingBox(m), bits);
-  return *quantizeMesh(m, grid, {}, nullptr);
-}
+using testing::quantized;
 
 // Directed edge counts: each directed edge at most once, and with `closed` its reverse present too.
 struct EdgeCheck {

@@ -16,10 +16,31 @@
 #include <string>
 #include <vector>
 
+#include <gtest/gtest.h>
+
 #include "engine/mesh.h"
 #include "engine/octahedral.h"
+#include "engine/quantize.h"
 
 namespace scanpress::testing {
+
+// `m` on a grid of `bits` over its bounding box, with `layout`'s attributes (a failed quantization fails the test).
+inline QuantizedMesh quantized(const Mesh& m, int bits, const AttributeLayout& layout = {}) {
+  auto grid = makeGrid(boundingBox(m), bits);
+  EXPECT_TRUE(grid.isOk());
+  if (!grid.isOk()) return {};
+  auto q = quantizeMesh(m, *grid, layout, nullptr);
+  EXPECT_TRUE(q.isOk());
+  return q.isOk() ? *std::move(q) : QuantizedMesh{};
+}
+
+// A mesh given as grid positions and triangles, as they are (nothing checked).
+inline QuantizedMesh rawMesh(std::vector<Vec3u> positions, std::vector<Triangle> triangles) {
+  QuantizedMesh m;
+  m.positions = std::move(positions);
+  m.triangles = std::move(triangles);
+  return m;
+}
 
 // A triangle over positions, rotated so that its smallest corner comes first (orientation kept).
 using PosTriangle = std::array<Vec3u, 3>;
