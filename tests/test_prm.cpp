@@ -229,6 +229,32 @@ TEST(Prm, SphereAndTorusRemeshNearTheirSurfaces) {
   }
 }
 
+// A remeshed sphere with the scan's normals and colors: prm decodes the remesh stage's mesh with its interpolated
+// attributes, exactly.
+TEST(Prm, RemeshedAttributesDecodeExactly) {
+  Mesh sphere = icosphere(4);
+  for (const auto& p : sphere.positions) {
+    sphere.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
+    sphere.colors.push_back({uint8_t(128 + 100 * p[0]), uint8_t(128 + 100 * p[1]), uint8_t(128 + 100 * p[2]), 255});
+  }
+  sphere.color_channels = 3;
+  const AttributeLayout layout{10, 3};
+  const Grid grid = *makeGrid(boundingBox(sphere), 14);
+  const QuantizedMesh q = *quantizeMesh(sphere, grid, layout, nullptr);
+  const TileContext ctx{14, layout};
+  CodecOptions options;
+  options.prm.grid = 0.03;
+  auto enc = prm().encode(ctx, TileView{q, {}}, options);
+  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+  auto d = prm().decode(ctx, prm().version, enc->payload, limitsOf(enc->decoded));
+  ASSERT_TRUE(d.isOk()) << d.status().toString();
+  auto staged = remeshTile(ctx, TileView{q, {}}, 0.2, prmSpacing(options.prm, 14));
+  ASSERT_TRUE(staged.isOk());
+  ASSERT_FALSE(testing::triangleMultiset(staged->mesh) == testing::triangleMultiset(q)) << "not remeshed";
+  EXPECT_TRUE(testing::cornerMultiset(*d, layout.normal_bits) ==
+              testing::cornerMultiset(staged->mesh, layout.normal_bits));
+}
+
 TEST(Prm, LockedBorderIsKept) {
   const TileContext ctx{14, {}};
   const Mesh sphere = icosphere(4);
@@ -310,12 +336,16 @@ TEST(Prm, KnobFloorTooFineLatticesAndTheSmallerCodingKeepTheTile) {
 }
 
 TEST(Prm, HostilePayloadsFailCleanly) {
-  const TileContext ctx{12, {}};
-  // A payload with patches, irregular faces and a boundary.
+  const TileContext ctx{12, {10, 3}};
+  // A payload with patches, irregular faces and a boundary, with normals and colors.
   QuantizedMesh q = latticeField(4, 12, 16, 16, [](int i, int j) { return 900 + 2.0 * i * j; });
   q.triangles.erase(q.triangles.begin() + 100, q.triangles.begin() + 110);
   q.positions.push_back({2000, 2000, 3000});
   q.triangles.push_back({0, 1, uint32_t(q.positions.size() - 1)});
+  for (size_t v = 0; v < q.positions.size(); ++v) {
+    q.normals.push_back({uint16_t(500 + v % 9), uint16_t(480 + v / 40)});
+    q.colors.push_back({uint8_t(v), uint8_t(100 + v % 7), uint8_t(v / 3), 255});
+  }
   CodecOptions options;
   options.prm.spacing = 0;  // as it is: a patch of the lattice of spacing 12, coded with it
   std::vector<uint8_t> payload;
@@ -328,7 +358,7 @@ TEST(Prm, HostilePayloadsFailCleanly) {
   const DecodeLimits lim = limitsOf(summary);
   auto good = prm().decode(ctx, 1, payload, lim);
   ASSERT_TRUE(good.isOk()) << good.status().toString();
-  EXPECT_TRUE(testing::triangleMultiset(*good) == testing::triangleMultiset(q));
+  EXPECT_TRUE(testing::cornerMultiset(*good, 10) == testing::cornerMultiset(q, 10));
   // Every truncation fails.
   for (size_t n = 0; n < payload.size(); ++n)
     EXPECT_FALSE(prm().decode(ctx, 1, std::span(payload).first(n), lim).isOk()) << n;
