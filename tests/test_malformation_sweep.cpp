@@ -82,8 +82,8 @@ constexpr uint64_t kMaxPeakBytes = uint64_t{256} << 20;
 #if defined(SCANPRESS_SWEEP_ASAN)
 constexpr bool kAsan = true;
 constexpr int kPayloadEdits = 2500;
-constexpr uint64_t kProgressiveRepairedCap = 150;
-constexpr uint64_t kSingleRateRepairedCap = 1500;
+constexpr uint64_t kProgressiveRepairedCap = 100;
+constexpr uint64_t kSingleRateRepairedCap = 800;
 constexpr uint64_t kMinMutations = 50'000;
 #else
 constexpr bool kAsan = false;
