@@ -61,8 +61,9 @@ run_target() {
   fi
   return "$status"
 }
-# The targets run side by side, one per core (each fuzzer is one process on one core): the same inputs per target
-# as one after the other (the seed is fixed), in less wall time. Each one's output is printed whole when it ends.
+# The targets run side by side, one per core (each fuzzer is one process on one core): the same seed and seconds
+# per target as one after the other, in less wall time (a target may run somewhat fewer inputs in its seconds
+# beside another). Each one's output is printed whole when it ends.
 status=0
 running=0
 for t in $targets; do

@@ -183,6 +183,20 @@ TEST(Prm, PatchesThatShareAProjectionAndUglyMeshesRoundTrip) {
   expectLatticeRoundTrip(attr, colored, 20);
 }
 
+// `q` coded by prm with `options` and decoded (`decoded`), and the remesh stage's mesh of it at prm's spacing
+// (`staged`, tau 0.2).
+void prmAndRemeshStage(const TileContext& ctx, const QuantizedMesh& q, const CodecOptions& options,
+                       QuantizedMesh& decoded, QuantizedMesh& staged) {
+  auto enc = prm().encode(ctx, TileView{q, {}}, options);
+  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+  auto d = prm().decode(ctx, prm().version, enc->payload, limitsOf(enc->decoded));
+  ASSERT_TRUE(d.isOk()) << d.status().toString();
+  auto remeshed = remeshTile(ctx, TileView{q, {}}, 0.2, prmSpacing(options.prm, ctx.bits));
+  ASSERT_TRUE(remeshed.isOk()) << remeshed.status().toString();
+  decoded = *std::move(d);
+  staged = std::move(remeshed->mesh);
+}
+
 TEST(Prm, SphereAndTorusRemeshNearTheirSurfaces) {
   struct Shape {
     const char* name;
@@ -202,21 +216,17 @@ TEST(Prm, SphereAndTorusRemeshNearTheirSurfaces) {
     const TileContext ctx{14, {}};
     CodecOptions options;
     options.prm.grid = 0.025;  // 410 grid cells: about the size of the input's triangles
-    auto enc = prm().encode(ctx, TileView{q, {}}, options);
-    ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-    auto d = prm().decode(ctx, prm().version, enc->payload, limitsOf(enc->decoded));
-    ASSERT_TRUE(d.isOk()) << d.status().toString();
+    QuantizedMesh d, staged;
+    ASSERT_NO_FATAL_FAILURE(prmAndRemeshStage(ctx, q, options, d, staged));
     // The decoded mesh is the remesh stage's output at that spacing, exactly.
-    auto staged = remeshTile(ctx, TileView{q, {}}, 0.2, prmSpacing(options.prm, 14));
-    ASSERT_TRUE(staged.isOk());
-    EXPECT_TRUE(testing::triangleMultiset(*d) == testing::triangleMultiset(staged->mesh));
+    EXPECT_TRUE(testing::triangleMultiset(d) == testing::triangleMultiset(staged));
     // Vertices on the surface within the lattice's sagitta plus rounding: a chord of length g (the lattice
     // spacing, slanted up to 1 / tau = 5 times longer in space) is within (5 g)^2 / (8 R) of a surface of
     // curvature radius R; the smallest here is the torus tube's 0.35.
     const double g = prmSpacing(options.prm, 14) * grid.cell, r_min = std::string(shape.name) == "torus" ? 0.35 : 1.0;
     const double bound = (5 * g) * (5 * g) / (8 * r_min) + 2 * grid.cell;
     double worst = 0;
-    for (const Vec3u& p : d->positions) worst = std::max(worst, shape.distance(grid.dequantize(p)));
+    for (const Vec3u& p : d.positions) worst = std::max(worst, shape.distance(grid.dequantize(p)));
     EXPECT_LT(worst, bound);
     // Most of the remeshed faces are coded as regular.
     std::vector<uint8_t> bytes;
@@ -224,7 +234,7 @@ TEST(Prm, SphereAndTorusRemeshNearTheirSurfaces) {
     ASSERT_TRUE(prmEncodeWithStats(ctx, TileView{q, {}}, options, bytes, &s, nullptr).isOk());
     EXPECT_GT(double(s.regular_faces), 0.6 * double(s.triangles));
     // The pictures' classification of the decoded faces is the coder's.
-    const auto relief = latticeFaceReliefs(*d, prmSpacing(options.prm, 14));
+    const auto relief = latticeFaceReliefs(d, prmSpacing(options.prm, 14));
     EXPECT_EQ(uint64_t(std::count_if(relief.begin(), relief.end(), [](int8_t r) { return r >= 0; })), s.regular_faces);
   }
 }
@@ -244,15 +254,12 @@ TEST(Prm, RemeshedAttributesDecodeExactly) {
   const TileContext ctx{14, layout};
   CodecOptions options;
   options.prm.grid = 0.03;
-  auto enc = prm().encode(ctx, TileView{q, {}}, options);
-  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-  auto d = prm().decode(ctx, prm().version, enc->payload, limitsOf(enc->decoded));
-  ASSERT_TRUE(d.isOk()) << d.status().toString();
-  auto staged = remeshTile(ctx, TileView{q, {}}, 0.2, prmSpacing(options.prm, 14));
-  ASSERT_TRUE(staged.isOk());
-  ASSERT_FALSE(testing::triangleMultiset(staged->mesh) == testing::triangleMultiset(q)) << "not remeshed";
-  EXPECT_TRUE(testing::cornerMultiset(*d, layout.normal_bits) ==
-              testing::cornerMultiset(staged->mesh, layout.normal_bits));
+  QuantizedMesh d, staged;
+  ASSERT_NO_FATAL_FAILURE(prmAndRemeshStage(ctx, q, options, d, staged));
+  ASSERT_FALSE(testing::triangleMultiset(staged) == testing::triangleMultiset(q)) << "not remeshed";
+  ASSERT_EQ(staged.normals.size(), staged.positions.size());
+  ASSERT_EQ(staged.colors.size(), staged.positions.size());
+  EXPECT_TRUE(testing::cornerMultiset(d, layout.normal_bits) == testing::cornerMultiset(staged, layout.normal_bits));
 }
 
 TEST(Prm, LockedBorderIsKept) {
