@@ -319,14 +319,8 @@ TEST_P(AttributeRoundTrip, CorruptedAttributesFailCleanly) {
 // On a smooth sphere with its own normals and colors the predictions hold: well below the raw 48 bits per vertex
 // (normals at 12 bits, RGB); a broken predictor (a wrong sign, a wrong vertex) costs about the raw bits.
 TEST_P(AttributeRoundTrip, PredictionsPredict) {
-  const Mesh sphere = icosphere(5);
-  const Grid grid = *makeGrid(boundingBox(sphere), 14);
-  Mesh with = sphere;
-  for (const auto& p : sphere.positions) {
-    with.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
-    with.colors.push_back({uint8_t(128 + 100 * p[0]), uint8_t(128 + 100 * p[1]), uint8_t(128 + 100 * p[2]), 255});
-  }
-  with.color_channels = 3;
+  const Mesh with = testing::coloredIcosphere(5);
+  const Grid grid = *makeGrid(boundingBox(with), 14);
   const AttributeLayout layout{12, 3};
   const QuantizedMesh q = *quantizeMesh(with, grid, layout, nullptr);
   QuantizedMesh bare = q;

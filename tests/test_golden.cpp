@@ -31,12 +31,7 @@ struct Golden {
 const Golden& golden() {
   static const Golden g = [] {
     Golden x;
-    Mesh sphere = icosphere(2);
-    for (const auto& p : sphere.positions) {
-      sphere.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
-      sphere.colors.push_back({uint8_t(128 + 100 * p[0]), uint8_t(128 + 100 * p[1]), uint8_t(128 + 100 * p[2]), 255});
-    }
-    sphere.color_channels = 3;
+    const Mesh sphere = testing::coloredIcosphere(2);
     x.grid = *makeGrid(boundingBox(sphere), 12);
     x.mesh = *quantizeMesh(sphere, x.grid, x.layout, nullptr);
     QuantizedMesh& m = x.mesh;

@@ -242,15 +242,8 @@ TEST(Prm, SphereAndTorusRemeshNearTheirSurfaces) {
 // A remeshed sphere with the scan's normals and colors: prm decodes the remesh stage's mesh with its interpolated
 // attributes, exactly.
 TEST(Prm, RemeshedAttributesDecodeExactly) {
-  Mesh sphere = icosphere(4);
-  for (const auto& p : sphere.positions) {
-    sphere.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
-    sphere.colors.push_back({uint8_t(128 + 100 * p[0]), uint8_t(128 + 100 * p[1]), uint8_t(128 + 100 * p[2]), 255});
-  }
-  sphere.color_channels = 3;
   const AttributeLayout layout{10, 3};
-  const Grid grid = *makeGrid(boundingBox(sphere), 14);
-  const QuantizedMesh q = *quantizeMesh(sphere, grid, layout, nullptr);
+  const QuantizedMesh q = testing::quantized(testing::coloredIcosphere(4), 14, layout);
   const TileContext ctx{14, layout};
   CodecOptions options;
   options.prm.grid = 0.03;

@@ -21,6 +21,7 @@
 #include "engine/mesh.h"
 #include "engine/octahedral.h"
 #include "engine/quantize.h"
+#include "engine/shapes.h"
 
 namespace scanpress::testing {
 
@@ -32,6 +33,18 @@ inline QuantizedMesh quantized(const Mesh& m, int bits, const AttributeLayout& l
   auto q = quantizeMesh(m, *grid, layout, nullptr);
   EXPECT_TRUE(q.isOk());
   return q.isOk() ? *std::move(q) : QuantizedMesh{};
+}
+
+// icosphere(levels) with the scan-like attributes the codec tests use: each vertex's normal is its position (the
+// sphere's outward normal), its color RGB (128 + 100 x, 128 + 100 y, 128 + 100 z).
+inline Mesh coloredIcosphere(int levels) {
+  Mesh sphere = icosphere(levels);
+  for (const auto& p : sphere.positions) {
+    sphere.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
+    sphere.colors.push_back({uint8_t(128 + 100 * p[0]), uint8_t(128 + 100 * p[1]), uint8_t(128 + 100 * p[2]), 255});
+  }
+  sphere.color_channels = 3;
+  return sphere;
 }
 
 // A mesh given as grid positions and triangles, as they are (nothing checked).
