@@ -697,8 +697,6 @@ ErrorKnob errorKnobOf(CodecId id) {
   return nullptr;
 }
 
-bool knownCodecName(const std::string& name) { return name == kAutoCodec || findCodec(name) != nullptr; }
-
 Result<EncodeResult> encodeFile(const EncodeSettings& s, ProgressListener* progress,
                                 std::shared_ptr<EmbreeDevice> device, const PipelineHooks* hooks) {
   if (s.subset_count == 1 || (s.subset_count && s.subset_index >= s.subset_count))

@@ -96,7 +96,7 @@ struct EncodeSettings {
 // RESULTS.md, "Error targets"). Without a target, auto is edgebreaker, the smallest lossless codec.
 inline constexpr const char* kAutoCodec = "auto";
 // Whether `name` is a codec or auto.
-bool knownCodecName(const std::string& name);
+inline bool knownCodecName(const std::string& name) { return name == kAutoCodec || findCodec(name) != nullptr; }
 
 // A lossy codec's error knob: sets how far the codec may depart from the tile, in grid cells (pm:
 // PmOptions::max_error). nullptr for a codec without one (every lossless codec).
