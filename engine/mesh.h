@@ -1,12 +1,13 @@
 // Mesh types shared by every layer.
 //
-// Mesh: what readers produce and writers consume (double positions, optional per-vertex normals and colors,
-// triangles). QuantizedMesh: a mesh on the scan's global integer grid, which is what codecs see. Vertex indices
+// Mesh: what readers produce and writers consume (double positions, optional per-vertex normals, colors and scalar
+// channels, triangles). QuantizedMesh: a mesh on the scan's global integer grid, which is what codecs see. Vertex indices
 // are 32-bit: a scan or tile has at most 2^32-1 vertices (readers enforce it).
 #pragma once
 
 #include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace scanpress {
@@ -18,6 +19,47 @@ using Rgba8 = std::array<uint8_t, 4>;
 using Triangle = std::array<uint32_t, 3>;
 using OctNormal = std::array<uint16_t, 2>;
 
+// The type of a per-vertex scalar channel: PLY's scalar types, kept exactly (a scanner's confidence, intensity or
+// quality comes back bit for bit).
+enum class ScalarType : uint8_t { kInt8 = 1, kUint8, kInt16, kUint16, kInt32, kUint32, kFloat32, kFloat64 };
+inline bool validScalarType(uint8_t t) { return t >= 1 && t <= 8; }
+inline int scalarTypeBytes(ScalarType t) {
+  switch (t) {
+    case ScalarType::kInt8:
+    case ScalarType::kUint8: return 1;
+    case ScalarType::kInt16:
+    case ScalarType::kUint16: return 2;
+    case ScalarType::kFloat64: return 8;
+    default: return 4;
+  }
+}
+// 32-bit words a value takes in ScalarValues: two for float64.
+inline int scalarTypeWords(ScalarType t) { return t == ScalarType::kFloat64 ? 2 : 1; }
+// PLY's names: char, uchar, short, ushort, int, uint, float, double.
+inline const char* scalarTypeName(ScalarType t) {
+  static constexpr const char* kNames[] = {"?", "char", "uchar", "short", "ushort", "int", "uint", "float", "double"};
+  return kNames[validScalarType(uint8_t(t)) ? uint8_t(t) : 0];
+}
+
+// A scalar channel's name: 1 to 255 printable ASCII bytes, no space (a PLY property name).
+inline bool validScalarName(const std::string& name) {
+  if (name.empty() || name.size() > 255) return false;
+  for (char c : name)
+    if (c <= ' ' || c > '~') return false;
+  return true;
+}
+
+// A per-vertex scalar channel: its name (the PLY property's, at most 255 bytes) and type.
+struct ScalarChannel {
+  std::string name;
+  ScalarType type = ScalarType::kFloat32;
+  bool operator==(const ScalarChannel&) const = default;
+};
+
+// The values of a mesh's scalar channels, vertex after vertex: each value's bit pattern, zero-extended to 32 bits
+// (float64: low word, then high word). `stride` words per vertex (the channels' scalarTypeWords).
+using ScalarValues = std::vector<uint32_t>;
+
 // Which per-vertex attributes a scan carries, and at what precision they are stored.
 struct AttributeLayout {
   uint8_t normal_bits = 0;     // 0: no normals; else octahedral bits per component (4..16)
@@ -25,8 +67,17 @@ struct AttributeLayout {
   // Levels per color channel: 2^color_bits (1..8). Below 8 the colors are snapped to those levels (quantize.h's
   // quantizeColor) and codecs that predict them code levels; the mesh keeps their 8-bit values.
   uint8_t color_bits = 8;
+  // Scalar channels, coded losslessly at their type (none: the container is version 1).
+  std::vector<ScalarChannel> scalars = {};
   bool hasNormals() const { return normal_bits != 0; }
   bool hasColors() const { return color_channels != 0; }
+  bool hasScalars() const { return !scalars.empty(); }
+  // 32-bit words of scalar values per vertex.
+  int scalarStride() const {
+    int w = 0;
+    for (const auto& c : scalars) w += scalarTypeWords(c.type);
+    return w;
+  }
   bool operator==(const AttributeLayout&) const = default;
 };
 
@@ -35,6 +86,8 @@ struct Mesh {
   std::vector<Vec3f> normals;  // empty, or one per vertex
   std::vector<Rgba8> colors;   // empty, or one per vertex (alpha 255 when the source has no alpha)
   uint8_t color_channels = 0;  // 3 or 4 when colors are present
+  std::vector<ScalarChannel> scalar_channels;
+  ScalarValues scalars;  // empty, or stride (scalar_channels' words) per vertex
   std::vector<Triangle> triangles;
 };
 
@@ -42,6 +95,7 @@ struct QuantizedMesh {
   std::vector<Vec3u> positions;
   std::vector<OctNormal> normals;  // empty, or one per vertex
   std::vector<Rgba8> colors;       // empty, or one per vertex
+  ScalarValues scalars;            // empty, or the layout's scalarStride() words per vertex
   std::vector<Triangle> triangles;
 };
 

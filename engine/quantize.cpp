@@ -72,6 +72,30 @@ Result<QuantizedMesh> quantizeMesh(const Mesh& mesh, const Grid& grid, const Att
     return makeError(ErrorCode::kInvalidArgument, "layout has colors but the mesh has " +
                                                       std::to_string(mesh.colors.size()) + " for " +
                                                       std::to_string(n) + " vertices");
+  // The layout's scalar channels, each found in the mesh's by name and type: its word offset there.
+  const size_t mesh_stride = [&] {
+    size_t w = 0;
+    for (const auto& c : mesh.scalar_channels) w += size_t(scalarTypeWords(c.type));
+    return w;
+  }();
+  if (mesh.scalars.size() != n * mesh_stride)
+    return makeError(ErrorCode::kInvalidArgument, "the mesh's scalar values do not match its vertices");
+  std::vector<std::pair<size_t, int>> picks;  // (offset in the mesh's row, words)
+  for (const ScalarChannel& want : layout.scalars) {
+    size_t offset = 0;
+    bool found = false;
+    for (const ScalarChannel& c : mesh.scalar_channels) {
+      if (c == want) {
+        picks.push_back({offset, scalarTypeWords(c.type)});
+        found = true;
+        break;
+      }
+      offset += size_t(scalarTypeWords(c.type));
+    }
+    if (!found)
+      return makeError(ErrorCode::kInvalidArgument, std::string("layout has scalar channel '") + want.name + "' (" +
+                                                        scalarTypeName(want.type) + "), the mesh has not");
+  }
   std::vector<Vec3u> q(n);
   for (size_t i = 0; i < n; ++i) q[i] = grid.quantize(mesh.positions[i]);
 
@@ -99,6 +123,8 @@ Result<QuantizedMesh> quantizeMesh(const Mesh& mesh, const Grid& grid, const Att
     out.positions.push_back(q[i]);
     if (layout.hasNormals()) out.normals.push_back(encodeOctahedral(mesh.normals[i], layout.normal_bits));
     if (layout.hasColors()) out.colors.push_back(quantizeColor(mesh.colors[i], layout));
+    for (const auto& [offset, words] : picks)
+      for (int w = 0; w < words; ++w) out.scalars.push_back(mesh.scalars[i * mesh_stride + offset + size_t(w)]);
   }
   for (Triangle& t : out.triangles)
     for (uint32_t& v : t) v = remap[v];
@@ -116,6 +142,8 @@ Mesh dequantizeMesh(const QuantizedMesh& mesh, const Grid& grid, const Attribute
     out.colors = mesh.colors;
     out.color_channels = layout.color_channels;
   }
+  out.scalar_channels = layout.scalars;
+  out.scalars = mesh.scalars;
   out.triangles = mesh.triangles;
   return out;
 }

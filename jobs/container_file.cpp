@@ -13,6 +13,13 @@ Result<ContainerFile> ContainerFile::open(const std::string& path) {
                                                 ", too short for a scanpress container (" +
                                                 std::to_string(kHeaderSize + kFooterSize) + " bytes at least)");
   SP_RETURN_IF_ERROR(cf.file_->read(0, kHeaderSize, buf));
+  SP_ASSIGN_OR_RETURN(const uint32_t header_size, headerSizeOf(buf, path));
+  if (header_size > kHeaderSize) {
+    if (header_size > size - kFooterSize)
+      return makeError(ErrorCode::kTruncated, path + ": header at byte 12: the header's " +
+                                                  std::to_string(header_size) + " bytes run past the file's end");
+    SP_RETURN_IF_ERROR(cf.file_->read(0, header_size, buf));
+  }
   SP_ASSIGN_OR_RETURN(cf.header_, parseHeader(buf, path));
   SP_RETURN_IF_ERROR(cf.file_->read(size - kFooterSize, kFooterSize, buf));
   Footer footer;

@@ -60,7 +60,7 @@ inline std::vector<SweepContainer> sweepContainers() {
   const Grid grid = makeGrid(boundingBox(m), 10).value();
   std::vector<SweepContainer> out;
   for (const CodecInfo& codec : allCodecs()) {
-    for (const AttributeLayout layout : {AttributeLayout{0, 0}, AttributeLayout{8, 4}}) {
+    for (const AttributeLayout& layout : {AttributeLayout{0, 0}, AttributeLayout{8, 4}}) {
       const QuantizedMesh q = quantizeMesh(m, grid, layout, nullptr).value();
       const std::vector<QuantizedMesh> tiles{q, everyNthTriangle(q, 3, 0), everyNthTriangle(q, 7, 2)};
       SweepContainer c;

@@ -379,7 +379,7 @@ void expectCoarseLevelsShowTheTilesOwnAttributes(const CodecInfo& codec, const A
 // inward: derived attributes, or a vertex showing another cell's point, fail.
 TEST_P(AttributeRoundTrip, CoarseLevelsShowTheTilesOwnAttributes) {
   if (!codec().progressive()) GTEST_SKIP() << codec().name << " is single-rate";
-  for (const AttributeLayout layout : {AttributeLayout{10, 4}, AttributeLayout{0, 3}, AttributeLayout{12, 0}})
+  for (const AttributeLayout& layout : {AttributeLayout{10, 4}, AttributeLayout{0, 3}, AttributeLayout{12, 0}})
     expectCoarseLevelsShowTheTilesOwnAttributes(codec(), layout);
 }
 

@@ -295,7 +295,7 @@ std::map<Vec3u, std::pair<OctNormal, Rgba8>> firstAttributes(const QuantizedMesh
 // first input vertex's at each position (lossless), or a kept input vertex's (lossy: no two vertices show the same
 // one).
 TEST(Pm, EveryLevelShowsTheTilesOwnAttributes) {
-  for (const AttributeLayout layout :
+  for (const AttributeLayout& layout :
        {AttributeLayout{10, 4}, AttributeLayout{12, 0}, AttributeLayout{0, 4}, AttributeLayout{6, 3, 5}}) {
     SCOPED_TRACE(::testing::Message() << int(layout.normal_bits) << " " << int(layout.color_channels) << " "
                                       << int(layout.color_bits));
@@ -385,7 +385,7 @@ TEST(Pm, Version2DerivesAttributes) {
 }
 
 TEST(Pm, EveryTruncationFailsCleanlyOrDecodesALevel) {
-  for (const AttributeLayout layout : {AttributeLayout{}, AttributeLayout{10, 4}}) {
+  for (const AttributeLayout& layout : {AttributeLayout{}, AttributeLayout{10, 4}}) {
     const TileContext ctx{12, layout};
     const QuantizedMesh sphere = attributedSphere(layout, 2);
     const Encoded enc = encodeTile(ctx, sphere, {});
@@ -408,7 +408,7 @@ TEST(Pm, EveryTruncationFailsCleanlyOrDecodesALevel) {
 }
 
 TEST(Pm, CorruptPayloadsFailCleanlyOrStayWithinLimits) {
-  for (const AttributeLayout layout : {AttributeLayout{}, AttributeLayout{10, 4}}) {
+  for (const AttributeLayout& layout : {AttributeLayout{}, AttributeLayout{10, 4}}) {
     const TileContext ctx{12, layout};
     const QuantizedMesh sphere = attributedSphere(layout, 3);
     const Encoded enc = encodeTile(ctx, sphere, {});

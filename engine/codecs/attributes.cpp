@@ -112,6 +112,9 @@ AttributeModels::AttributeModels(const AttributeLayout& layout) {
     normal_v.assign(kActivity * 5, SymbolModel(classes));
   }
   if (layout.hasColors()) color.assign(kActivity * 4 * 4, SymbolModel(9));  // |residual| <= 128
+  scalar.resize(layout.scalars.size());
+  for (size_t c = 0; c < layout.scalars.size(); ++c)
+    scalar[c].cls.assign(kActivity, SymbolModel(u32(scalarBits(layout.scalars[c].type)) + 1));
 }
 
 }  // namespace scanpress::hierarchy

@@ -68,6 +68,11 @@ struct AttributeModels {
   BitModel normal_sign[2], normal_top[2][17], flip[2];
   std::vector<SymbolModel> color;  // [activity][channel][min(class of green, 3)]
   BitModel color_sign[4], color_top[4][9];
+  struct Scalar {
+    std::vector<SymbolModel> cls;  // [activity]: the residual's bit length, 0..8 x bytes
+    BitModel sign, top[65];
+  };
+  std::vector<Scalar> scalar;  // per scalar channel
 };
 
 inline int activityBin(u32 sum, u32 count) {
@@ -184,6 +189,118 @@ inline Rgba8 colorOfLevels(const Rgba8& lv, const AttributeLayout& layout) {
   return out;
 }
 
+// Scalar channels, lossless at their type. A value is coded as its ordered integer: integers as they are (signed
+// ones sign-extended), floats as sign and magnitude of their bit pattern (-1 - magnitude when negative), so that
+// close values are close integers and every bit pattern (NaNs, -0) comes back. The residual from the prediction,
+// modulo 2^(8 x bytes), is coded as a class (its bit length; adaptive, context: the decoded neighbours' mean class),
+// a top bit below the leading one, raw bits and a sign.
+inline int scalarBits(ScalarType t) { return 8 * scalarTypeBytes(t); }
+
+inline int64_t scalarOrdered(ScalarType t, const uint32_t* w) {
+  switch (t) {
+    case ScalarType::kInt8: return int8_t(w[0]);
+    case ScalarType::kInt16: return int16_t(w[0]);
+    case ScalarType::kInt32: return int32_t(w[0]);
+    case ScalarType::kFloat32: return (w[0] >> 31) ? -1 - int64_t(w[0] & 0x7FFFFFFFu) : int64_t(w[0]);
+    case ScalarType::kFloat64: {
+      const uint64_t b = uint64_t(w[0]) | (uint64_t(w[1]) << 32);
+      return (b >> 63) ? -1 - int64_t(b & 0x7FFFFFFFFFFFFFFFull) : int64_t(b);
+    }
+    default: return int64_t(w[0]);  // unsigned
+  }
+}
+
+inline void scalarFromOrdered(ScalarType t, int64_t x, uint32_t* w) {
+  switch (t) {
+    case ScalarType::kFloat32: w[0] = x < 0 ? 0x80000000u | uint32_t(-1 - x) : uint32_t(x); break;
+    case ScalarType::kFloat64: {
+      const uint64_t b = x < 0 ? (uint64_t{1} << 63) | uint64_t(-1 - x) : uint64_t(x);
+      w[0] = uint32_t(b), w[1] = uint32_t(b >> 32);
+      break;
+    }
+    default: w[0] = uint32_t(uint64_t(x) & ((uint64_t{1} << scalarBits(t)) - 1)); break;
+  }
+}
+
+// x wrapped into the type's range of ordered integers: [0, 2^b) for unsigned types, [-2^(b-1), 2^(b-1)) otherwise.
+inline int64_t wrapOrdered(ScalarType t, int64_t x) {
+  const int b = scalarBits(t);
+  if (b == 64) return x;
+  const uint64_t mask = (uint64_t{1} << b) - 1, u = uint64_t(x) & mask;
+  const bool is_unsigned = t == ScalarType::kUint8 || t == ScalarType::kUint16 || t == ScalarType::kUint32;
+  if (is_unsigned) return int64_t(u);
+  return (u >> (b - 1)) ? int64_t(u) - int64_t(mask) - 1 : int64_t(u);
+}
+
+// One value of channel `c` predicted by the ordered integer `pred`; `actual` its ordered integer (encoder). Returns
+// the decoded ordered integer; `cls` gets the residual's class.
+template <class Io>
+int64_t codeScalar(Io& io, AttributeModels::Scalar& m, ScalarType t, int64_t pred, int64_t actual, int bin, int& cls) {
+  const int b = scalarBits(t);
+  // The residual modulo 2^b, centred: in [-2^(b-1), 2^(b-1)).
+  uint64_t r = uint64_t(actual) - uint64_t(pred);
+  if (b < 64) {
+    r &= (uint64_t{1} << b) - 1;
+    if (r >> (b - 1)) r |= ~((uint64_t{1} << b) - 1);
+  }
+  const int64_t rs = int64_t(r);
+  const uint64_t mag_in = rs < 0 ? uint64_t(0) - uint64_t(rs) : uint64_t(rs);
+  const int k = int(io.sym(m.cls[bin], u32(mag_in == 0 ? 0 : 64 - __builtin_clzll(mag_in))));
+  cls = k;
+  if (k == 0) return pred;
+  uint64_t mag = uint64_t{1} << (k - 1);
+  if (k >= 2) mag |= uint64_t(io.bit(m.top[k], int((mag_in >> (k - 2)) & 1))) << (k - 2);
+  for (int rest = k - 2; rest > 0;) {  // raw bits below the top one, 32 at a time, high first
+    const int n = std::min(rest, 32);
+    rest -= n;
+    mag |= uint64_t(io.bits(u32((mag_in >> rest) & ((uint64_t{1} << n) - 1)), n)) << rest;
+  }
+  const bool negative = io.bit(m.sign, rs < 0);
+  return wrapOrdered(t, int64_t(uint64_t(pred) + (negative ? uint64_t(0) - mag : mag)));
+}
+
+// The scalar channels of the vertices v in [first, n) that are not known(v), in vertex order, each channel on its
+// own: predicted by the rounded mean of the decoded neighbours' values (as codePredictedRange's colors), else the
+// previous vertex's, else 0. `truth` (encoder): values by vertex; `values` holds the known vertices' and gets the
+// coded ones' (stride words per vertex).
+template <class Io, class FacesOf, class Known>
+void codeScalarRange(Io& io, const AttributeLayout& layout, AttributeModels& models, u32 first, u32 n,
+                     const std::vector<Triangle>& tris, const FacesOf& faces_of, const Known& known,
+                     const ScalarValues* truth, ScalarValues& values) {
+  const auto decoded = [&](u32 w, u32 v) { return w < v || known(w); };
+  const size_t stride = size_t(layout.scalarStride());
+  values.resize(size_t(n) * stride);
+  std::vector<u8> activity(n, 0);
+  size_t offset = 0;
+  for (size_t ch = 0; ch < layout.scalars.size(); ++ch) {
+    const ScalarType t = layout.scalars[ch].type;
+    AttributeModels::Scalar& m = models.scalar[ch];
+    const auto at = [&](const ScalarValues& vals, u32 v) { return scalarOrdered(t, vals.data() + v * stride + offset); };
+    std::fill(activity.begin(), activity.end(), u8(0));
+    for (u32 v = first; v < n; ++v) {
+      if (known(v)) continue;
+      i128 sum = 0;
+      u32 count = 0, active = 0;
+      for (u32 f : faces_of(v))
+        for (u32 w : tris[f])
+          if (w != v && decoded(w, v)) sum += at(values, w), active += activity[w], ++count;
+      int64_t pred = 0;
+      if (count) {
+        // The rounded mean (half away from zero), in i128: 64-bit values do not overflow.
+        const i128 c = count;
+        pred = int64_t(sum >= 0 ? (sum + c / 2) / c : -((-sum + c / 2) / c));
+      } else if (v > 0) {
+        pred = at(values, v - 1);
+      }
+      int cls = 0;
+      const int64_t x = codeScalar(io, m, t, pred, truth ? at(*truth, v) : 0, activityBin(active, count), cls);
+      scalarFromOrdered(t, x, values.data() + v * stride + offset);
+      activity[v] = u8(cls);
+    }
+    offset += size_t(scalarTypeWords(t));
+  }
+}
+
 // Payload versions of the attribute coding: raw before kPredictedAttributes, predicted from it on; from
 // kCoarseAttributes (kdtree and octree) coded through the levels too (CoarseAttributes below).
 constexpr uint16_t kPredictedAttributes = 2;
@@ -196,9 +313,11 @@ constexpr uint16_t kCoarseAttributes = 3;
 template <class Io, class FacesOf, class Geometric, class Known>
 void codePredictedRange(Io& io, const AttributeLayout& layout, u32 first, u32 n, const std::vector<Triangle>& tris,
                         const FacesOf& faces_of, const Geometric& geometric, const Known& known, const Points* truth,
-                        std::vector<OctNormal>& normals, std::vector<Rgba8>& colors) {
+                        std::vector<OctNormal>& normals, std::vector<Rgba8>& colors, ScalarValues* scalars = nullptr) {
   const auto decoded = [&](u32 w, u32 v) { return w < v || known(w); };
   AttributeModels models(layout);
+  if (layout.hasScalars() && scalars)  // (pm passes none: it refuses layouts with scalars)
+    codeScalarRange(io, layout, models, first, n, tris, faces_of, known, truth ? &truth->scalars : nullptr, *scalars);
   std::vector<u8> activity(n, 0);  // per vertex: its residuals' classes (the context of its later neighbours)
   if (layout.hasNormals()) {
     const int bits = layout.normal_bits, m = (1 << (bits - 1)) - 1;
@@ -277,15 +396,16 @@ void codePredictedRange(Io& io, const AttributeLayout& layout, u32 first, u32 n,
 template <class Io>
 void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::vector<Vec3u>& pos,
                              const std::vector<Triangle>& tris, const Points* truth, std::vector<OctNormal>& normals,
-                             std::vector<Rgba8>& colors, const std::vector<u8>* known = nullptr) {
-  if (!layout.hasNormals() && !layout.hasColors()) return;
+                             std::vector<Rgba8>& colors, ScalarValues& scalars,
+                             const std::vector<u8>* known = nullptr) {
+  if (!layout.hasNormals() && !layout.hasColors() && !layout.hasScalars()) return;
   const u32 n = u32(pos.size());
   const VertexFaces vf(n, tris);
   std::vector<std::array<double, 3>> geometric;
   if (layout.hasNormals()) geometric = angleWeightedNormals(pos, tris);
   codePredictedRange(
       io, layout, 0, n, tris, [&](u32 v) { return vf.of(v); }, [&](u32 v) { return geometric[v]; },
-      [&](u32 v) { return known && (*known)[v] != 0; }, truth, normals, colors);
+      [&](u32 v) { return known && (*known)[v] != 0; }, truth, normals, colors, &scalars);
 }
 
 // Version 3 of kdtree and octree: coarse levels show the scan's own attributes. Every vertex of a coarse level
@@ -308,7 +428,7 @@ class CoarseAttributes {
       : layout_(layout),
         models_(layout),
         n_(n),
-        active_(version >= kCoarseAttributes && (layout.hasNormals() || layout.hasColors())) {
+        active_(version >= kCoarseAttributes && (layout.hasNormals() || layout.hasColors() || layout.hasScalars())) {
     if (!active_) return;
     shown_.assign(n, kNone);
     coded_.assign(n, 0);
@@ -322,7 +442,7 @@ class CoarseAttributes {
   // `truth` (encoder): attributes by vertex. `normals` and `colors` are by vertex (n of them).
   template <class Io, class Neighbours>
   void endLevel(Io& io, u32 vertices, int coarseness, const Points* truth, std::vector<OctNormal>& normals,
-                std::vector<Rgba8>& colors, const Neighbours& neighbours) {
+                std::vector<Rgba8>& colors, ScalarValues& scalars, const Neighbours& neighbours) {
     if (!active_) return;
     if (vertices > coarseLimit(n_)) {
       for (const auto& [v, p] : born_) shown_[v] = p == kNone ? kNone : shown_[p];
@@ -334,6 +454,8 @@ class CoarseAttributes {
     const int levels = 1 << layout_.color_bits;
     if (layout_.hasNormals()) normals.resize(n_);
     if (layout_.hasColors()) colors.resize(n_, Rgba8{0, 0, 0, 255});
+    const size_t stride = size_t(layout_.scalarStride());
+    scalars.resize(size_t(n_) * stride);
     for (const auto& [v, p] : born_) {
       const u32 from = p == kNone ? kNone : shown_[p];
       // The neighbours at this level whose attributes are decoded (not those born later in this segment).
@@ -372,6 +494,25 @@ class CoarseAttributes {
             colorOfLevels(codeColorLevels(io, models_, layout_, pred, truth ? &truth->colors[v] : nullptr, bin, act),
                           layout_);
       }
+      // Scalars: the rounded mean of the decoded neighbours' representatives', else the parent's representative's.
+      size_t offset = 0;
+      for (size_t ch = 0; ch < layout_.scalars.size(); ++ch) {
+        const ScalarType t = layout_.scalars[ch].type;
+        i128 sum = 0;
+        u32 count_s = 0;
+        for (u32 w : neighbours(v))
+          if (const u32 r = shown_[w]; r != kNone) sum += scalarOrdered(t, scalars.data() + r * stride + offset), ++count_s;
+        int64_t pred = from != kNone ? scalarOrdered(t, scalars.data() + from * stride + offset) : 0;
+        if (count_s) {
+          const i128 c = count_s;
+          pred = int64_t(sum >= 0 ? (sum + c / 2) / c : -((-sum + c / 2) / c));
+        }
+        int cls = 0;
+        const int64_t x = codeScalar(io, models_.scalar[ch], t, pred,
+                                     truth ? scalarOrdered(t, truth->scalars.data() + v * stride + offset) : 0, bin, cls);
+        scalarFromOrdered(t, x, scalars.data() + v * stride + offset);
+        offset += size_t(scalarTypeWords(t));
+      }
       shown_[v] = v;
       coded_[v] = 1;
     }
@@ -382,14 +523,16 @@ class CoarseAttributes {
   // (the root level): the caller derives them.
   template <class Id>
   bool show(u32 count, const Id& id, const std::vector<OctNormal>& normals, const std::vector<Rgba8>& colors,
-            QuantizedMesh& m) const {
+            const ScalarValues& scalars, QuantizedMesh& m) const {
     if (!active_) return false;
     for (u32 i = 0; i < count; ++i)
       if (shown_[id(i)] == kNone) return false;
+    const size_t stride = size_t(layout_.scalarStride());
     for (u32 i = 0; i < count; ++i) {
       const u32 r = shown_[id(i)];
       if (layout_.hasNormals()) m.normals.push_back(normals[r]);
       if (layout_.hasColors()) m.colors.push_back(colors[r]);
+      m.scalars.insert(m.scalars.end(), scalars.begin() + r * stride, scalars.begin() + (r + 1) * stride);
     }
     return true;
   }
@@ -410,9 +553,17 @@ class CoarseAttributes {
 template <class Io>
 void codeTileAttributes(Io& io, uint16_t version, const AttributeLayout& layout, const std::vector<Vec3u>& pos,
                         const std::vector<Triangle>& tris, const Points* truth, std::vector<OctNormal>& normals,
-                        std::vector<Rgba8>& colors, const std::vector<u8>* known = nullptr) {
-  if (version >= kPredictedAttributes) codePredictedAttributes(io, layout, pos, tris, truth, normals, colors, known);
-  else codeRawAttributes(io, layout, u32(pos.size()), truth, normals, colors);
+                        std::vector<Rgba8>& colors, ScalarValues& scalars, const std::vector<u8>* known = nullptr) {
+  if (version >= kPredictedAttributes) {
+    codePredictedAttributes(io, layout, pos, tris, truth, normals, colors, scalars, known);
+    return;
+  }
+  codeRawAttributes(io, layout, u32(pos.size()), truth, normals, colors);
+  // Version 1 payloads predate scalar channels (this build writes none with them); a hostile one in a container
+  // that has them reads them raw, word by word.
+  const size_t words = size_t(pos.size()) * size_t(layout.scalarStride());
+  scalars.resize(words);
+  for (size_t i = 0; i < words; ++i) scalars[i] = io.bits(truth ? truth->scalars[i] : 0, 32);
 }
 
 }  // namespace scanpress::hierarchy

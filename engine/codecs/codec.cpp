@@ -95,7 +95,10 @@ void addLevelBytes(std::span<const CodecLevel> levels, std::vector<uint64_t>& to
 
 namespace {
 double needBits(const PayloadFloor& f, const AttributeLayout& layout, uint64_t vertices, uint64_t faces) {
-  const double attribute_bits = f.raw_attributes ? 2.0 * layout.normal_bits + 8.0 * layout.color_channels : 0.0;
+  double scalar_bits = 0;
+  for (const ScalarChannel& c : layout.scalars) scalar_bits += 8.0 * scalarTypeBytes(c.type);
+  const double attribute_bits =
+      f.raw_attributes ? 2.0 * layout.normal_bits + 8.0 * layout.color_channels + scalar_bits : 0.0;
   return double(vertices) * (f.bits_per_vertex + attribute_bits) + double(faces) * f.bits_per_face;
 }
 }  // namespace
@@ -116,6 +119,11 @@ uint64_t PayloadFloor::minPayloadBytes(const AttributeLayout& layout, uint64_t v
 Result<EncodedTile> encodeMesh(const CodecInfo& codec, const TileContext& ctx, const QuantizedMesh& mesh,
                                const CodecOptions& options) {
   return codec.encode(ctx, TileView{mesh, {}}, options);
+}
+
+Status scalarsNotCarried(std::string_view codec) {
+  return makeError(ErrorCode::kInvalidArgument,
+                   std::string(codec) + " does not carry scalar channels yet (kdtree, octree, edgebreaker and store do)");
 }
 
 DecodeLimits limitsOf(const TileSummary& s) { return DecodeLimits{s.vertices, s.faces}; }
@@ -150,9 +158,11 @@ Vec3d triangleCross(const std::vector<Vec3u>& positions, const Triangle& t) {
 void deriveAttributes(QuantizedMesh& m, const AttributeLayout& layout, std::span<const uint8_t> keep) {
   std::vector<OctNormal> old_normals;
   std::vector<Rgba8> old_colors;
-  if (!keep.empty()) old_normals.swap(m.normals), old_colors.swap(m.colors);
+  ScalarValues old_scalars;
+  if (!keep.empty()) old_normals.swap(m.normals), old_colors.swap(m.colors), old_scalars.swap(m.scalars);
   m.normals.clear();
   m.colors.clear();
+  m.scalars.clear();
   if (layout.hasNormals()) {
     std::vector<Vec3d> acc(m.positions.size(), Vec3d{0, 0, 0});
     for (const auto& t : m.triangles) {
@@ -165,10 +175,14 @@ void deriveAttributes(QuantizedMesh& m, const AttributeLayout& layout, std::span
       m.normals.push_back(encodeOctahedral(Vec3f{float(a[0]), float(a[1]), float(a[2])}, layout.normal_bits));
   }
   if (layout.hasColors()) m.colors.assign(m.positions.size(), Rgba8{128, 128, 128, 255});
+  const size_t stride = size_t(layout.scalarStride());
+  m.scalars.assign(m.positions.size() * stride, 0);  // zero: 0 or +0.0 at every type
   for (size_t v = 0; v < keep.size() && v < m.positions.size(); ++v)
     if (keep[v]) {
       if (v < old_normals.size() && !m.normals.empty()) m.normals[v] = old_normals[v];
       if (v < old_colors.size() && !m.colors.empty()) m.colors[v] = old_colors[v];
+      if ((v + 1) * stride <= old_scalars.size())
+        std::copy_n(old_scalars.begin() + v * stride, stride, m.scalars.begin() + v * stride);
     }
 }
 
@@ -178,6 +192,8 @@ Status validateTile(const TileContext& ctx, const QuantizedMesh& mesh) {
     return makeError(ErrorCode::kMalformed, "normal count does not match the vertex count");
   if (ctx.layout.hasColors() != !mesh.colors.empty() || (!mesh.colors.empty() && mesh.colors.size() != n))
     return makeError(ErrorCode::kMalformed, "color count does not match the vertex count");
+  if (mesh.scalars.size() != n * size_t(ctx.layout.scalarStride()))
+    return makeError(ErrorCode::kMalformed, "scalar values do not match the vertex count");
   const uint32_t max_coord = (1u << ctx.bits) - 1;
   for (size_t i = 0; i < n; ++i)
     for (uint32_t c : mesh.positions[i])

@@ -136,7 +136,8 @@ struct PayloadFloor {
   double bits_per_vertex = 0;
   double bits_per_face = 0;
   uint64_t slack_bytes = 0;
-  // true: the codec spends a vertex's normal and color bits raw (2 x normal_bits + 8 x color_channels), on top of
+  // true: the codec spends a vertex's normal, color and scalar bits raw (2 x normal_bits + 8 x color_channels + each
+  // scalar channel's type's bits), on top of
   // bits_per_vertex (store). false: it keeps none (pm) or predicts them at a cost near zero (kdtree, octree and
   // edgebreaker from version 2).
   bool raw_attributes = true;
@@ -199,11 +200,13 @@ DecodeLimits limitsOf(const TileSummary& summary);
 Status validateTile(const TileContext& ctx, const QuantizedMesh& mesh);
 // Checks counts a payload claims against the limits, naming `what` (the codec's payload) in the message.
 Status checkLimits(std::string_view what, uint64_t vertices, uint64_t faces, const DecodeLimits& limits);
+// The error of a codec that does not carry scalar channels (yet): the lossy codecs, pm and prm.
+Status scalarsNotCarried(std::string_view codec);
 // The summary of a mesh: counts and bounds.
 TileSummary summarize(const QuantizedMesh& mesh);
-// Coarse-level attributes derived from geometry: area-weighted normals from the triangles, gray colors (as the
-// layout asks); replaces whatever normals and colors the mesh had.
-// `keep` (when not empty, one per vertex): the vertices that keep the normals and colors they have.
+// Coarse-level attributes derived from geometry: area-weighted normals from the triangles, gray colors, scalars 0
+// (as the layout asks); replaces whatever attributes the mesh had.
+// `keep` (when not empty, one per vertex): the vertices that keep the attributes they have.
 void deriveAttributes(QuantizedMesh& mesh, const AttributeLayout& layout, std::span<const uint8_t> keep = {});
 // A triangle's cross product on the grid (edges from its first corner, in double): the area-weighted normal that
 // deriveAttributes sums at each corner, in triangle order.

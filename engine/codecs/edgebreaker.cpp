@@ -392,7 +392,8 @@ class Engine {
     io_.meter(&CodecStats::connectivity_bits);
     SP_RETURN_IF_ERROR(triangles());
     io_.meter(&CodecStats::attribute_bits);
-    codeTileAttributes(io_, version, layout, pos_, tris_, truth_ ? &truth_->ordered : nullptr, normals_, colors_);
+    codeTileAttributes(io_, version, layout, pos_, tris_, truth_ ? &truth_->ordered : nullptr, normals_, colors_,
+                       scalars_);
     return Status::ok();
   }
 
@@ -402,6 +403,7 @@ class Engine {
     m.triangles = std::move(tris_);
     m.normals = std::move(normals_);
     m.colors = std::move(colors_);
+    m.scalars = std::move(scalars_);
     return m;
   }
 
@@ -1203,11 +1205,14 @@ class Engine {
       o.pos.assign(n_, Vec3u{0, 0, 0});
       if (!pts.normals.empty()) o.normals.resize(n_);
       if (!pts.colors.empty()) o.colors.resize(n_);
+      const size_t stride = pts.stride();
+      o.scalars.resize(size_t(n_) * stride);
       for (u32 p = 0; p < pts.pos.size(); ++p) {
         const u32 q = truth_->out_of_point[p];
         o.pos[q] = pts.pos[p];
         if (!pts.normals.empty()) o.normals[q] = pts.normals[p];
         if (!pts.colors.empty()) o.colors[q] = pts.colors[p];
+        std::copy_n(pts.scalars.begin() + ptrdiff_t(p * stride), stride, o.scalars.begin() + ptrdiff_t(q * stride));
       }
       std::vector<std::pair<TriKey, std::array<u32, 2>>> tk;
       tk.reserve(pts.tri_keys.size());
@@ -1269,6 +1274,7 @@ class Engine {
   std::vector<Triangle> tris_;
   std::vector<OctNormal> normals_;
   std::vector<Rgba8> colors_;
+  ScalarValues scalars_;
 };
 
 Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, u32 spacing, std::vector<u8>& out,

@@ -33,8 +33,10 @@ Status collectPoints(std::string_view codec, const TileContext& ctx, const Quant
   if (nv >= kMaxPoints || mesh.triangles.size() >= kMaxTriangles)
     return makeError(ErrorCode::kLimitExceeded, name + ": tile has more than 2^26 vertices or 2^28 triangles");
   if (ctx.layout.hasNormals() != !mesh.normals.empty() || (ctx.layout.hasNormals() && mesh.normals.size() != nv) ||
-      ctx.layout.hasColors() != !mesh.colors.empty() || (ctx.layout.hasColors() && mesh.colors.size() != nv))
+      ctx.layout.hasColors() != !mesh.colors.empty() || (ctx.layout.hasColors() && mesh.colors.size() != nv) ||
+      mesh.scalars.size() != nv * size_t(ctx.layout.scalarStride()))
     return makeError(ErrorCode::kInvalidArgument, name + ": attributes do not match the layout");
+  const size_t stride = size_t(ctx.layout.scalarStride());
   const u32 max_coord = (1u << ctx.bits) - 1;
   for (const auto& p : mesh.positions)
     if (p[0] > max_coord || p[1] > max_coord || p[2] > max_coord)
@@ -57,6 +59,9 @@ Status collectPoints(std::string_view codec, const TileContext& ctx, const Quant
   auto attrLess = [&](u32 a, u32 b) {
     if (!mesh.normals.empty() && mesh.normals[a] != mesh.normals[b]) return mesh.normals[a] < mesh.normals[b];
     if (!mesh.colors.empty() && mesh.colors[a] != mesh.colors[b]) return mesh.colors[a] < mesh.colors[b];
+    if (stride)
+      return std::lexicographical_compare(mesh.scalars.begin() + a * stride, mesh.scalars.begin() + (a + 1) * stride,
+                                          mesh.scalars.begin() + b * stride, mesh.scalars.begin() + (b + 1) * stride);
     return false;
   };
   std::vector<u32> order(nv);
@@ -73,6 +78,7 @@ Status collectPoints(std::string_view codec, const TileContext& ctx, const Quant
       out.pos.push_back(mesh.positions[v]);
       if (!mesh.normals.empty()) out.normals.push_back(mesh.normals[v]);
       if (!mesh.colors.empty()) out.colors.push_back(mesh.colors[v]);
+      out.scalars.insert(out.scalars.end(), mesh.scalars.begin() + v * stride, mesh.scalars.begin() + (v + 1) * stride);
     }
     point_of[v] = u32(out.pos.size() - 1);
   }

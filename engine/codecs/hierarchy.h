@@ -31,12 +31,14 @@ constexpr u64 kMaxTriangles = 1ull << 28;
 // The interleaved bits of p, most significant level first, axes in `axes` order within a level.
 Key mortonKey(const Vec3u& p, int bits, const Axes& axes);
 
-// A tile's distinct (position, normal, color) points sorted by Morton key (ties by attributes), and its triangles
+// A tile's distinct (position, normal, color, scalars) points sorted by Morton key (ties by attributes), and its triangles
 // as sorted keys over point indices with the copies in each orientation (0: as sorted a,b,c; 1: a,c,b).
 struct Points {
   std::vector<Vec3u> pos;
   std::vector<OctNormal> normals;
   std::vector<Rgba8> colors;
+  ScalarValues scalars;  // the layout's scalarStride() words per point
+  size_t stride() const { return pos.empty() ? 0 : scalars.size() / pos.size(); }
   std::vector<TriKey> tri_keys;
   std::vector<std::array<u32, 2>> tri_copies;
 };

@@ -273,7 +273,7 @@ class Engine {
         cells_.swap(next_);
       }
       io_.meter(&CodecStats::attribute_bits);
-      coarse_->endLevel(io_, u32(cells_.size()), bits_ - (k + 1), truth_, normals_, colors_,
+      coarse_->endLevel(io_, u32(cells_.size()), bits_ - (k + 1), truth_, normals_, colors_, scalars_,
                         [&](u32 v) -> const std::vector<u32>& { return cx_.nb[v]; });
       SP_RETURN_IF_ERROR(io_.end());
       level_ = k + 1;
@@ -303,6 +303,7 @@ class Engine {
       m.triangles = std::move(triangles_);
       m.normals = std::move(normals_);
       m.colors = std::move(colors_);
+      m.scalars = std::move(scalars_);
       return m;
     }
     std::vector<u32> index(n_, UINT32_MAX);
@@ -317,7 +318,7 @@ class Engine {
       for (auto& v : t) v = index[v];
     // Version 3: each cell shows its representative's attributes (attributes.h, CoarseAttributes).
     if (!coarse_ || !coarse_->show(
-                        u32(cells_.size()), [&](u32 i) { return cells_[i].s; }, normals_, colors_, m))
+                        u32(cells_.size()), [&](u32 i) { return cells_[i].s; }, normals_, colors_, scalars_, m))
       deriveAttributes(m, layout);
     return m;
   }
@@ -728,7 +729,8 @@ class Engine {
 
   void codeAttributes() {
     io_.meter(&CodecStats::attribute_bits);
-    codeTileAttributes(io_, version, layout, lo_, triangles_, truth_, normals_, colors_, coarse_->coded());
+    codeTileAttributes(io_, version, layout, lo_, triangles_, truth_, normals_, colors_, scalars_,
+                       coarse_->coded());
   }
 
  public:
@@ -762,6 +764,7 @@ class Engine {
   std::vector<Triangle> triangles_;
   std::vector<OctNormal> normals_;  // by point; from version 3 filled in from the first level on
   std::vector<Rgba8> colors_;
+  ScalarValues scalars_;  // by point, the layout's scalarStride() words each
   std::unique_ptr<CoarseAttributes> coarse_;
 };
 

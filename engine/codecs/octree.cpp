@@ -148,7 +148,7 @@ class Engine {
       for (int j = 0; j < 3; ++j) SP_RETURN_IF_ERROR(step(3 * (k - k0_) + j));
       io_.meter(&CodecStats::attribute_bits);
       coarse_->endLevel(io_, u32(lo_.size()), bits_ - (k + 1), truth_ ? &truth_->by_id : nullptr, normals_, colors_,
-                        [&](u32 v) -> const std::vector<u32>& { return nb_[v]; });
+                        scalars_, [&](u32 v) -> const std::vector<u32>& { return nb_[v]; });
       SP_RETURN_IF_ERROR(io_.end());
       level_ = k + 1;
     }
@@ -165,7 +165,7 @@ class Engine {
     SP_RETURN_IF_ERROR(codeFaces());
     io_.meter(&CodecStats::attribute_bits);
     codeTileAttributes(io_, version, layout, lo_, triangles_, truth_ ? &truth_->by_id : nullptr, normals_, colors_,
-                       coarse_->coded());
+                       scalars_, coarse_->coded());
     SP_RETURN_IF_ERROR(io_.end());
     level_ = bits_;
     complete_ = true;
@@ -183,6 +183,7 @@ class Engine {
       m.triangles = std::move(triangles_);
       m.normals = std::move(normals_);
       m.colors = std::move(colors_);
+      m.scalars = std::move(scalars_);
       return m;
     }
     const u32 half = (1u << (bits_ - level_)) >> 1;
@@ -207,7 +208,7 @@ class Engine {
     m.triangles = orientedTriangles(keys);
     // Version 3: each vertex shows its representative's attributes (attributes.h, CoarseAttributes).
     if (!coarse_ || !coarse_->show(
-                        u32(m.positions.size()), [](u32 i) { return i; }, normals_, colors_, m))
+                        u32(m.positions.size()), [](u32 i) { return i; }, normals_, colors_, scalars_, m))
       deriveAttributes(m, layout);
     return m;
   }
@@ -501,6 +502,7 @@ class Engine {
   std::vector<Triangle> triangles_;
   std::vector<OctNormal> normals_;  // by vertex id; from version 3 filled in from the first level on
   std::vector<Rgba8> colors_;
+  ScalarValues scalars_;  // by vertex id
   std::unique_ptr<CoarseAttributes> coarse_;
 };
 
@@ -520,10 +522,13 @@ void renameToIds(const Points& pts, const std::vector<std::array<u32, 2>>& range
   const u32 n = u32(range.size());
   std::vector<u32> id(n);
   for (u32 v = 0; v < n; ++v) id[range[v][0]] = v;
+  const size_t stride = pts.stride();
   for (u32 v = 0; v < n; ++v) {
     out.pos.push_back(pts.pos[range[v][0]]);
     if (!pts.normals.empty()) out.normals.push_back(pts.normals[range[v][0]]);
     if (!pts.colors.empty()) out.colors.push_back(pts.colors[range[v][0]]);
+    const auto row = pts.scalars.begin() + ptrdiff_t(range[v][0] * stride);
+    out.scalars.insert(out.scalars.end(), row, row + ptrdiff_t(stride));
   }
   std::vector<std::pair<TriKey, std::array<u32, 2>>> tris;
   for (size_t i = 0; i < pts.tri_keys.size(); ++i) {

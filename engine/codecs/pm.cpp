@@ -647,6 +647,8 @@ PmState initialState(const QuantizedMesh& base, std::vector<uint32_t>* order_out
 Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                  uint32_t level, const DecodeLimits& limits) {
   SP_RETURN_IF_ERROR(checkVersion(version));
+  if (ctx.layout.hasScalars())
+    return makeError(ErrorCode::kMalformed, "pm payload in a container with scalar channels (pm carries none)");
   SP_ASSIGN_OR_RETURN(Header h, parseHeader(payload, limits));
   const uint32_t target = std::min<uint32_t>(level, uint32_t(h.levels.size()));
   if (h.base_bytes > payload.size() - h.base_offset)
@@ -1085,6 +1087,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
 }  // namespace
 
 Result<EncodedTile> pmEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options) {
+  if (ctx.layout.hasScalars()) return scalarsNotCarried("pm");
   return pmEncodeImpl(ctx, tile, options);
 }
 

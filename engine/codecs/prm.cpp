@@ -72,6 +72,7 @@ uint32_t prmSpacing(const PrmOptions& options, int bits) {
 
 Status prmEncodeWithStats(const TileContext& ctx, const TileView& tile, const CodecOptions& options,
                           std::vector<uint8_t>& out, CodecStats* stats, TileSummary* summary) {
+  if (ctx.layout.hasScalars()) return scalarsNotCarried("prm");
   StageSpec spec;
   spec.kind = StageKind::kRemesh;
   spec.remesh = RemeshStageOptions{.grid = options.prm.grid, .tau = options.prm.tau};
@@ -125,6 +126,8 @@ Result<QuantizedMesh> prmDecode(const TileContext& ctx, uint16_t version, std::s
                                 const DecodeLimits& limits) {
   if (version != 1)
     return makeError(ErrorCode::kUnknownVersion, "prm payload: unknown version " + std::to_string(version));
+  if (ctx.layout.hasScalars())
+    return makeError(ErrorCode::kMalformed, "prm payload in a container with scalar channels (prm carries none)");
   size_t header = 0;
   SP_ASSIGN_OR_RETURN(const uint32_t spacing, readSpacing(payload, header));
   return edgebreakerDecodeOnLattice(ctx, payload.subspan(header), limits, spacing);

@@ -37,7 +37,9 @@ Result<EncodedTile> storeEncode(const TileContext& ctx, const TileView& tile, co
   // A tile below the codec's floor (FORMAT.md; a dense lattice spends few bits per vertex) spends more coordinate
   // bits than its range needs, up to the grid's: the decoder accepts any width within the grid.
   const int index_bits = bitsFor(n - 1);
-  const int extra_bits = 2 * ctx.layout.normal_bits + 8 * ctx.layout.color_channels;
+  int scalar_bits = 0;
+  for (const ScalarChannel& c : ctx.layout.scalars) scalar_bits += 8 * scalarTypeBytes(c.type);
+  const int extra_bits = 2 * ctx.layout.normal_bits + 8 * ctx.layout.color_channels + scalar_bits;
   const uint64_t need = findCodec(CodecId::kStore)->floor.minPayloadBytes(ctx.layout, n, mesh.triangles.size());
   auto payloadBytes = [&] {
     const uint64_t bits = uint64_t(axis_bits[0] + axis_bits[1] + axis_bits[2] + extra_bits) * n +
@@ -63,6 +65,15 @@ Result<EncodedTile> storeEncode(const TileContext& ctx, const TileView& tile, co
   if (ctx.layout.hasColors())
     for (const auto& c : mesh.colors)
       for (int k = 0; k < ctx.layout.color_channels; ++k) bw.put(c[k], 8);
+  // Scalar channels (container v2): per vertex, each channel's value at its type's width.
+  const size_t stride = size_t(ctx.layout.scalarStride());
+  for (size_t v = 0; v < n; ++v) {
+    const uint32_t* w = mesh.scalars.data() + v * stride;
+    for (const ScalarChannel& c : ctx.layout.scalars) {
+      if (c.type == ScalarType::kFloat64) bw.put(w[0], 32), bw.put(w[1], 32), w += 2;
+      else bw.put(*w++, 8 * scalarTypeBytes(c.type));
+    }
+  }
   bw.flush();
   return result;
 }
@@ -94,8 +105,10 @@ Result<QuantizedMesh> storeDecode(const TileContext& ctx, uint16_t version, std:
     axis_bits[a] = b;
   }
   const int index_bits = bitsFor(uint64_t(n) - 1);
+  uint64_t scalar_bits = 0;
+  for (const ScalarChannel& c : ctx.layout.scalars) scalar_bits += 8u * uint64_t(scalarTypeBytes(c.type));
   const uint64_t per_vertex = uint64_t(axis_bits[0]) + axis_bits[1] + axis_bits[2] + 2u * ctx.layout.normal_bits +
-                              8u * ctx.layout.color_channels;
+                              8u * ctx.layout.color_channels + scalar_bits;
   const uint64_t need_bits = per_vertex * n + uint64_t(t) * 3 * index_bits;
   if ((need_bits + 7) / 8 != r.remaining())
     return r.error(ErrorCode::kMalformed, "payload holds " + std::to_string(r.remaining()) + " bytes, counts need " +
@@ -122,6 +135,12 @@ Result<QuantizedMesh> storeDecode(const TileContext& ctx, uint16_t version, std:
       for (int k = 0; k < ctx.layout.color_channels; ++k) c[k] = static_cast<uint8_t>(br.get(8));
     }
   }
+  mesh.scalars.resize(size_t(n) * size_t(ctx.layout.scalarStride()));
+  for (size_t v = 0, i = 0; v < n; ++v)
+    for (const ScalarChannel& c : ctx.layout.scalars) {
+      if (c.type == ScalarType::kFloat64) mesh.scalars[i] = br.get(32), mesh.scalars[i + 1] = br.get(32), i += 2;
+      else mesh.scalars[i++] = br.get(8 * scalarTypeBytes(c.type));
+    }
   if (br.overrun()) return makeError(ErrorCode::kTruncated, "store payload ends inside the bit stream");
   SP_RETURN_IF_ERROR(validateTile(ctx, mesh).withContext("store payload"));
   return mesh;

@@ -48,13 +48,47 @@ std::vector<uint8_t> chunkHeader(const TileEntry& e, std::span<const uint8_t> pa
 
 }  // namespace
 
+namespace {
+// v2's table after the fixed header: u8 count; per channel u8 type, u8 name length, the name; CRC-32C of it.
+std::vector<uint8_t> scalarTable(const AttributeLayout& layout) {
+  std::vector<uint8_t> out;
+  if (!layout.hasScalars()) return out;
+  ByteWriter w(out);
+  w.u8(static_cast<uint8_t>(layout.scalars.size()));
+  for (const ScalarChannel& c : layout.scalars) {
+    w.u8(static_cast<uint8_t>(c.type));
+    w.u8(static_cast<uint8_t>(c.name.size()));
+    for (char ch : c.name) w.u8(static_cast<uint8_t>(ch));
+  }
+  w.u32(crc32c(out));
+  return out;
+}
+}  // namespace
+
+Status checkScalarChannels(const AttributeLayout& layout) {
+  if (layout.scalars.size() > 255) return makeError(ErrorCode::kInvalidArgument, "more than 255 scalar channels");
+  for (const ScalarChannel& c : layout.scalars) {
+    if (!validScalarType(static_cast<uint8_t>(c.type)))
+      return makeError(ErrorCode::kInvalidArgument, "scalar channel '" + c.name + "' has no valid type");
+    if (!validScalarName(c.name))
+      return makeError(ErrorCode::kInvalidArgument,
+                       "scalar channel name '" + c.name + "': 1 to 255 printable ASCII bytes without spaces");
+  }
+  for (size_t i = 0; i < layout.scalars.size(); ++i)
+    for (size_t j = 0; j < i; ++j)
+      if (layout.scalars[i].name == layout.scalars[j].name)
+        return makeError(ErrorCode::kInvalidArgument, "scalar channel '" + layout.scalars[i].name + "' appears twice");
+  return Status::ok();
+}
+
 std::vector<uint8_t> serializeHeader(const ContainerHeader& h) {
+  const std::vector<uint8_t> table = scalarTable(h.layout);
   std::vector<uint8_t> out;
   out.reserve(kHeaderSize);
   ByteWriter w(out);
   w.bytes(kHeaderMagic);
-  w.u32(h.version);
-  w.u32(kHeaderSize);
+  w.u32(table.empty() ? kContainerVersion : kContainerVersionScalars);
+  w.u32(static_cast<uint32_t>(kHeaderSize + table.size()));
   for (double c : h.grid.origin) w.f64(c);
   w.f64(h.grid.cell);
   w.u8(static_cast<uint8_t>(h.grid.bits));
@@ -67,6 +101,7 @@ std::vector<uint8_t> serializeHeader(const ContainerHeader& h) {
   w.u16(h.subset_index);
   w.u16(h.subset_count);
   w.u32(crc32c(out));
+  for (uint8_t b : table) w.u8(b);
   return out;
 }
 
@@ -79,7 +114,10 @@ Status ContainerWriter::begin() {
   if (header_.layout.color_bits < 1 || header_.layout.color_bits > 8)
     return makeError(ErrorCode::kInvalidArgument, "color bits must be in [1, 8]");
   if (!header_.layout.hasColors()) header_.layout.color_bits = 8;  // byte 51 is 0 without colors
+  SP_RETURN_IF_ERROR(checkScalarChannels(header_.layout));
+  header_.version = header_.layout.hasScalars() ? kContainerVersionScalars : kContainerVersion;
   const auto bytes = serializeHeader(header_);
+  header_.header_size = static_cast<uint32_t>(bytes.size());
   SP_RETURN_IF_ERROR(sink_.append(bytes));
   offset_ = bytes.size();
   return Status::ok();
@@ -134,7 +172,7 @@ Status ContainerWriter::finish() {
   ByteWriter f(footer);
   f.u64(offset_);
   f.u64(index.size());
-  f.u32(kContainerVersion);
+  f.u32(header_.version);
   f.u32(crc32c(footer));
   f.bytes(kFooterMagic);
   SP_RETURN_IF_ERROR(sink_.append(index));
@@ -144,7 +182,7 @@ Status ContainerWriter::finish() {
   return sink_.writeAt(0, serializeHeader(header_));
 }
 
-Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::string& what) {
+Result<uint32_t> headerSizeOf(std::span<const uint8_t> bytes, const std::string& what) {
   const std::string where = what + ": header";
   if (bytes.size() < kHeaderSize)
     return makeError(ErrorCode::kTruncated, where + ": the file ends at byte " + std::to_string(bytes.size()) +
@@ -154,20 +192,40 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
   ByteReader r(bytes.first(kHeaderSize), where);
   std::span<const uint8_t> magic;
   SP_RETURN_IF_ERROR(r.bytes(8, magic));
-  ContainerHeader h;
-  uint32_t header_size = 0;
-  SP_RETURN_IF_ERROR(r.u32(h.version));
-  if (h.version != kContainerVersion)
+  uint32_t version = 0, header_size = 0;
+  SP_RETURN_IF_ERROR(r.u32(version));
+  if (version != kContainerVersion && version != kContainerVersionScalars)
     return makeError(ErrorCode::kUnknownVersion,
-                     where + " at byte 8: container format version " + std::to_string(h.version) +
-                         " is not known to this build (knows " + std::to_string(kContainerVersion) + ")");
+                     where + " at byte 8: container format version " + std::to_string(version) +
+                         " is not known to this build (knows " + std::to_string(kContainerVersion) + " and " +
+                         std::to_string(kContainerVersionScalars) + ")");
   SP_RETURN_IF_ERROR(r.u32(header_size));
   uint32_t stored_crc = 0;
   std::memcpy(&stored_crc, bytes.data() + kHeaderSize - 4, 4);
   SP_RETURN_IF_ERROR(checkCrc(stored_crc, bytes.first(kHeaderSize - 4),
                               where + " at byte " + std::to_string(kHeaderSize - 4)));
-  if (header_size != kHeaderSize)
-    return makeError(ErrorCode::kMalformed, where + " at byte 12: header size " + std::to_string(header_size));
+  // v1: exactly the fixed header; v2: a table of at least one channel (7 bytes) and at most 255.
+  if (version == kContainerVersion ? header_size != kHeaderSize
+                                   : header_size < kHeaderSize + 7 || header_size > kMaxHeaderSize)
+    return makeError(ErrorCode::kMalformed, where + " at byte 12: header size " + std::to_string(header_size) +
+                                                " for container format version " + std::to_string(version));
+  return header_size;
+}
+
+Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::string& what) {
+  const std::string where = what + ": header";
+  SP_ASSIGN_OR_RETURN(const uint32_t header_size, headerSizeOf(bytes, what));
+  if (bytes.size() < header_size)
+    return makeError(ErrorCode::kTruncated, where + ": the file ends at byte " + std::to_string(bytes.size()) +
+                                                ", its header needs " + std::to_string(header_size) + " bytes");
+  ByteReader r(bytes.first(kHeaderSize), where);
+  std::span<const uint8_t> magic;
+  SP_RETURN_IF_ERROR(r.bytes(8, magic));
+  ContainerHeader h;
+  h.header_size = header_size;
+  uint32_t size_field = 0;
+  SP_RETURN_IF_ERROR(r.u32(h.version));
+  SP_RETURN_IF_ERROR(r.u32(size_field));
   for (double& c : h.grid.origin) SP_RETURN_IF_ERROR(r.f64(c));
   SP_RETURN_IF_ERROR(r.f64(h.grid.cell));
   uint8_t bits = 0, reserved = 0;
@@ -201,6 +259,30 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
                                                 std::to_string(h.subset_count));
   if (h.tile_count > kMaxTiles)
     return makeError(ErrorCode::kLimitExceeded, where + " at byte 52: " + std::to_string(h.tile_count) + " tiles");
+  if (h.version == kContainerVersionScalars) {
+    const auto table = bytes.subspan(kHeaderSize, header_size - kHeaderSize);
+    uint32_t table_crc = 0;
+    std::memcpy(&table_crc, table.data() + table.size() - 4, 4);
+    SP_RETURN_IF_ERROR(checkCrc(table_crc, table.first(table.size() - 4),
+                                where + " at byte " + std::to_string(header_size - 4)));
+    ByteReader t(table.first(table.size() - 4), where + " scalar channels", kHeaderSize);
+    uint8_t count = 0;
+    SP_RETURN_IF_ERROR(t.u8(count));
+    if (count == 0) return t.error(ErrorCode::kMalformed, "a version 2 header with no scalar channel");
+    for (uint8_t i = 0; i < count; ++i) {
+      uint8_t type = 0, length = 0;
+      SP_RETURN_IF_ERROR(t.u8(type));
+      if (!validScalarType(type))
+        return t.error(ErrorCode::kMalformed, "scalar channel " + std::to_string(i) + ": type " + std::to_string(type));
+      SP_RETURN_IF_ERROR(t.u8(length));
+      std::span<const uint8_t> name;
+      SP_RETURN_IF_ERROR(t.bytes(length, name));
+      h.layout.scalars.push_back({std::string(name.begin(), name.end()), static_cast<ScalarType>(type)});
+    }
+    if (t.remaining() != 0) return t.error(ErrorCode::kMalformed, "bytes after the scalar channels");
+    if (Status s = checkScalarChannels(h.layout); !s.isOk())
+      return makeError(ErrorCode::kMalformed, where + " at byte " + std::to_string(kHeaderSize) + ": " + s.message());
+  }
   return h;
 }
 
@@ -220,9 +302,10 @@ Result<Footer> parseFooter(std::span<const uint8_t> last, uint64_t file_size, co
   SP_RETURN_IF_ERROR(r.u64(f.index_offset));
   SP_RETURN_IF_ERROR(r.u64(f.index_bytes));
   SP_RETURN_IF_ERROR(r.u32(version));
+  f.version = version;
   SP_RETURN_IF_ERROR(r.u32(stored_crc));
   SP_RETURN_IF_ERROR(checkCrc(stored_crc, last.first(20), where + " at byte " + std::to_string(base + 20)));
-  if (version != kContainerVersion)
+  if (version != kContainerVersion && version != kContainerVersionScalars)
     return makeError(ErrorCode::kUnknownVersion, where + " at byte " + std::to_string(base + 16) +
                                                      ": container format version " + std::to_string(version));
   if (f.index_offset < kHeaderSize || f.index_bytes < 12 || f.index_offset > base ||
@@ -238,6 +321,10 @@ Result<std::vector<TileEntry>> parseIndex(std::span<const uint8_t> bytes, const 
   if (bytes.size() != footer.index_bytes)
     return makeError(ErrorCode::kTruncated, where + " at byte " + std::to_string(footer.index_offset) + ": expected " +
                                                 std::to_string(footer.index_bytes) + " bytes");
+  if (footer.version != header.version)
+    return makeError(ErrorCode::kMalformed, what + ": footer says container format version " +
+                                                std::to_string(footer.version) + ", the header " +
+                                                std::to_string(header.version));
   uint32_t stored_crc = 0;
   std::memcpy(&stored_crc, bytes.data() + bytes.size() - 4, 4);
   SP_RETURN_IF_ERROR(checkCrc(stored_crc, bytes.first(bytes.size() - 4),
@@ -253,7 +340,7 @@ Result<std::vector<TileEntry>> parseIndex(std::span<const uint8_t> bytes, const 
   if (uint64_t(count) * kIndexEntrySize + 12 != bytes.size())
     return r.error(ErrorCode::kMalformed, "index size does not match its tile count");
   std::vector<TileEntry> entries(count);
-  uint64_t next_offset = kHeaderSize, vertices = 0, faces = 0;
+  uint64_t next_offset = header.header_size, vertices = 0, faces = 0;
   for (uint32_t i = 0; i < count; ++i) {
     TileEntry& e = entries[i];
     uint16_t codec = 0;

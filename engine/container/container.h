@@ -1,4 +1,5 @@
-// Container format v1 (.spz): the byte-level layout is specified in FORMAT.md next to this file.
+// Container format v1 and v2 (.spz): the byte-level layout is specified in FORMAT.md next to this file. v2 is v1
+// with a scalar-channel table after the fixed header; a container without scalar channels is written as v1.
 //
 //   header | tile chunk | tile chunk | ... | tile index | footer (magic last)
 //
@@ -22,14 +23,17 @@
 namespace scanpress {
 
 constexpr uint32_t kContainerVersion = 1;
-constexpr size_t kHeaderSize = 80;
+constexpr uint32_t kContainerVersionScalars = 2;  // v1 plus the scalar channels' table after the fixed header
+constexpr size_t kHeaderSize = 80;                // the fixed header (the whole header of v1)
+constexpr size_t kMaxHeaderSize = kHeaderSize + 1 + 255 * (2 + 255) + 4;
 constexpr size_t kFooterSize = 32;
 constexpr size_t kChunkHeaderSize = 36;
 constexpr size_t kIndexEntrySize = 56;
 constexpr uint32_t kMaxTiles = 1u << 24;
 
 struct ContainerHeader {
-  uint32_t version = kContainerVersion;
+  uint32_t version = kContainerVersion;  // v2 when the layout has scalar channels
+  uint32_t header_size = kHeaderSize;    // where the first chunk starts
   Grid grid;
   AttributeLayout layout;
   uint32_t tile_count = 0;
@@ -56,7 +60,11 @@ struct TileEntry {
 struct Footer {
   uint64_t index_offset = 0;
   uint64_t index_bytes = 0;
+  uint32_t version = kContainerVersion;  // the header's
 };
+
+// The layout's scalar channels can be written: at most 255, valid types and names, no name twice.
+Status checkScalarChannels(const AttributeLayout& layout);
 
 // Where the writer puts bytes: appended in order, plus one rewrite of the header at the end.
 class ByteSink {
@@ -111,6 +119,10 @@ class ContainerWriter {
 std::vector<uint8_t> serializeHeader(const ContainerHeader& header);
 
 // Parsers. `what` names the file in error messages. Offsets in messages are absolute file offsets.
+// The header's size from its first kHeaderSize bytes (magic, version and fixed part's checksum checked): a reader
+// reads that many bytes for parseHeader.
+Result<uint32_t> headerSizeOf(std::span<const uint8_t> fixed, const std::string& what);
+// The whole header (`bytes` may run past it).
 Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::string& what);
 Result<Footer> parseFooter(std::span<const uint8_t> last_bytes, uint64_t file_size, const std::string& what);
 Result<std::vector<TileEntry>> parseIndex(std::span<const uint8_t> bytes, const ContainerHeader& header,
