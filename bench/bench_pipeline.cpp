@@ -80,7 +80,8 @@ Measured encodeInChild(const std::string& input, int threads, uint64_t budget) {
 
 uint64_t triangleCount(const std::string& path) {
   struct Count : MeshSink {
-    Status vertices(std::span<const Vec3d>, std::span<const Vec3f>, std::span<const Rgba8>, uint8_t) override {
+    Status vertices(std::span<const Vec3d>, std::span<const Vec3f>, std::span<const Rgba8>, uint8_t,
+                    const ScalarChunk&) override {
       return Status::ok();
     }
     Status triangles(std::span<const Triangle>) override { return Status::ok(); }

@@ -214,8 +214,9 @@ class ChunkWriter : public MeshSink {
   ChunkWriter(FileSource& out, VertexTable& table, uint64_t run, std::function<void(const Mesh&)> survey)
       : out_(out), table_(table), run_(run), survey_(std::move(survey)) {}
 
-  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f>, std::span<const Rgba8> c,
-                  uint8_t channels) override {
+  // Scalar channels are not drawn or measured.
+  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f>, std::span<const Rgba8> c, uint8_t channels,
+                  const ScalarChunk&) override {
     if (!c.empty()) {
       out_.colors = true;
       out_.color_channels = std::max(out_.color_channels, channels);

@@ -40,12 +40,15 @@ QuantizedMesh cropToBox(const QuantizedMesh& q, const Grid& grid, const std::arr
   }
   std::vector<uint32_t> remap(q.positions.size(), UINT32_MAX);
   QuantizedMesh out;
+  const size_t stride = q.positions.empty() ? 0 : q.scalars.size() / q.positions.size();
   auto keep = [&](uint32_t v) {
     if (remap[v] == UINT32_MAX) {
       remap[v] = static_cast<uint32_t>(out.positions.size());
       out.positions.push_back(q.positions[v]);
       if (!q.normals.empty()) out.normals.push_back(q.normals[v]);
       if (!q.colors.empty()) out.colors.push_back(q.colors[v]);
+      out.scalars.insert(out.scalars.end(), q.scalars.begin() + ptrdiff_t(v * stride),
+                         q.scalars.begin() + ptrdiff_t((v + 1) * stride));
     }
     return remap[v];
   };
@@ -313,8 +316,17 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
                                                       ": --gltf-compression and --gltf-nodes are for glTF output "
                                                       "(.glb, .gltf)");
   result.tiles = static_cast<uint32_t>(chosen.size());
+  if (!scalarsWritten(settings.output))
+    for (const ScalarChannel& c : header.layout.scalars)
+      result.dropped.push_back({"vertex." + c.name, header.vertices});
   const uint64_t in_memory = inMemoryDecodeBytes(chosen);
   if (settings.memory_budget > 0 && in_memory > settings.memory_budget) {
+    if (header.layout.hasScalars() && scalarsWritten(settings.output))
+      return makeError(ErrorCode::kUnsupported,
+                       settings.input +
+                           ": the container has scalar channels, which decoding under a memory budget "
+                           "(tile batch by tile batch) does not write yet: raise --memory-budget, or "
+                           "decode to a format without them (.obj, .stl, .off drop them)");
     if (gltf)
       return makeError(ErrorCode::kLimitExceeded,
                        settings.output + ": glTF output is built in memory, about " + std::to_string(in_memory >> 20) +

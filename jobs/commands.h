@@ -52,6 +52,8 @@ struct DecodeResult {
   uint64_t level_bytes = 0;                     // payload bytes that level needs, over the decoded tiles
   uint16_t subset_index = 0, subset_count = 0;  // the container is a part (encode --subset): its tiles only
   bool streamed = false;                        // decoded tile batch by tile batch under the memory budget
+  // The container's scalar channels when the output format has no place for them (only PLY does): not silent.
+  std::vector<DroppedProperty> dropped;
 };
 
 // A tile's bounds in world units: the outer faces of the cells its vertices occupy (min x, y, z, max x, y, z).

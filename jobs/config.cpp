@@ -256,6 +256,7 @@ std::vector<std::string> knownConfigKeys() {
           "/codec/color_bits",
           "/codec/normals",
           "/codec/colors",
+          "/codec/scalars",
           "/codec/allow_degenerate",
           "/codec/grid",
           "/codec/tau",
@@ -351,6 +352,7 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     c.integer("color_bits", 1, 8, s.encode.color_bits);
     c.boolean("normals", s.encode.keep_normals);
     c.boolean("colors", s.encode.keep_colors);
+    c.boolean("scalars", s.encode.keep_scalars);
     c.boolean("allow_degenerate", s.encode.allow_degenerate);
     // prm's remeshing (engine/codecs/codec.h PrmOptions): the lattice spacing, a fraction of 2^bits, and tau.
     c.number("grid", 1e-6, 1, s.encode.codec_options.prm.grid);

@@ -75,13 +75,14 @@ class Stopwatch {
 class SurveySink : public MeshSink {
  public:
   explicit SurveySink(uint64_t keep_limit) : keep_limit_(keep_limit) {}
-  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c,
-                  uint8_t channels) override {
+  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c, uint8_t channels,
+                  const ScalarChunk& s) override {
     for (const auto& v : p) box.extend(v);
     vertex_count += p.size();
     has_normals |= !n.empty();
     if (!c.empty()) channels_ = std::max(channels_, channels);
-    if (kept()) SP_RETURN_IF_ERROR(collector_.vertices(p, n, c, channels));
+    if (scalar_channels.empty()) scalar_channels.assign(s.channels.begin(), s.channels.end());
+    if (kept()) SP_RETURN_IF_ERROR(collector_.vertices(p, n, c, channels, s));
     checkLimit();
     return Status::ok();
   }
@@ -119,12 +120,14 @@ class SurveySink : public MeshSink {
   BoundingBox box;
   uint64_t vertex_count = 0, triangle_count = 0;
   bool has_normals = false;
+  std::vector<ScalarChannel> scalar_channels;  // the file's
 
  private:
   void checkLimit() {
     if (dropped_) return;
     const uint64_t bytes = mesh_.positions.size() * sizeof(Vec3d) + mesh_.normals.size() * sizeof(Vec3f) +
-                           mesh_.colors.size() * sizeof(Rgba8) + mesh_.triangles.size() * sizeof(Triangle);
+                           mesh_.colors.size() * sizeof(Rgba8) + mesh_.triangles.size() * sizeof(Triangle) +
+                           mesh_.scalars.size() * sizeof(uint32_t);
     if (bytes > keep_limit_) {
       dropped_ = true;
       mesh_ = Mesh();
@@ -144,7 +147,8 @@ class SurveySink : public MeshSink {
 class UsedBoxSink : public MeshSink {
  public:
   UsedBoxSink(const std::vector<uint64_t>& used, uint64_t vertex_count) : used_(used), vertex_count_(vertex_count) {}
-  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f>, std::span<const Rgba8>, uint8_t) override {
+  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f>, std::span<const Rgba8>, uint8_t,
+                  const ScalarChunk&) override {
     for (const Vec3d& v : p) {
       if (next_ >> 6 < used_.size() && (used_[next_ >> 6] >> (next_ & 63) & 1)) box.extend(v);
       ++next_;
@@ -177,9 +181,21 @@ class IngestSink : public MeshSink {
              TriangleSpill* spill, bool points)
       : grid_(grid), layout_(layout), store_(store), hist_(hist), spill_(spill), points_(points) {}
   static Vec3d originalOf(const VertexRecord& r) { return {r.original[0], r.original[1], r.original[2]}; }
-  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c, uint8_t) override {
+  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c, uint8_t,
+                  const ScalarChunk& s) override {
     const OctNormal no_normal = encodeOctahedral({0, 0, 0}, layout_.hasNormals() ? layout_.normal_bits : 8);
+    if (layout_.hasScalars() && picks_.empty()) SP_RETURN_IF_ERROR(pickScalars(s.channels));
+    size_t in_stride = 0;
+    for (const ScalarChannel& ch : s.channels) in_stride += size_t(scalarTypeWords(ch.type));
+    if (layout_.hasScalars() && s.values.size() != p.size() * in_stride)
+      return makeError(ErrorCode::kInternal, "scalar values do not match the vertices");
     for (size_t i = 0; i < p.size(); ++i) {
+      if (layout_.hasScalars()) {
+        row_.clear();
+        for (const auto& [offset, words] : picks_)
+          for (size_t w = 0; w < words; ++w) row_.push_back(s.values[i * in_stride + offset + w]);
+        store_.appendScalars(row_);
+      }
       VertexRecord r;
       r.q = grid_.quantize(p[i]);
       for (int a = 0; a < 3; ++a) r.original[a] = static_cast<float>(p[i][a] - grid_.origin[a]);
@@ -225,6 +241,24 @@ class IngestSink : public MeshSink {
     return Status::ok();
   }
 
+  // Where each of the layout's scalar channels sits in the reader's rows (by name and type).
+  Status pickScalars(std::span<const ScalarChannel> channels) {
+    for (const ScalarChannel& want : layout_.scalars) {
+      size_t offset = 0;
+      bool found = false;
+      for (const ScalarChannel& c : channels) {
+        if (c == want) {
+          picks_.push_back({offset, size_t(scalarTypeWords(c.type))});
+          found = true;
+          break;
+        }
+        offset += size_t(scalarTypeWords(c.type));
+      }
+      if (!found) return makeError(ErrorCode::kIo, "scalar channel '" + want.name + "' missing from the second read");
+    }
+    return Status::ok();
+  }
+
   QuantizeStats stats;
   uint64_t input_degenerate = 0;  // of the degenerate triangles, those with a repeated index (no grid keeps them)
   uint64_t referenced = 0;        // vertices encoded: used by a kept triangle, or points
@@ -238,6 +272,8 @@ class IngestSink : public MeshSink {
   TileHistogram& hist_;
   TriangleSpill* spill_;
   bool points_;
+  std::vector<std::pair<size_t, size_t>> picks_;  // (word offset in the reader's row, words) per layout channel
+  std::vector<uint32_t> row_;
 };
 
 // Out of core, the tile pass's source of the kept triangles (or a point cloud's points, as (v, v, v)), in input
@@ -248,7 +284,8 @@ class KeptTriangles : public MeshSink {
  public:
   KeptTriangles(VertexStore& store, bool points, std::function<Status(const SpilledTriangle&)> fn)
       : store_(store), points_(points), fn_(std::move(fn)) {}
-  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f>, std::span<const Rgba8>, uint8_t) override {
+  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f>, std::span<const Rgba8>, uint8_t,
+                  const ScalarChunk&) override {
     if (!points_) return Status::ok();
     VertexRecord r;
     for (size_t i = 0; i < p.size(); ++i, ++next_vertex_) {
@@ -284,10 +321,14 @@ class KeptTriangles : public MeshSink {
 Status replay(const Mesh& m, MeshSink& sink, size_t chunk) {
   for (size_t i = 0; i < m.positions.size(); i += chunk) {
     const size_t n = std::min(chunk, m.positions.size() - i);
+    size_t stride = 0;
+    for (const ScalarChannel& c : m.scalar_channels) stride += size_t(scalarTypeWords(c.type));
+    const ScalarChunk scalars{m.scalar_channels, stride ? std::span(m.scalars).subspan(i * stride, n * stride)
+                                                        : std::span<const uint32_t>()};
     SP_RETURN_IF_ERROR(sink.vertices(std::span(m.positions).subspan(i, n),
                                      m.normals.empty() ? std::span<const Vec3f>() : std::span(m.normals).subspan(i, n),
                                      m.colors.empty() ? std::span<const Rgba8>() : std::span(m.colors).subspan(i, n),
-                                     m.color_channels));
+                                     m.color_channels, scalars));
   }
   for (size_t i = 0; i < m.triangles.size(); i += chunk)
     SP_RETURN_IF_ERROR(sink.triangles(std::span(m.triangles).subspan(i, std::min(chunk, m.triangles.size() - i))));
@@ -325,6 +366,7 @@ class ScanEncoder {
       result_.layout.color_channels = survey_.colorChannels();
       result_.layout.color_bits = static_cast<uint8_t>(s_.color_bits);
     }
+    if (s_.keep_scalars && codecCarriesScalars()) result_.layout.scalars = survey_.scalar_channels;
     result_.point_cloud = survey_.triangle_count == 0 && survey_.vertex_count > 0;
     SP_ASSIGN_OR_RETURN(const BoundingBox box, gridBox());
     auto grid = makeGrid(box, s_.bits);
@@ -359,8 +401,11 @@ class ScanEncoder {
     const uint64_t n_vertices = survey_.vertex_count, n_triangles = survey_.triangle_count;
     // A point cloud's points go through the spill and the bins as triangles (v, v, v) at their own positions.
     const uint64_t n_items = result_.point_cloud ? n_vertices : n_triangles;
+    // Scalar channels stay in memory (4 bytes per value), whatever the budget: counted here so that the rest goes
+    // out of core sooner.
     const uint64_t in_memory_bytes = n_vertices * sizeof(VertexRecord) +
-                                     n_items * (sizeof(SpilledTriangle) + sizeof(Triangle));
+                                     n_items * (sizeof(SpilledTriangle) + sizeof(Triangle)) +
+                                     n_vertices * uint64_t(result_.layout.scalarStride()) * sizeof(uint32_t);
     storage_budget_ = s_.memory_budget > 0 ? s_.memory_budget : kAutoStorageBudget;
     in_memory_ = in_memory_bytes <= storage_budget_ / 2;
     result_.out_of_core = !in_memory_;
@@ -548,17 +593,36 @@ class ScanEncoder {
       result_.dropped_on_request.push_back({"vertex normals", survey_.vertex_count});
     if (!s_.keep_colors && survey_.colorChannels())
       result_.dropped_on_request.push_back({"vertex colors", survey_.vertex_count});
+    for (const ScalarChannel& c : survey_.scalar_channels) {
+      if (!s_.keep_scalars) result_.dropped_on_request.push_back({"vertex." + c.name, survey_.vertex_count});
+      else if (!codecCarriesScalars())
+        result_.read.dropped.push_back({"vertex." + c.name + " (" + scalarsDroppedBy() + " carries no scalar channels)",
+                                        survey_.vertex_count});
+    }
     if (s_.strict && !result_.read.dropped.empty())
       return makeError(ErrorCode::kUnsupported,
                        s_.input + ": strict: the container would not keep " + describeDropped(result_.read.dropped) +
-                           " (scanpress keeps positions, triangles, normals and colors; encode without "
-                           "--strict or /strict to drop them)");
+                           " (scanpress keeps positions, triangles, normals, colors and, with store, kdtree, octree "
+                           "and edgebreaker, per-vertex scalars; encode without --strict or /strict to drop them)");
     return Status::ok();
   }
 
   EncodeResult& result() { return result_; }
 
  private:
+  // The codecs that code scalar channels (`auto` is one of pm and edgebreaker here; its search keeps edgebreaker's
+  // result when pm's dropped scalars, jobs/targets.cpp), and no remesh stage (which makes new vertices).
+  bool codecCarriesScalars() const {
+    for (const StageSpec& st : s_.stages)
+      if (st.kind == StageKind::kRemesh) return false;
+    return codec_.id != CodecId::kPm && codec_.id != CodecId::kPrm;
+  }
+  std::string scalarsDroppedBy() const {
+    for (const StageSpec& st : s_.stages)
+      if (st.kind == StageKind::kRemesh) return "the remesh stage";
+    return "codec " + std::string(codec_.name);
+  }
+
   // Fails (exit 2) when quantization made more than kMaxDegenerateShare of the triangles degenerate: the grid is
   // too coarse for the scan (or an outlying vertex that a triangle uses stretched it), and the archive would
   // silently lose its surface.

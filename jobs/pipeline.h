@@ -69,6 +69,9 @@ struct EncodeSettings {
   int color_bits = 8;  // levels per color channel: 2^color_bits (8: exact)
   bool keep_normals = true;
   bool keep_colors = true;
+  // Per-vertex scalar properties (a PLY's confidence, intensity, quality, ...), kept losslessly at their type by
+  // the codecs that carry them (store, kdtree, octree, edgebreaker); pm and prm drop them, and the report says so.
+  bool keep_scalars = true;
   bool allow_degenerate = false;     // quantization may drop more than kMaxDegenerateShare of the triangles
   uint64_t tile_triangles = 131072;  // target triangles per tile (tiles adapt to density around it)
   int threads = 0;                   // 0: all cores
@@ -156,7 +159,7 @@ struct TargetReport {
 
 struct EncodeResult {
   ReadStats read;  // read.dropped: what the input holds that scanpress does not keep (unsupported)
-  std::vector<DroppedProperty> dropped_on_request;  // normals and colors the settings dropped
+  std::vector<DroppedProperty> dropped_on_request;  // normals, colors and scalars the settings dropped
   Grid grid;
   AttributeLayout layout;
   QuantizeStats quantize;

@@ -16,7 +16,8 @@ namespace scanpress {
 namespace {
 
 // Bumped whenever a message's layout changes.
-constexpr uint32_t kWireVersion = 4;  // 2: the layout's color bits; 3: the remesh stage's options; 4: prm's
+constexpr uint32_t kWireVersion = 5;  // 2: the layout's color bits; 3: the remesh stage's options; 4: prm's
+// options; 5: scalar channels (the layout's, and each tile's values)
 
 // The wire spells out every field of these structs: a new field must be added to the messages below too (this
 // fails to compile until its size is updated here).
@@ -170,6 +171,18 @@ Status readScan(std::span<const uint8_t> message, EncodeSettings& s, TileScanFac
   SP_RETURN_IF_ERROR(r.u8(f.layout.normal_bits));
   SP_RETURN_IF_ERROR(r.u8(f.layout.color_channels));
   SP_RETURN_IF_ERROR(r.u8(f.layout.color_bits));
+  uint8_t scalar_count = 0;
+  SP_RETURN_IF_ERROR(r.u8(scalar_count));
+  for (uint8_t i = 0; i < scalar_count; ++i) {
+    uint8_t type = 0;
+    SP_RETURN_IF_ERROR(r.u8(type));
+    if (!validScalarType(type)) return r.error(ErrorCode::kMalformed, "scalar channel type out of range");
+    ScalarChannel c;
+    c.type = static_cast<ScalarType>(type);
+    SP_RETURN_IF_ERROR(getString(r, c.name));
+    if (!validScalarName(c.name)) return r.error(ErrorCode::kMalformed, "scalar channel name");
+    f.layout.scalars.push_back(std::move(c));
+  }
   SP_RETURN_IF_ERROR(toBool(r, f.measured));
   SP_RETURN_IF_ERROR(r.f64(f.diagonal));
   SP_RETURN_IF_ERROR(r.f64(f.density));
@@ -228,6 +241,11 @@ std::vector<uint8_t> scanMessage(const EncodeSettings& s, const TileScanFacts& f
   w.u8(f.layout.normal_bits);
   w.u8(f.layout.color_channels);
   w.u8(f.layout.color_bits);
+  w.u8(static_cast<uint8_t>(f.layout.scalars.size()));
+  for (const ScalarChannel& c : f.layout.scalars) {
+    w.u8(static_cast<uint8_t>(c.type));
+    putString(w, c.name);
+  }
   w.u8(f.measured);
   w.f64(f.diagonal);
   w.f64(f.density);
@@ -243,6 +261,7 @@ std::vector<uint8_t> tileMessage(const TileMesh& tm, const std::vector<Vec3d>& o
   putArray(w, tm.mesh.positions);
   putArray(w, tm.mesh.normals);
   putArray(w, tm.mesh.colors);
+  putArray(w, tm.mesh.scalars);
   putArray(w, tm.mesh.triangles);
   putArray(w, tm.local_to_global);
   putArray(w, tm.border);
@@ -390,6 +409,7 @@ std::vector<uint8_t> TileServer::tile(std::span<const uint8_t> message) const {
     if (status.isOk()) status = getArray(r, tm.mesh.positions);
     if (status.isOk()) status = getArray(r, tm.mesh.normals);
     if (status.isOk()) status = getArray(r, tm.mesh.colors);
+    if (status.isOk()) status = getArray(r, tm.mesh.scalars);
     if (status.isOk()) status = getArray(r, tm.mesh.triangles);
     if (status.isOk()) status = getArray(r, tm.local_to_global);
     if (status.isOk()) status = getArray(r, tm.border);

@@ -75,10 +75,13 @@ const json kInfoCounts = {
      "by the distinct vertices"}};
 
 json layoutJson(const AttributeLayout& l) {
+  json scalars = json::array();
+  for (const ScalarChannel& c : l.scalars) scalars.push_back({{"name", c.name}, {"type", scalarTypeName(c.type)}});
   return {{"normals", l.hasNormals()},
           {"normal_bits", l.normal_bits},
           {"color_channels", l.color_channels},
-          {"color_bits", l.hasColors() ? l.color_bits : 0}};
+          {"color_bits", l.hasColors() ? l.color_bits : 0},
+          {"scalars", std::move(scalars)}};
 }
 
 // The target, what the search chose and tried, and whether the target was met.
@@ -406,7 +409,14 @@ std::string containerInfoText(const ContainerFile& file) {
                                     std::to_string(h.layout.color_bits) + " bits"
                               : "no")
      << "\n"
-     << "  tiles:     " << h.tile_count << "\n";
+     << "  scalars:   " <<
+      [&] {
+    std::string s;
+    for (const ScalarChannel& c : h.layout.scalars)
+      s += (s.empty() ? "" : ", ") + c.name + " (" + scalarTypeName(c.type) + ")";
+    return s.empty() ? std::string("no") : s;
+  }() << "\n"
+      << "  tiles:     " << h.tile_count << "\n";
   for (const auto& t : file.tiles()) {
     os << "    tile " << t.tile_id << ": " << codecName(t.codec) << " v" << t.codec_version << ", " << t.vertices
        << " vertices, " << t.faces << " faces, " << t.chunk_bytes << " bytes";

@@ -198,6 +198,16 @@ Status VertexStore::finalize() {
   return Status::ok();
 }
 
+Status VertexStore::readScalars(std::span<const uint32_t> ids, size_t stride, ScalarValues& out) const {
+  if (scalars_.size() != size_ * stride) return makeError(ErrorCode::kInternal, "vertex store: scalars missing");
+  out.resize(ids.size() * stride);
+  for (size_t k = 0; k < ids.size(); ++k) {
+    if (ids[k] >= size_) return makeError(ErrorCode::kInternal, "vertex store index out of range");
+    std::copy_n(scalars_.begin() + ptrdiff_t(ids[k] * stride), stride, out.begin() + ptrdiff_t(k * stride));
+  }
+  return Status::ok();
+}
+
 Status VertexStore::read(std::span<const uint32_t> ids, std::vector<VertexRecord>& out) const {
   out.resize(ids.size());
   if (!file_.isOpen()) {

@@ -61,10 +61,13 @@ class VertexStore : public VertexSource {
   Status get(uint64_t i, VertexRecord& r);
   Status bumpValence(uint64_t i, bool& first_use);
   Status setNormal(uint64_t i, const OctNormal& n);
+  // The next vertex's scalar values (its record is appended after them). Held in memory, 4 bytes per value.
+  void appendScalars(std::span<const uint32_t> row) { scalars_.insert(scalars_.end(), row.begin(), row.end()); }
   // Ends filling: writes dirty blocks if anything was ever spilled, then frees the cache.
   Status finalize();
   // Records for sorted, unique ids (thread-safe after finalize).
   Status read(std::span<const uint32_t> sorted_ids, std::vector<VertexRecord>& out) const override;
+  Status readScalars(std::span<const uint32_t> sorted_ids, size_t stride, ScalarValues& out) const override;
   uint64_t size() const { return size_; }
 
  private:
@@ -98,6 +101,7 @@ class VertexStore : public VertexSource {
   bool finalized_ = false;
   uint64_t last_block_ = UINT64_MAX;
   size_t last_slot_ = 0;
+  ScalarValues scalars_;
 };
 
 // Triangles with their centroid (spatial/tile_builder.h), in input order, between the ingest pass and binning.

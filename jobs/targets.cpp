@@ -402,6 +402,9 @@ Result<EncodeResult> encodeToTargetAuto(const EncodeSettings& settings, Progress
   }
   auto metOf = [](const Candidate& c) { return c.result.target && c.result.target->met; };
   auto better = [&](const Candidate& a, const Candidate& b) {  // a is better than b
+    // pm drops a scan's scalar channels (the report lists them): the codec that keeps them wins whatever the sizes.
+    if (a.result.layout.scalars.size() != b.result.layout.scalars.size())
+      return a.result.layout.scalars.size() > b.result.layout.scalars.size();
     if (metOf(a) != metOf(b)) return metOf(a);
     if (settings.target.kind == TargetKind::kMaxError) return a.result.bytes < b.result.bytes;
     return errorOf(a.result, ErrorMetric::kRms) < errorOf(b.result, ErrorMetric::kRms);

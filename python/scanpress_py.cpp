@@ -41,8 +41,42 @@ T unwrap(Result<T> r) {
   return std::move(r).value();
 }
 
+// One scalar channel's values as a numpy array of its type (the bit patterns as they are).
+template <typename T>
+py::array channelArray(const Mesh& m, size_t offset, size_t stride) {
+  py::array_t<T> a(py::ssize_t(m.positions.size()));
+  T* out = a.mutable_data();
+  for (size_t i = 0; i < m.positions.size(); ++i) {
+    const uint64_t bits = uint64_t(m.scalars[i * stride + offset]) |
+                          (sizeof(T) == 8 ? uint64_t(m.scalars[i * stride + offset + 1]) << 32 : 0);
+    std::memcpy(&out[i], &bits, sizeof(T));  // little-endian: the low bytes
+  }
+  return a;
+}
+
 py::dict meshDict(const Mesh& m) {
   py::dict d;
+  // Scalar channels (a PLY's confidence, intensity, ...): name -> array of the channel's type.
+  py::dict scalars;
+  size_t stride = 0;
+  for (const ScalarChannel& c : m.scalar_channels) stride += size_t(scalarTypeWords(c.type));
+  size_t offset = 0;
+  for (const ScalarChannel& c : m.scalar_channels) {
+    py::array a;
+    switch (c.type) {
+      case ScalarType::kInt8: a = channelArray<int8_t>(m, offset, stride); break;
+      case ScalarType::kUint8: a = channelArray<uint8_t>(m, offset, stride); break;
+      case ScalarType::kInt16: a = channelArray<int16_t>(m, offset, stride); break;
+      case ScalarType::kUint16: a = channelArray<uint16_t>(m, offset, stride); break;
+      case ScalarType::kInt32: a = channelArray<int32_t>(m, offset, stride); break;
+      case ScalarType::kUint32: a = channelArray<uint32_t>(m, offset, stride); break;
+      case ScalarType::kFloat32: a = channelArray<float>(m, offset, stride); break;
+      case ScalarType::kFloat64: a = channelArray<double>(m, offset, stride); break;
+    }
+    scalars[py::str(c.name)] = a;
+    offset += size_t(scalarTypeWords(c.type));
+  }
+  d["scalars"] = scalars;
   py::array_t<double> pos({py::ssize_t(m.positions.size()), py::ssize_t(3)});
   std::memcpy(pos.mutable_data(), m.positions.data(), m.positions.size() * sizeof(Vec3d));
   py::array_t<uint32_t> faces({py::ssize_t(m.triangles.size()), py::ssize_t(3)});
@@ -186,7 +220,7 @@ PYBIND11_MODULE(scanpress, m) {
   m.def("read", &readContainer, py::arg("path"), py::kw_only(), py::arg("tiles") = py::none(),
         py::arg("level") = py::none(), py::arg("box") = py::none(), py::arg("crop") = false,
         "Decodes a container into a dict of numpy arrays: positions (N, 3) float64, faces (M, 3) uint32, normals "
-        "(N, 3) float32 or None, colors (N, 3|4) uint8 or None, uvs None; `tiles` a list of tile ids, `box` "
+        "(N, 3) float32 or None, colors (N, 3|4) uint8 or None, uvs None, scalars a dict of (N,) arrays by name at their type; `tiles` a list of tile ids, `box` "
         "(xmin, ymin, zmin, xmax, ymax, zmax) in world units (`crop` keeps only the triangles inside), `level` a "
         "progressive codec's level.");
   m.def("info", &info, py::arg("path"),

@@ -39,6 +39,10 @@ Status buildTileMesh(uint32_t tile, std::span<const Triangle> tris, const Vertex
   for (size_t i = 0; i < order.size(); ++i) sorted[i] = order[i].first;
   std::vector<VertexRecord> records;
   SP_RETURN_IF_ERROR(vertices.read(sorted, records));
+  const size_t stride = size_t(layout.scalarStride());
+  ScalarValues rows;
+  if (stride) SP_RETURN_IF_ERROR(vertices.readScalars(sorted, stride, rows));
+  m.scalars.resize(ids.size() * stride);
   out.tile_id = tile;
   m.positions.resize(ids.size());
   if (layout.hasNormals()) m.normals.resize(ids.size());
@@ -52,6 +56,7 @@ Status buildTileMesh(uint32_t tile, std::span<const Triangle> tris, const Vertex
     m.positions[local] = r.q;
     if (layout.hasNormals()) m.normals[local] = r.normal;
     if (layout.hasColors()) m.colors[local] = r.color;
+    std::copy_n(rows.begin() + ptrdiff_t(i * stride), stride, m.scalars.begin() + ptrdiff_t(local * stride));
     out.border[local] = local_valence[local] < r.valence ? 1 : 0;
   }
   return Status::ok();

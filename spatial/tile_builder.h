@@ -37,6 +37,8 @@ class VertexSource {
   virtual ~VertexSource() = default;
   // Records for sorted, unique global ids, in that order.
   virtual Status read(std::span<const uint32_t> sorted_ids, std::vector<VertexRecord>& out) const = 0;
+  // Their scalar values (the layout's scalarStride() words each), in that order.
+  virtual Status readScalars(std::span<const uint32_t> sorted_ids, size_t stride, ScalarValues& out) const = 0;
 };
 
 // A triangle (global vertex ids) with its centroid on the grid, between quantization and binning.

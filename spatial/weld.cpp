@@ -14,13 +14,16 @@ size_t WeldKeyHash::operator()(const WeldKey& k) const {
   h ^= (h >> 29) ^ (k.p[1] * 0xC2B2AE3D27D4EB4Full);
   h ^= (h >> 31) ^ (k.p[2] * 0x165667B19E3779F9ull);
   h ^= (h >> 27) ^ ((a << 32 | b) * 0x27D4EB2F165667C5ull);
+  for (size_t i = 0; i < k.stride; ++i) h = (h ^ k.s[i]) * 0x100000001B3ull;
   return static_cast<size_t>(h ^ (h >> 32));
 }
 
 WeldKey weldKey(const QuantizedMesh& mesh, size_t v, WeldBy by) {
   const bool attributes = by == WeldBy::kPositionAndAttributes;
+  const size_t stride = attributes && !mesh.positions.empty() ? mesh.scalars.size() / mesh.positions.size() : 0;
   return WeldKey{mesh.positions[v], !attributes || mesh.normals.empty() ? OctNormal{0, 0} : mesh.normals[v],
-                 !attributes || mesh.colors.empty() ? Rgba8{0, 0, 0, 0} : mesh.colors[v]};
+                 !attributes || mesh.colors.empty() ? Rgba8{0, 0, 0, 0} : mesh.colors[v],
+                 stride ? mesh.scalars.data() + v * stride : nullptr, stride};
 }
 
 QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by, std::vector<uint32_t>* owner) {
@@ -57,6 +60,9 @@ QuantizedMesh weldTiles(std::span<const QuantizedMesh> tiles, WeldBy by, std::ve
       if (owner) owner->push_back(t);
       if (!tile.normals.empty()) out.normals.push_back(tile.normals[v]);
       if (!tile.colors.empty()) out.colors.push_back(tile.colors[v]);
+      if (const size_t stride = tile.scalars.size() / tile.positions.size())
+        out.scalars.insert(out.scalars.end(), tile.scalars.begin() + ptrdiff_t(v * stride),
+                           tile.scalars.begin() + ptrdiff_t((v + 1) * stride));
     }
     for (const Triangle& tri : tile.triangles) out.triangles.push_back({remap[tri[0]], remap[tri[1]], remap[tri[2]]});
   }

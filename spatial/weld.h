@@ -10,6 +10,7 @@
 // inside one tile are left as the codec returned them: welding never changes what one tile decodes to.
 #pragma once
 
+#include <algorithm>
 #include <span>
 
 #include "engine/mesh.h"
@@ -18,12 +19,17 @@ namespace scanpress {
 
 enum class WeldBy { kPositionAndAttributes, kPosition };
 
-// A vertex's identity for welding: position and attributes (zero attributes when welding by position).
+// A vertex's identity for welding: position and attributes (zero attributes when welding by position). `s`: the
+// vertex's scalar values (`stride` words, in its tile), compared word for word.
 struct WeldKey {
   Vec3u p;
   OctNormal n;
   Rgba8 c;
-  bool operator==(const WeldKey& o) const { return p == o.p && n == o.n && c == o.c; }
+  const uint32_t* s = nullptr;
+  size_t stride = 0;
+  bool operator==(const WeldKey& o) const {
+    return p == o.p && n == o.n && c == o.c && stride == o.stride && (stride == 0 || std::equal(s, s + stride, o.s));
+  }
 };
 
 struct WeldKeyHash {

@@ -30,6 +30,7 @@ struct SweepContainer {
 inline QuantizedMesh everyNthTriangle(const QuantizedMesh& m, size_t step, size_t first) {
   QuantizedMesh out;
   std::vector<uint32_t> remap(m.positions.size(), UINT32_MAX);
+  const size_t stride = m.positions.empty() ? 0 : m.scalars.size() / m.positions.size();
   for (size_t t = first; t < m.triangles.size(); t += step) {
     Triangle tri{};
     for (int c = 0; c < 3; ++c) {
@@ -39,6 +40,8 @@ inline QuantizedMesh everyNthTriangle(const QuantizedMesh& m, size_t step, size_
         out.positions.push_back(m.positions[v]);
         if (!m.normals.empty()) out.normals.push_back(m.normals[v]);
         if (!m.colors.empty()) out.colors.push_back(m.colors[v]);
+        out.scalars.insert(out.scalars.end(), m.scalars.begin() + ptrdiff_t(v * stride),
+                           m.scalars.begin() + ptrdiff_t((v + 1) * stride));
       }
       tri[c] = remap[v];
     }
@@ -48,7 +51,8 @@ inline QuantizedMesh everyNthTriangle(const QuantizedMesh& m, size_t step, size_
 }
 
 // Three tiles (an icosphere of 80 triangles and two smaller pieces of it) at 10 grid bits, for every codec,
-// without attributes and with 8-bit normals and RGBA colors: 6 containers of a few hundred bytes each.
+// without attributes and with 8-bit normals and RGBA colors, and for store, kdtree and edgebreaker also with two
+// scalar channels (a float and a uchar: container version 2): containers of a few hundred bytes each.
 inline std::vector<SweepContainer> sweepContainers() {
   Mesh m = icosphere(1);
   for (size_t i = 0; i < m.positions.size(); ++i) {
@@ -57,15 +61,29 @@ inline std::vector<SweepContainer> sweepContainers() {
     m.colors.push_back({static_cast<uint8_t>(37 * i), static_cast<uint8_t>(11 * i), 200, 255});
   }
   m.color_channels = 4;
+  m.scalar_channels = {{"confidence", ScalarType::kFloat32}, {"q", ScalarType::kUint8}};
+  for (size_t i = 0; i < m.positions.size(); ++i) {
+    const float f = static_cast<float>(0.5 + 0.3 * m.positions[i][0]);
+    uint32_t bits = 0;
+    std::memcpy(&bits, &f, 4);
+    m.scalars.push_back(bits);
+    m.scalars.push_back(static_cast<uint32_t>((7 * i) & 255));
+  }
   const Grid grid = makeGrid(boundingBox(m), 10).value();
+  AttributeLayout scalars{8, 4};
+  scalars.scalars = m.scalar_channels;
   std::vector<SweepContainer> out;
   for (const CodecInfo& codec : allCodecs()) {
-    for (const AttributeLayout& layout : {AttributeLayout{0, 0}, AttributeLayout{8, 4}}) {
+    const bool carries = codec.id == CodecId::kStore || codec.id == CodecId::kKdtree ||
+                         codec.id == CodecId::kEdgebreaker;
+    for (const AttributeLayout& layout : {AttributeLayout{0, 0}, AttributeLayout{8, 4}, scalars}) {
+      if (layout.hasScalars() && !carries) continue;
       const QuantizedMesh q = quantizeMesh(m, grid, layout, nullptr).value();
       const std::vector<QuantizedMesh> tiles{q, everyNthTriangle(q, 3, 0), everyNthTriangle(q, 7, 2)};
       SweepContainer c;
       c.progressive = codec.progressive();
-      c.name = std::string(codec.name) + (layout.hasNormals() ? "+normals+colors" : "");
+      c.name = std::string(codec.name) + (layout.hasNormals() ? "+normals+colors" : "") +
+               (layout.hasScalars() ? "+scalars" : "");
       c.bytes = encodeContainer(grid, layout, codec, tiles).value();
       out.push_back(std::move(c));
     }
@@ -193,6 +211,10 @@ inline void forEachMutation(const std::vector<uint8_t>& base, Family family, uin
           edit([&](auto& x) { put<uint64_t>(x, at, v); });
       }
       for (uint32_t v : {1u, 0xFFFFFFFFu}) edit([&](auto& x) { put<uint32_t>(x, 72, v); });
+      // Version 2: every byte of the scalar-channel table set to edge values (count, types, name lengths, names).
+      const uint32_t header_size = get<uint32_t>(base, 12);
+      for (uint64_t at = kHeaderSize; at + 4 < header_size; ++at)
+        for (int v : {0, 1, 7, 8, 9, 32, 255}) edit([&](auto& x) { x[at] = static_cast<uint8_t>(v); });
       return;
     }
     case Family::kIndexEdit: {

@@ -26,10 +26,12 @@ void put(std::string& e, char separator, T value) {
 class RecordingSink : public MeshSink {
  public:
   explicit RecordingSink(int fail_at = -1, bool throw_instead = false) : fail_at_(fail_at), throw_(throw_instead) {}
-  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c,
-                  uint8_t channels) override {
+  Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c, uint8_t channels,
+                  const ScalarChunk& s) override {
     std::string e("v");
-    for (size_t k : {p.size(), n.size(), c.size(), size_t(channels)}) put(e, '/', k);
+    for (size_t k : {p.size(), n.size(), c.size(), size_t(channels), s.channels.size(), s.values.size()})
+      put(e, '/', k);
+    for (uint32_t w : s.values) put(e, '%', w);
     for (const Vec3d& v : p)
       for (double x : v) put(e, ':', x);
     for (const Vec3f& v : n) put(e, ';', v[2]);

@@ -37,6 +37,7 @@ Mesh bunny() {
 Mesh bunnyWithStray() {
   Mesh m = bunny();
   m.positions.push_back({1000, 1000, 1000});
+  m.scalars.resize(m.scalars.size() + m.scalars.size() / (m.positions.size() - 1), 0);  // its confidence and intensity
   return m;
 }
 

@@ -8,6 +8,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <limits>
 #include <map>
 #include <random>
@@ -27,8 +28,8 @@ using hierarchy::scalarFromOrdered;
 using hierarchy::scalarOrdered;
 
 const std::vector<ScalarChannel> kEveryType = {
-    {"c_int8", ScalarType::kInt8},     {"quality", ScalarType::kUint8},   {"c_int16", ScalarType::kInt16},
-    {"c_uint16", ScalarType::kUint16}, {"c_int32", ScalarType::kInt32},   {"flags", ScalarType::kUint32},
+    {"c_int8", ScalarType::kInt8},        {"quality", ScalarType::kUint8},    {"c_int16", ScalarType::kInt16},
+    {"c_uint16", ScalarType::kUint16},    {"c_int32", ScalarType::kInt32},    {"flags", ScalarType::kUint32},
     {"confidence", ScalarType::kFloat32}, {"intensity", ScalarType::kFloat64}};
 
 uint32_t floatBits(float f) { return std::bit_cast<uint32_t>(f); }
@@ -41,10 +42,10 @@ std::vector<std::array<uint32_t, 2>> specials(ScalarType t) {
   const auto add = [&](uint64_t b) { out.push_back({uint32_t(b), uint32_t(b >> 32)}); };
   switch (t) {
     case ScalarType::kFloat32:
-      for (float f : {0.f, -0.f, 1.f, -1.f, std::numeric_limits<float>::infinity(),
-                      -std::numeric_limits<float>::infinity(), std::numeric_limits<float>::denorm_min(),
-                      -std::numeric_limits<float>::denorm_min(), std::numeric_limits<float>::max(),
-                      std::numeric_limits<float>::lowest()})
+      for (float f :
+           {0.f, -0.f, 1.f, -1.f, std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
+            std::numeric_limits<float>::denorm_min(), -std::numeric_limits<float>::denorm_min(),
+            std::numeric_limits<float>::max(), std::numeric_limits<float>::lowest()})
         add(floatBits(f));
       add(0x7FC00001u), add(0xFFFFFFFFu), add(0x7F800001u);  // NaNs with payloads
       break;
@@ -86,8 +87,9 @@ TEST(ScalarChannels, OrderedIntegersRoundTripEveryBitPatternInOrder) {
     }
   }
   // Floats: the ordered integers follow the values (and -0 sits just below +0).
-  std::vector<float> fs = {-std::numeric_limits<float>::infinity(), -3.5f, -1.f, -1e-30f, -0.f, 0.f, 1e-30f,
-                           0.25f, 1.f, 7.f, std::numeric_limits<float>::max()};
+  std::vector<float> fs = {
+      -std::numeric_limits<float>::infinity(), -3.5f, -1.f, -1e-30f, -0.f, 0.f, 1e-30f, 0.25f, 1.f, 7.f,
+      std::numeric_limits<float>::max()};
   for (size_t i = 1; i < fs.size(); ++i) {
     const uint32_t a = floatBits(fs[i - 1]), b = floatBits(fs[i]);
     EXPECT_LT(scalarOrdered(ScalarType::kFloat32, &a), scalarOrdered(ScalarType::kFloat32, &b)) << fs[i];
@@ -96,8 +98,8 @@ TEST(ScalarChannels, OrderedIntegersRoundTripEveryBitPatternInOrder) {
 
 // A sphere with one channel of each type (smooth fields, noise in the low bits, and every special value), twins at
 // one position that differ in their scalars alone (kept apart), and an isolated vertex.
-QuantizedMesh scalarSphere(const AttributeLayout& layout, uint32_t seed) {
-  const Mesh sphere = icosphere(4);
+QuantizedMesh scalarSphere(const AttributeLayout& layout, uint32_t seed, int levels = 4) {
+  const Mesh sphere = icosphere(levels);
   const Grid grid = *makeGrid(boundingBox(sphere), 12);
   QuantizedMesh q = *quantizeMesh(sphere, grid, {}, nullptr);
   std::mt19937_64 rng(seed);
@@ -123,7 +125,8 @@ QuantizedMesh scalarSphere(const AttributeLayout& layout, uint32_t seed) {
             const bool is_signed = c.type == ScalarType::kInt8 || c.type == ScalarType::kInt16 ||
                                    c.type == ScalarType::kInt32;
             const double scale = std::ldexp(1.0, bits - 3);
-            const int64_t v = int64_t(std::llround(field * scale)) + int64_t(rng() % 3) + (is_signed ? 0 : int64_t(2 * scale));
+            const int64_t v = int64_t(std::llround(field * scale)) + int64_t(rng() % 3) +
+                              (is_signed ? 0 : int64_t(2 * scale));
             w[0] = uint32_t(uint64_t(v) & (bits == 32 ? 0xFFFFFFFFull : (uint64_t{1} << bits) - 1));
           }
         }
@@ -136,15 +139,15 @@ QuantizedMesh scalarSphere(const AttributeLayout& layout, uint32_t seed) {
   for (size_t i = 0; i < q.positions.size(); ++i) {
     const auto r = row(sphere.positions[i], i);
     q.scalars.insert(q.scalars.end(), r.begin(), r.end());
-    if (layout.hasNormals()) q.normals.push_back(encodeOctahedral(Vec3f{float(sphere.positions[i][0]),
-                                                                        float(sphere.positions[i][1]),
-                                                                        float(sphere.positions[i][2])},
-                                                                  layout.normal_bits));
+    if (layout.hasNormals())
+      q.normals.push_back(encodeOctahedral(Vec3f{float(sphere.positions[i][0]), float(sphere.positions[i][1]),
+                                                 float(sphere.positions[i][2])},
+                                           layout.normal_bits));
     if (layout.hasColors()) q.colors.push_back({uint8_t(i), uint8_t(i * 7), 90, 255});
   }
   for (int k = 0; k < 12; ++k) {  // twins: same position, normal and color, other scalars, in a triangle
     const uint32_t twin = uint32_t(q.positions.size());
-    const auto t = q.triangles[size_t(k) * 41];
+    const auto t = q.triangles[size_t(k) * 41 % q.triangles.size()];
     q.positions.push_back(q.positions[t[0]]);
     if (layout.hasNormals()) q.normals.push_back(q.normals[t[0]]);
     if (layout.hasColors()) q.colors.push_back(q.colors[t[0]]);
@@ -262,8 +265,8 @@ TEST_P(ScalarRoundTrip, CoarseLevelsShowAPointOfTheirCell) {
     const int shift = 12 - last_coded;
     std::map<Vec3u, std::vector<std::vector<uint32_t>>> in_cell;
     for (size_t v = 0; v < q.positions.size(); ++v)
-      in_cell[{q.positions[v][0] >> shift, q.positions[v][1] >> shift, q.positions[v][2] >> shift}].push_back(
-          std::vector<uint32_t>(q.scalars.begin() + v * stride, q.scalars.begin() + (v + 1) * stride));
+      in_cell[{q.positions[v][0] >> shift, q.positions[v][1] >> shift, q.positions[v][2] >> shift}]
+          .push_back(std::vector<uint32_t>(q.scalars.begin() + v * stride, q.scalars.begin() + (v + 1) * stride));
     size_t bad = 0;
     for (size_t v = 0; v < d->positions.size(); ++v) {
       const Vec3u& p = d->positions[v];
@@ -308,8 +311,8 @@ std::vector<CodecId> scalarCodecs() {
 
 INSTANTIATE_TEST_SUITE_P(Codecs, ScalarRoundTrip, ::testing::ValuesIn(scalarCodecs()),
                          [](const ::testing::TestParamInfo<CodecId>& info) {
-                           return std::string(findCodec(info.param)->name);
-                         });
+  return std::string(findCodec(info.param)->name);
+});
 
 TEST(ScalarChannels, LossyCodecsRefuseThemByName) {
   AttributeLayout layout;
@@ -337,11 +340,12 @@ TEST(ScalarChannels, ContainerWritesVersion2OnlyWithChannels) {
   ASSERT_TRUE(pc.isOk()) << pc.status().toString();
   EXPECT_EQ(pc->header.version, 2u);
   EXPECT_EQ(pc->header.layout, layout);
-  EXPECT_EQ(pc->header.header_size, kHeaderSize + 1 + 4 + [&] {
-    size_t n = 0;
-    for (const auto& c : layout.scalars) n += 2 + c.name.size();
-    return n;
-  }());
+  EXPECT_EQ(
+      pc->header.header_size, kHeaderSize + 1 + 4 + [&] {
+        size_t n = 0;
+        for (const auto& c : layout.scalars) n += 2 + c.name.size();
+        return n;
+      }());
   for (const TileEntry& e : pc->tiles) {
     auto payload = parseTileChunk(std::span(*file).subspan(e.offset, e.chunk_bytes), e, "mem");
     ASSERT_TRUE(payload.isOk());
@@ -375,7 +379,8 @@ TEST(ScalarChannels, HostileChannelTablesFailCleanly) {
   AttributeLayout layout;
   layout.scalars = {{"confidence", ScalarType::kFloat32}, {"intensity", ScalarType::kUint16}};
   const QuantizedMesh q = scalarSphere(layout, 4);
-  auto file = encodeContainer(Grid{{0, 0, 0}, 1.0, 12}, layout, *findCodec(CodecId::kStore), std::vector<QuantizedMesh>{q});
+  auto file =
+      encodeContainer(Grid{{0, 0, 0}, 1.0, 12}, layout, *findCodec(CodecId::kStore), std::vector<QuantizedMesh>{q});
   ASSERT_TRUE(file.isOk());
   auto pc = parseContainer(*file, "mem");
   ASSERT_TRUE(pc.isOk());
@@ -427,6 +432,39 @@ TEST(ScalarChannels, HostileChannelTablesFailCleanly) {
   auto r = parseContainer(b, "mem");
   ASSERT_FALSE(r.isOk());
   EXPECT_NE(r.status().message().find("version"), std::string::npos) << r.status().toString();
+}
+
+// Golden containers of version 2 (tests/golden/scalars-<codec>.spz, kept forever): each build decodes them to the
+// sphere they were made from, and the writer must still produce them byte for byte (the scalar channels' coding
+// is part of the format). SCANPRESS_WRITE_GOLDEN=1 writes the missing ones.
+TEST(ScalarChannels, GoldenContainersDecodeAndAreReproduced) {
+  AttributeLayout layout;
+  layout.scalars = kEveryType;
+  layout.normal_bits = 10, layout.color_channels = 4;
+  const QuantizedMesh q = scalarSphere(layout, 11, 2);
+  const Grid grid{{0, 0, 0}, 1.0, 12};
+  for (CodecId id : scalarCodecs()) {
+    const CodecInfo& codec = *findCodec(id);
+    SCOPED_TRACE(codec.name);
+    const std::string path = std::string(SCANPRESS_GOLDEN) + "/scalars-" + std::string(codec.name) + ".spz";
+    auto bytes = encodeContainer(grid, layout, codec, std::vector<QuantizedMesh>{q});
+    ASSERT_TRUE(bytes.isOk()) << bytes.status().toString();
+    if (!std::filesystem::exists(path) && std::getenv("SCANPRESS_WRITE_GOLDEN")) {
+      testing::writeBytes(path, std::string(bytes->begin(), bytes->end()));
+    }
+    const std::vector<uint8_t> golden = testing::readBytes(path);
+    ASSERT_FALSE(golden.empty()) << path << " missing (SCANPRESS_WRITE_GOLDEN=1 writes it)";
+    EXPECT_TRUE(golden == *bytes) << "the writer no longer reproduces " << path;
+    auto pc = parseContainer(golden, path);
+    ASSERT_TRUE(pc.isOk()) << pc.status().toString();
+    ASSERT_EQ(pc->tiles.size(), 1u);
+    const TileEntry& e = pc->tiles[0];
+    auto payload = parseTileChunk(std::span(golden).subspan(e.offset, e.chunk_bytes), e, path);
+    ASSERT_TRUE(payload.isOk());
+    auto d = decodeTilePayload(pc->header, e, *payload, path);
+    ASSERT_TRUE(d.isOk()) << d.status().toString();
+    EXPECT_TRUE(vertexRows(*d, size_t(layout.scalarStride())) == vertexRows(q, size_t(layout.scalarStride())));
+  }
 }
 
 }  // namespace

@@ -275,7 +275,9 @@ void codeScalarRange(Io& io, const AttributeLayout& layout, AttributeModels& mod
   for (size_t ch = 0; ch < layout.scalars.size(); ++ch) {
     const ScalarType t = layout.scalars[ch].type;
     AttributeModels::Scalar& m = models.scalar[ch];
-    const auto at = [&](const ScalarValues& vals, u32 v) { return scalarOrdered(t, vals.data() + v * stride + offset); };
+    const auto at = [&](const ScalarValues& vals, u32 v) {
+      return scalarOrdered(t, vals.data() + v * stride + offset);
+    };
     std::fill(activity.begin(), activity.end(), u8(0));
     for (u32 v = first; v < n; ++v) {
       if (known(v)) continue;
@@ -501,7 +503,8 @@ class CoarseAttributes {
         i128 sum = 0;
         u32 count_s = 0;
         for (u32 w : neighbours(v))
-          if (const u32 r = shown_[w]; r != kNone) sum += scalarOrdered(t, scalars.data() + r * stride + offset), ++count_s;
+          if (const u32 r = shown_[w]; r != kNone)
+            sum += scalarOrdered(t, scalars.data() + r * stride + offset), ++count_s;
         int64_t pred = from != kNone ? scalarOrdered(t, scalars.data() + from * stride + offset) : 0;
         if (count_s) {
           const i128 c = count_s;
@@ -509,7 +512,8 @@ class CoarseAttributes {
         }
         int cls = 0;
         const int64_t x = codeScalar(io, models_.scalar[ch], t, pred,
-                                     truth ? scalarOrdered(t, truth->scalars.data() + v * stride + offset) : 0, bin, cls);
+                                     truth ? scalarOrdered(t, truth->scalars.data() + v * stride + offset) : 0, bin,
+                                     cls);
         scalarFromOrdered(t, x, scalars.data() + v * stride + offset);
         offset += size_t(scalarTypeWords(t));
       }

@@ -97,8 +97,8 @@ namespace {
 double needBits(const PayloadFloor& f, const AttributeLayout& layout, uint64_t vertices, uint64_t faces) {
   double scalar_bits = 0;
   for (const ScalarChannel& c : layout.scalars) scalar_bits += 8.0 * scalarTypeBytes(c.type);
-  const double attribute_bits =
-      f.raw_attributes ? 2.0 * layout.normal_bits + 8.0 * layout.color_channels + scalar_bits : 0.0;
+  const double attribute_bits = f.raw_attributes ? 2.0 * layout.normal_bits + 8.0 * layout.color_channels + scalar_bits
+                                                 : 0.0;
   return double(vertices) * (f.bits_per_vertex + attribute_bits) + double(faces) * f.bits_per_face;
 }
 }  // namespace
@@ -123,7 +123,8 @@ Result<EncodedTile> encodeMesh(const CodecInfo& codec, const TileContext& ctx, c
 
 Status scalarsNotCarried(std::string_view codec) {
   return makeError(ErrorCode::kInvalidArgument,
-                   std::string(codec) + " does not carry scalar channels yet (kdtree, octree, edgebreaker and store do)");
+                   std::string(codec) +
+                       " does not carry scalar channels yet (kdtree, octree, edgebreaker and store do)");
 }
 
 DecodeLimits limitsOf(const TileSummary& s) { return DecodeLimits{s.vertices, s.faces}; }

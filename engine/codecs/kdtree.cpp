@@ -729,8 +729,7 @@ class Engine {
 
   void codeAttributes() {
     io_.meter(&CodecStats::attribute_bits);
-    codeTileAttributes(io_, version, layout, lo_, triangles_, truth_, normals_, colors_, scalars_,
-                       coarse_->coded());
+    codeTileAttributes(io_, version, layout, lo_, triangles_, truth_, normals_, colors_, scalars_, coarse_->coded());
   }
 
  public:

@@ -195,10 +195,10 @@ Result<uint32_t> headerSizeOf(std::span<const uint8_t> bytes, const std::string&
   uint32_t version = 0, header_size = 0;
   SP_RETURN_IF_ERROR(r.u32(version));
   if (version != kContainerVersion && version != kContainerVersionScalars)
-    return makeError(ErrorCode::kUnknownVersion,
-                     where + " at byte 8: container format version " + std::to_string(version) +
-                         " is not known to this build (knows " + std::to_string(kContainerVersion) + " and " +
-                         std::to_string(kContainerVersionScalars) + ")");
+    return makeError(ErrorCode::kUnknownVersion, where + " at byte 8: container format version " +
+                                                     std::to_string(version) + " is not known to this build (knows " +
+                                                     std::to_string(kContainerVersion) + " and " +
+                                                     std::to_string(kContainerVersionScalars) + ")");
   SP_RETURN_IF_ERROR(r.u32(header_size));
   uint32_t stored_crc = 0;
   std::memcpy(&stored_crc, bytes.data() + kHeaderSize - 4, 4);

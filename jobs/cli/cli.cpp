@@ -92,13 +92,16 @@ options:
   --color-bits N      levels per color channel: 2^N, 1..8 (default 8: exact)
   --no-normals        drop normals
   --no-colors         drop colors
+  --no-scalars        drop per-vertex scalar properties (a PLY's confidence, intensity, quality, ...; kept
+                      losslessly at their type by store, kdtree, octree and edgebreaker; pm and prm drop them
+                      with a warning)
   --allow-degenerate  keep going when quantization makes more than 0.1%% of the triangles degenerate (they are
                       dropped); without it such a scan fails with exit 2 (raise --bits instead). Implied by
                       --max-error, whose measured error accounts for them
   --strict            fail (exit 2) when the input holds anything the container would not keep
-                      (texture coordinates, materials, per-vertex scalars such as confidence, per-face
-                      properties, extra PLY elements); without it they are dropped with one warning and
-                      listed in the report
+                      (texture coordinates, materials, per-face properties, extra PLY elements, per-vertex
+                      scalars under pm or prm); without it they are dropped with one warning and listed in
+                      the report
   --tile-triangles N  target triangles per tile (default 131072; tiles adapt to density around it)
   --threads N         worker threads (default: all cores); the output is the same at any count
   --memory-budget S   bound the memory for tile data, e.g. 512M, 2GiB or 1.5G (units K, M, G, T of 1024;
@@ -398,7 +401,8 @@ int runEncode(int argc, char** argv) {
                  {"--codec", "--stages", "--bits", "--normal-bits", "--color-bits", "--report", "--tile-triangles",
                   "--threads", "--memory-budget", "--scratch-dir", "--samples-per-triangle", "--format", "--max-error",
                   "--error", "--max-bytes", "--bpv", "--subset", "--grid", "--tau"},
-                 {"--no-normals", "--no-colors", "--allow-degenerate", "--strict", "--measure", "--quiet", "--help"},
+                 {"--no-normals", "--no-colors", "--no-scalars", "--allow-degenerate", "--strict", "--measure",
+                  "--quiet", "--help"},
                  args, error))
     return usage(error, "encode");
   if (args.has("--help")) {
@@ -429,6 +433,7 @@ int runEncode(int argc, char** argv) {
     return usage(error, "encode");
   s.keep_normals = !args.has("--no-normals");
   s.keep_colors = !args.has("--no-colors");
+  s.keep_scalars = !args.has("--no-scalars");
   s.allow_degenerate = args.has("--allow-degenerate");
   s.strict = args.has("--strict");
   if (!integerOption(args, "--tile-triangles", kMinTileTriangles, kMaxTileTriangles, s.tile_triangles, error) ||
@@ -613,6 +618,9 @@ int runDecode(int argc, char** argv) {
   if (!args.has("--quiet") && result->level)
     std::fprintf(say, "level %u: %llu payload bytes\n", *result->level,
                  static_cast<unsigned long long>(result->level_bytes));
+  if (!result->dropped.empty())  // never silent, --quiet or not
+    std::fprintf(stderr, "scanpress: warning: %s holds %s, which %s cannot: not written (decode to .ply keeps them)\n",
+                 in_name.c_str(), describeDropped(result->dropped).c_str(), out_name.c_str());
   return 0;
 }
 

@@ -32,13 +32,15 @@ Status AsyncSink::push(Call call) {
   }
 
 Status AsyncSink::vertices(std::span<const Vec3d> positions, std::span<const Vec3f> normals,
-                           std::span<const Rgba8> colors, uint8_t color_channels) {
+                           std::span<const Rgba8> colors, uint8_t color_channels, const ScalarChunk& scalars) {
   SP_ASYNC_CALL(call);
   call.kind = Kind::kVertices;
   call.positions.assign(positions.begin(), positions.end());
   call.normals.assign(normals.begin(), normals.end());
   call.colors.assign(colors.begin(), colors.end());
   call.channels = color_channels;
+  call.scalar_channels.assign(scalars.channels.begin(), scalars.channels.end());
+  call.scalars.assign(scalars.values.begin(), scalars.values.end());
   return push(std::move(call));
 }
 
@@ -72,7 +74,10 @@ void AsyncSink::run() {
     Status s;
     try {
       switch (call.kind) {
-        case Kind::kVertices: s = sink_.vertices(call.positions, call.normals, call.colors, call.channels); break;
+        case Kind::kVertices:
+          s = sink_.vertices(call.positions, call.normals, call.colors, call.channels,
+                             ScalarChunk{call.scalar_channels, call.scalars});
+          break;
         case Kind::kTriangles: s = sink_.triangles(call.triangles); break;
         case Kind::kVertexNormals: s = sink_.vertexNormals(call.first, call.normals); break;
       }

@@ -26,7 +26,7 @@ class AsyncSink : public MeshSink {
   AsyncSink& operator=(const AsyncSink&) = delete;
 
   Status vertices(std::span<const Vec3d> positions, std::span<const Vec3f> normals, std::span<const Rgba8> colors,
-                  uint8_t color_channels) override;
+                  uint8_t color_channels, const ScalarChunk& scalars) override;
   Status triangles(std::span<const Triangle> triangles) override;
   Status vertexNormals(uint64_t first, std::span<const Vec3f> normals) override;
   // Waits until the wrapped sink has seen every call; its first error, if any.
@@ -40,6 +40,8 @@ class AsyncSink : public MeshSink {
     std::vector<Vec3f> normals;
     std::vector<Rgba8> colors;
     uint8_t channels = 0;
+    std::vector<ScalarChannel> scalar_channels;
+    ScalarValues scalars;
     std::vector<Triangle> triangles;
     uint64_t first = 0;
   };

@@ -15,10 +15,11 @@ namespace scanpress {
 
 Status ChunkBuffer::flushVertices() {
   if (pos_.empty()) return Status::ok();
-  Status s = sink_.vertices(pos_, nrm_, col_, channels_);
+  Status s = sink_.vertices(pos_, nrm_, col_, channels_, ScalarChunk{scalar_channels_, sca_});
   pos_.clear();
   nrm_.clear();
   col_.clear();
+  sca_.clear();
   return s;
 }
 
@@ -93,8 +94,17 @@ MeshFormat sniffFormat(std::span<const uint8_t> head) {
 }  // namespace
 
 Status MeshCollector::vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c,
-                               uint8_t channels) {
+                               uint8_t channels, const ScalarChunk& scalars) {
   const size_t before = mesh_.positions.size();
+  if (!scalars.channels.empty()) {
+    if (before == 0) mesh_.scalar_channels.assign(scalars.channels.begin(), scalars.channels.end());
+    if (!std::equal(scalars.channels.begin(), scalars.channels.end(), mesh_.scalar_channels.begin(),
+                    mesh_.scalar_channels.end()))
+      return makeError(ErrorCode::kInternal, "scalar channels changed during a read");
+    mesh_.scalars.insert(mesh_.scalars.end(), scalars.values.begin(), scalars.values.end());
+  } else if (!mesh_.scalar_channels.empty()) {
+    return makeError(ErrorCode::kInternal, "scalar channels changed during a read");
+  }
   mesh_.positions.insert(mesh_.positions.end(), p.begin(), p.end());
   if (!n.empty()) {
     mesh_.normals.resize(before, Vec3f{0, 0, 0});

@@ -52,12 +52,20 @@ struct ReadStats {
   std::vector<DroppedProperty> dropped;  // what the reader read past, in file order (empty: nothing)
 };
 
+// A chunk's scalar channels (PLY vertex properties kept at their type, such as confidence or intensity): the
+// channels, the same on every call of one read, and their values, ScalarValues' words (stride per vertex: the
+// channels' scalarTypeWords) for the chunk's vertices; both empty when the file has none.
+struct ScalarChunk {
+  std::span<const ScalarChannel> channels;
+  std::span<const uint32_t> values;
+};
+
 class MeshSink {
  public:
   virtual ~MeshSink() = default;
   // `normals` and `colors` are empty or as long as `positions`; `color_channels` is 3 or 4 when colors are given.
   virtual Status vertices(std::span<const Vec3d> positions, std::span<const Vec3f> normals,
-                          std::span<const Rgba8> colors, uint8_t color_channels) = 0;
+                          std::span<const Rgba8> colors, uint8_t color_channels, const ScalarChunk& scalars) = 0;
   virtual Status triangles(std::span<const Triangle> triangles) = 0;
   // OBJ: normals referenced by face corners, for vertices [first, first + normals.size()); NaN where none.
   virtual Status vertexNormals(uint64_t first, std::span<const Vec3f> normals) = 0;
@@ -70,7 +78,7 @@ class MeshCollector : public MeshSink {
  public:
   explicit MeshCollector(Mesh& mesh) : mesh_(mesh) {}
   Status vertices(std::span<const Vec3d> positions, std::span<const Vec3f> normals, std::span<const Rgba8> colors,
-                  uint8_t color_channels) override;
+                  uint8_t color_channels, const ScalarChunk& scalars) override;
   Status triangles(std::span<const Triangle> triangles) override;
   Status vertexNormals(uint64_t first, std::span<const Vec3f> normals) override;
   void finish();
@@ -102,12 +110,21 @@ Result<ReadStats> readOff(Scanner& in, MeshSink& sink, const ReadOptions& option
 // Buffers vertices and triangles and hands them to a sink in chunks (shared by the readers).
 class ChunkBuffer {
  public:
-  ChunkBuffer(MeshSink& sink, size_t chunk, uint8_t color_channels, bool normals)
-      : sink_(sink), chunk_(chunk), channels_(color_channels), normals_(normals) {}
-  Status addVertex(const Vec3d& p, const Vec3f& n, const Rgba8& c) {
+  ChunkBuffer(MeshSink& sink, size_t chunk, uint8_t color_channels, bool normals,
+              std::vector<ScalarChannel> scalar_channels = {})
+      : sink_(sink),
+        chunk_(chunk),
+        channels_(color_channels),
+        normals_(normals),
+        scalar_channels_(std::move(scalar_channels)) {
+    for (const ScalarChannel& c : scalar_channels_) stride_ += size_t(scalarTypeWords(c.type));
+  }
+  // `scalars`: the vertex's scalar values (stride words), when the buffer has scalar channels.
+  Status addVertex(const Vec3d& p, const Vec3f& n, const Rgba8& c, const uint32_t* scalars = nullptr) {
     pos_.push_back(p);
     if (normals_) nrm_.push_back(n);
     if (channels_) col_.push_back(c);
+    if (stride_ && scalars) sca_.insert(sca_.end(), scalars, scalars + stride_);
     ++vertices_;
     return pos_.size() >= chunk_ ? flushVertices() : Status::ok();
   }
@@ -127,6 +144,9 @@ class ChunkBuffer {
   size_t chunk_;
   uint8_t channels_;
   bool normals_;
+  std::vector<ScalarChannel> scalar_channels_;
+  size_t stride_ = 0;
+  ScalarValues sca_;
   std::vector<Vec3d> pos_;
   std::vector<Vec3f> nrm_;
   std::vector<Rgba8> col_;

@@ -89,7 +89,15 @@ void putIndex(std::string& out, uint64_t v) {
   out.append(num, r.ptr);
 }
 
+size_t strideOf(const std::vector<ScalarChannel>& channels) {
+  size_t w = 0;
+  for (const ScalarChannel& c : channels) w += size_t(scalarTypeWords(c.type));
+  return w;
+}
+
 Status checkMesh(const std::string& path, const Mesh& mesh) {
+  if (mesh.scalars.size() != mesh.positions.size() * strideOf(mesh.scalar_channels))
+    return makeError(ErrorCode::kInternal, path + ": scalar values do not match vertices");
   if (!mesh.normals.empty() && mesh.normals.size() != mesh.positions.size())
     return makeError(ErrorCode::kInternal, path + ": normals do not match vertices");
   if (!mesh.colors.empty() && mesh.colors.size() != mesh.positions.size())
@@ -105,17 +113,25 @@ Status writeWith(const std::string& path, const Mesh& mesh, const WriteOptions& 
   layout.normals = !mesh.normals.empty();
   layout.color_channels = mesh.colors.empty() ? 0 : (mesh.color_channels == 4 ? 4 : 3);
   layout.double_positions = options.double_positions;
+  if (format.kind() == MeshFileFormat::Kind::kPly) layout.scalars = mesh.scalar_channels;
+  const size_t stride = strideOf(layout.scalars);
   SP_ASSIGN_OR_RETURN(auto writer, MeshFileWriter::create(path, layout, format));
   if (format.indexed())
     for (size_t i = 0; i < mesh.positions.size(); ++i)
       SP_RETURN_IF_ERROR(writer->vertex(mesh.positions[i], layout.normals ? &mesh.normals[i] : nullptr,
-                                        layout.color_channels ? &mesh.colors[i] : nullptr));
+                                        layout.color_channels ? &mesh.colors[i] : nullptr,
+                                        stride ? mesh.scalars.data() + i * stride : nullptr));
   for (const Triangle& t : mesh.triangles)
     SP_RETURN_IF_ERROR(writer->face(t, {mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]}));
   return writer->commit();
 }
 
 }  // namespace
+
+bool scalarsWritten(const std::string& path) {
+  const auto f = MeshFileFormat::forPath(path);
+  return f.isOk() && f->kind() == MeshFileFormat::Kind::kPly;
+}
 
 Result<MeshFileFormat> MeshFileFormat::forPath(const std::string& path) {
   const std::string base = endsWith(path, ".zst") ? path.substr(0, path.size() - 4) : path;
@@ -137,6 +153,8 @@ void MeshFileFormat::header(const MeshFileLayout& layout, std::string& out) cons
       if (layout.normals) out += "property float nx\nproperty float ny\nproperty float nz\n";
       if (layout.color_channels) out += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
       if (layout.color_channels == 4) out += "property uchar alpha\n";
+      for (const ScalarChannel& c : layout.scalars)
+        out += std::string("property ") + scalarTypeName(c.type) + " " + c.name + "\n";
       out += "element face " + std::to_string(layout.faces) + "\n";
       out += "property list uchar int vertex_indices\nend_header\n";
       return;
@@ -159,7 +177,7 @@ void MeshFileFormat::header(const MeshFileLayout& layout, std::string& out) cons
 }
 
 void MeshFileFormat::vertex(const MeshFileLayout& layout, const Vec3d& p, const Vec3f* normal, const Rgba8* color,
-                            std::string& out) const {
+                            const uint32_t* scalars, std::string& out) const {
   switch (kind_) {
     case Kind::kPly:
       for (double c : p) {
@@ -169,6 +187,13 @@ void MeshFileFormat::vertex(const MeshFileLayout& layout, const Vec3d& p, const 
       if (normal)
         for (float c : *normal) putLe(out, c);
       if (color) out.append(reinterpret_cast<const char*>(color->data()), layout.color_channels == 4 ? 4 : 3);
+      if (scalars)
+        for (const ScalarChannel& c : layout.scalars) {  // each value's bytes, little-endian at its type
+          const uint64_t bits = uint64_t(scalars[0]) |
+                                (c.type == ScalarType::kFloat64 ? uint64_t(scalars[1]) << 32 : 0);
+          for (int b = 0; b < scalarTypeBytes(c.type); ++b) out += char(uint8_t(bits >> (8 * b)));
+          scalars += scalarTypeWords(c.type);
+        }
       return;
     case Kind::kObj:
       // Each vertex's normal follows it (`vn` lines count like `v` lines, so face corners use one index).
@@ -266,12 +291,14 @@ Status MeshFileWriter::drain(bool force) {
   return s;
 }
 
-Status MeshFileWriter::vertex(const Vec3d& p, const Vec3f* normal, const Rgba8* color) {
+Status MeshFileWriter::vertex(const Vec3d& p, const Vec3f* normal, const Rgba8* color, const uint32_t* scalars) {
   if (!format_.indexed()) return Status::ok();  // STL: the corners come with the faces
   if (vertices_ == layout_.vertices || faces_ != 0)
     return makeError(ErrorCode::kInternal, out_->path() + ": more vertices than the header says, or after a face");
   ++vertices_;
-  format_.vertex(layout_, p, normal, color, buf_);
+  if (!layout_.scalars.empty() && !scalars)
+    return makeError(ErrorCode::kInternal, out_->path() + ": a vertex without the layout's scalar values");
+  format_.vertex(layout_, p, normal, color, layout_.scalars.empty() ? nullptr : scalars, buf_);
   return drain();
 }
 

@@ -44,7 +44,13 @@ struct MeshFileLayout {
   bool normals = false;
   uint8_t color_channels = 0;  // 0, 3 or 4
   bool double_positions = false;
+  // Scalar channels, written by PLY only (at their type, after the colors); other formats have no place for them
+  // (the caller reports them dropped: scalarsWritten).
+  std::vector<ScalarChannel> scalars;
 };
+
+// Whether `format` writes scalar channels (PLY).
+bool scalarsWritten(const std::string& path);
 
 // The byte form of one indexed format (.ply, .obj, .stl, .off; .zst is the output's business).
 class MeshFileFormat {
@@ -57,9 +63,9 @@ class MeshFileFormat {
   // Whether the file lists vertices (STL repeats the corners in every facet instead).
   bool indexed() const { return kind_ != Kind::kStl; }
   void header(const MeshFileLayout& layout, std::string& out) const;
-  // `normal` and `color` are null when the layout has none.
+  // `normal` and `color` are null when the layout has none; `scalars` (the layout's words) when it has scalars.
   void vertex(const MeshFileLayout& layout, const Vec3d& p, const Vec3f* normal, const Rgba8* color,
-              std::string& out) const;
+              const uint32_t* scalars, std::string& out) const;
   // `corners`: the triangle's positions (used by STL only).
   void face(const MeshFileLayout& layout, const Triangle& t, const std::array<Vec3d, 3>& corners,
             std::string& out) const;
@@ -80,7 +86,7 @@ class MeshFileWriter {
                                                         MeshFileFormat format);
   ~MeshFileWriter();
   const MeshFileFormat& format() const { return format_; }
-  Status vertex(const Vec3d& p, const Vec3f* normal, const Rgba8* color);
+  Status vertex(const Vec3d& p, const Vec3f* normal, const Rgba8* color, const uint32_t* scalars = nullptr);
   Status face(const Triangle& t, const std::array<Vec3d, 3>& corners);
   // Faces already in this format's bytes (MeshFileFormat::face), `count` of them.
   Status faceBytes(std::span<const uint8_t> bytes, uint64_t count);

@@ -7,6 +7,7 @@
 // listed in ReadStats::dropped.
 #include <algorithm>
 #include <bit>
+#include <charconv>
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -20,7 +21,8 @@ namespace {
 
 enum class PlyType : uint8_t { kInt8, kUint8, kInt16, kUint16, kInt32, kUint32, kFloat32, kFloat64 };
 enum class Encoding { kAscii, kLittle, kBig };
-enum class Role : uint8_t { kNone, kX, kY, kZ, kNx, kNy, kNz, kRed, kGreen, kBlue, kAlpha, kIndices };
+// kScalar: any other non-list vertex property (confidence, intensity, quality, flags, ...), kept at its type.
+enum class Role : uint8_t { kNone, kX, kY, kZ, kNx, kNy, kNz, kRed, kGreen, kBlue, kAlpha, kIndices, kScalar };
 enum class ElementKind { kVertex, kFace, kTristrips, kOther };
 
 bool parseType(std::string_view s, PlyType& t) {
@@ -123,7 +125,13 @@ class PlyParser {
     }
     if (xyz != 3) return in_.errorAtLine(ErrorCode::kMalformed, "PLY 'vertex' element lacks x, y or z");
     vertex_count_ = vertex->count;
-    ChunkBuffer out(sink_, options_.chunk, channels, has_normals);
+    std::vector<ScalarChannel> scalars;
+    for (const auto& p : vertex->props)
+      if (p.role == Role::kScalar) {
+        scalars.push_back({p.name, static_cast<ScalarType>(static_cast<uint8_t>(p.type) + 1)});
+        stride_ += size_t(scalarTypeWords(scalars.back().type));
+      }
+    ChunkBuffer out(sink_, options_.chunk, channels, has_normals, std::move(scalars));
     out_ = &out;
     bool seen_vertex = false;
     for (const auto& e : elements_) {
@@ -222,7 +230,14 @@ class PlyParser {
         Element& e = elements_.back();
         for (const auto& other : e.props)
           if (other.name == p.name) return headerError("property '" + p.name + "' declared twice");
-        if (e.kind == ElementKind::kVertex && !p.is_list) p.role = vertexRole(p.name);
+        if (e.kind == ElementKind::kVertex && !p.is_list) {
+          p.role = vertexRole(p.name);
+          // Any other scalar is kept (at most 255 of them, with a name a container can hold; else dropped).
+          if (p.role == Role::kNone && validScalarName(p.name) && scalar_count_ < 255) {
+            p.role = Role::kScalar;
+            ++scalar_count_;
+          }
+        }
         if ((e.kind == ElementKind::kFace && (p.name == "vertex_indices" || p.name == "vertex_index")) ||
             (e.kind == ElementKind::kTristrips && p.name == "vertex_indices")) {
           if (!p.is_list) return headerError("'" + p.name + "' must be a list property");
@@ -384,14 +399,66 @@ class PlyParser {
     return Status::ok();
   }
 
+  // A scalar property's value as its bit pattern (ScalarValues' words at `w`), exactly: binary bytes as they are
+  // (byte-swapped from big endian), ASCII parsed at the property's type (a float property's text rounded once, to
+  // float). `raw`: the value's bytes in a fixed-size binary record, else null (read from the input).
+  Status readScalarBits(const Property& p, const uint8_t* raw, uint32_t* w) {
+    const size_t n = typeSize(p.type);
+    if (encoding_ != Encoding::kAscii) {
+      uint8_t b[8];
+      if (raw) std::memcpy(b, raw, n);
+      else SP_RETURN_IF_ERROR(in_.read(b, n));
+      if (encoding_ == Encoding::kBig) std::reverse(b, b + n);
+      uint64_t bits = 0;
+      for (size_t i = 0; i < n; ++i) bits |= uint64_t(b[i]) << (8 * i);
+      w[0] = uint32_t(bits);
+      if (n == 8) w[1] = uint32_t(bits >> 32);
+      return Status::ok();
+    }
+    std::string_view tok;
+    SP_RETURN_IF_ERROR(nextToken(tok));
+    const auto bad = [&](const char* what) {
+      return in_.errorAtLine(ErrorCode::kMalformed,
+                             "property '" + p.name + "': expected " + what + ", found '" + std::string(tok) + "'");
+    };
+    if (p.type == PlyType::kFloat32) {
+      float f = 0;
+      const char* b = tok.data() + (!tok.empty() && tok[0] == '+');
+      const auto [ptr, ec] = std::from_chars(b, tok.data() + tok.size(), f);
+      if (ec != std::errc() || ptr != tok.data() + tok.size()) return bad("a number");
+      std::memcpy(w, &f, 4);
+      return Status::ok();
+    }
+    if (p.type == PlyType::kFloat64) {
+      double d = 0;
+      if (!parseDouble(tok, d)) return bad("a number");
+      uint64_t bits = 0;
+      std::memcpy(&bits, &d, 8);
+      w[0] = uint32_t(bits), w[1] = uint32_t(bits >> 32);
+      return Status::ok();
+    }
+    int64_t i = 0;
+    if (!parseInt64(tok, i)) return bad("an integer");
+    const int bits = int(8 * n);
+    const bool is_signed = p.type == PlyType::kInt8 || p.type == PlyType::kInt16 || p.type == PlyType::kInt32;
+    const int64_t lo = is_signed ? -(int64_t{1} << (bits - 1)) : 0;
+    const int64_t hi = is_signed ? (int64_t{1} << (bits - 1)) - 1 : (int64_t{1} << bits) - 1;
+    if (i < lo || i > hi)
+      return bad(("an integer of type " + std::string(scalarTypeName(ScalarType(uint8_t(p.type) + 1)))).c_str());
+    w[0] = uint32_t(uint64_t(i) & (bits == 32 ? 0xFFFFFFFFull : (uint64_t{1} << bits) - 1));
+    return Status::ok();
+  }
+
   Status readVertices(const Element& e) {
     std::vector<uint8_t> record(e.record_size);
+    std::vector<uint32_t> row(stride_);
     for (uint64_t r = 0; r < e.count; ++r) {
       Vec3d pos{0, 0, 0};
       Vec3f nrm{0, 0, 0};
       Rgba8 col{255, 255, 255, 255};
       const bool fast = encoding_ != Encoding::kAscii && e.fixed_size;
       if (fast) SP_RETURN_IF_ERROR(in_.read(record.data(), e.record_size));
+      size_t word = 0;
       for (size_t k = 0; k < e.props.size(); ++k) {
         const Property& p = e.props[k];
         double v = 0;
@@ -399,6 +466,11 @@ class PlyParser {
           uint64_t n = 0;
           SP_RETURN_IF_ERROR(readListCount(p, n));
           for (uint64_t i = 0; i < n; ++i) SP_RETURN_IF_ERROR(readValue(p.type, v));
+          continue;
+        }
+        if (p.role == Role::kScalar) {
+          SP_RETURN_IF_ERROR(readScalarBits(p, fast ? record.data() + p.offset : nullptr, row.data() + word));
+          word += p.type == PlyType::kFloat64 ? 2 : 1;
           continue;
         }
         if (fast) v = decodeBinary(record.data() + p.offset, p.type);
@@ -421,7 +493,7 @@ class PlyParser {
         return placeError(ErrorCode::kMalformed, "vertex " + std::to_string(r) + " has a NaN or infinite coordinate");
       if (!std::isfinite(nrm[0]) || !std::isfinite(nrm[1]) || !std::isfinite(nrm[2]))
         return placeError(ErrorCode::kMalformed, "vertex " + std::to_string(r) + " has a NaN or infinite normal");
-      SP_RETURN_IF_ERROR(out_->addVertex(pos, nrm, col));
+      SP_RETURN_IF_ERROR(out_->addVertex(pos, nrm, col, row.data()));
     }
     return out_->flushVertices();
   }
@@ -557,6 +629,8 @@ class PlyParser {
   Encoding encoding_ = Encoding::kAscii;
   std::vector<Element> elements_;
   uint64_t vertex_count_ = 0;
+  size_t scalar_count_ = 0;  // vertex properties kept as scalar channels
+  size_t stride_ = 0;        // their words per vertex
   ReadStats stats_;
   std::string_view line_;
   Tokenizer tokens_{std::string_view()};

@@ -20,9 +20,10 @@ def cli(*args):
     return r
 
 
-def read_ply(path):
+def read_ply(path, vertex_records=False):
     """A binary little-endian PLY as scanpress writes it: float or double x, y, z (then any other vertex
-    properties), faces as a uchar count and int indices."""
+    properties), faces as a uchar count and int indices. `vertex_records`: also the vertex records (a numpy
+    structured array, one field per property)."""
     with open(path, "rb") as f:
         header = []
         while True:
@@ -48,6 +49,8 @@ def read_ply(path):
     faces = np.frombuffer(body, dtype=np.dtype([("n", "u1"), ("i", "<i4", (3,))]), count=nf, offset=nv * vdt.itemsize)
     assert (faces["n"] == 3).all()
     pos = np.stack([verts["x"], verts["y"], verts["z"]], axis=1).astype(np.float64)
+    if vertex_records:
+        return pos, faces["i"].astype(np.uint32), verts
     return pos, faces["i"].astype(np.uint32)
 
 
@@ -76,6 +79,12 @@ def test_read_equals_the_cli_decode(bunny):
     assert np.array_equal(m["positions"].astype(np.float32), pos.astype(np.float32))
     assert m["uvs"] is None
     assert m["tiles"] == len(scanpress.info(str(spz))["tiles"]) > 1
+    # The bunny's confidence and intensity (float PLY properties), as the CLI's PLY has them, bit for bit.
+    _, _, verts = read_ply(d / "b.ply", vertex_records=True)
+    assert sorted(m["scalars"]) == ["confidence", "intensity"]
+    for name in ("confidence", "intensity"):
+        assert m["scalars"][name].dtype == np.float32
+        assert np.array_equal(m["scalars"][name].view(np.uint32), verts[name].view(np.uint32))
 
 
 def test_levels_tiles_and_boxes_select_as_the_cli(bunny):

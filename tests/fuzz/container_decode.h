@@ -26,21 +26,27 @@ inline void storeCrc(std::vector<uint8_t>& b, uint64_t at, std::span<const uint8
   std::memcpy(b.data() + at, &crc, 4);
 }
 
-// Recomputes every CRC-32C that FORMAT.md places where this file's own fields say: the header's, the
-// footer's, each chunk's (walking the chunks from offset 80 by their payload lengths, up to the index) and
-// the index's. Fields that point outside the file are left alone (the parser must refuse them).
+// Recomputes every CRC-32C that FORMAT.md places where this file's own fields say: the header's, a version 2
+// header's channel table (its size from byte 12), the footer's, each chunk's (walking the chunks from the header's
+// end by their payload lengths, up to the index) and the index's. Fields that point outside the file are left
+// alone (the parser must refuse them).
 inline void repairChecksums(std::vector<uint8_t>& b) {
   const uint64_t n = b.size();
   const std::span<const uint8_t> all(b);
   if (n >= kHeaderSize) storeCrc(b, kHeaderSize - 4, all.first(kHeaderSize - 4));
   if (n < kHeaderSize + kFooterSize) return;
+  uint32_t header_size = 0;
+  std::memcpy(&header_size, b.data() + 12, 4);
+  if (header_size < kHeaderSize + 5 || header_size > kMaxHeaderSize || header_size > n - kFooterSize)
+    header_size = uint32_t(kHeaderSize);
+  if (header_size > kHeaderSize) storeCrc(b, header_size - 4, all.subspan(kHeaderSize, header_size - kHeaderSize - 4));
   const uint64_t footer = n - kFooterSize;
   storeCrc(b, footer + 20, all.subspan(footer, 20));
   const uint64_t index_offset = loadU64(b, footer), index_bytes = loadU64(b, footer + 8);
-  const bool index_inside = index_offset >= kHeaderSize && index_offset <= footer && index_bytes >= 12 &&
+  const bool index_inside = index_offset >= header_size && index_offset <= footer && index_bytes >= 12 &&
                             index_bytes <= footer - index_offset;
   const uint64_t chunks_end = index_inside ? index_offset : footer;
-  for (uint64_t at = kHeaderSize; at + kChunkHeaderSize <= chunks_end;) {
+  for (uint64_t at = header_size; at + kChunkHeaderSize <= chunks_end;) {
     const uint64_t payload_bytes = loadU64(b, at + 20);
     if (payload_bytes > chunks_end - at - kChunkHeaderSize) break;
     storeCrc(b, at + 28, all.subspan(at + kChunkHeaderSize, payload_bytes));
@@ -128,7 +134,7 @@ inline Status decodeEverything(std::span<const uint8_t> file, DecodeCounts& coun
     }
     uint64_t hash = 0;
     if (options.seen) {
-      hash = fnv1a(file.subspan(e.offset, e.chunk_bytes), fnv1a(file.first(kHeaderSize)));
+      hash = fnv1a(file.subspan(e.offset, e.chunk_bytes), fnv1a(file.first(parsed->header.header_size)));
       if (const auto it = options.seen->find(hash); it != options.seen->end()) {
         ++counts.decodes_skipped;
         note(it->second);

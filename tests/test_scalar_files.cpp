@@ -1,0 +1,151 @@
+// Scalar channels through files (issue 22 part 1): the bunny's confidence and intensity (float PLY properties)
+// through encode and decode with every codec that carries them, in one tile and in many (welded across borders),
+// in memory and out of core, compared with the input file's values vertex by vertex; the lossy codecs, --no-scalars
+// and /strict report or refuse what they drop; formats without scalars say so on decode.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <map>
+#include <tuple>
+
+#include "engine/container/container.h"
+#include "jobs/commands.h"
+#include "jobs/container_file.h"
+#include "jobs/mesh_io/mesh_reader.h"
+#include "jobs/pipeline.h"
+#include "jobs_util.h"
+
+namespace scanpress {
+namespace {
+
+using testing::kBunny;
+using testing::TempDir;
+
+// (grid cell, scalar row) of every vertex a triangle uses, distinct and sorted: what a lossless codec keeps.
+std::vector<std::pair<Vec3u, std::vector<uint32_t>>> cellRows(const Mesh& m, const Grid& grid) {
+  size_t stride = 0;
+  for (const ScalarChannel& c : m.scalar_channels) stride += size_t(scalarTypeWords(c.type));
+  std::vector<uint8_t> used(m.positions.size());
+  for (const Triangle& t : m.triangles)
+    for (uint32_t v : t) used[v] = 1;
+  std::vector<std::pair<Vec3u, std::vector<uint32_t>>> out;
+  for (size_t v = 0; v < m.positions.size(); ++v)
+    if (used[v])
+      out.push_back({grid.quantize(m.positions[v]),
+                     std::vector<uint32_t>(m.scalars.begin() + ptrdiff_t(v * stride),
+                                           m.scalars.begin() + ptrdiff_t((v + 1) * stride))});
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+EncodeSettings settingsFor(const std::string& out, const std::string& codec) {
+  EncodeSettings s;
+  s.input = kBunny;
+  s.output = out;
+  s.codec = codec;
+  s.threads = 2;
+  return s;
+}
+
+TEST(ScalarFiles, BunnyConfidenceAndIntensityComeBackBitForBit) {
+  TempDir dir;
+  auto input = readMeshFile(kBunny);
+  ASSERT_TRUE(input.isOk());
+  ASSERT_EQ(input->scalar_channels,
+            (std::vector<ScalarChannel>{{"confidence", ScalarType::kFloat32}, {"intensity", ScalarType::kFloat32}}));
+  struct Case {
+    const char* codec;
+    uint64_t tile_triangles;
+    uint64_t memory_budget;  // 0: in memory
+  };
+  for (const Case& c : {Case{"edgebreaker", 131072, 0}, Case{"kdtree", 6000, 0}, Case{"octree", 6000, 0},
+                        Case{"store", 6000, 0}, Case{"edgebreaker", 6000, uint64_t(6) << 20}}) {
+    SCOPED_TRACE(std::string(c.codec) + ", " + std::to_string(c.tile_triangles) + " triangles per tile" +
+                 (c.memory_budget ? ", out of core" : ""));
+    EncodeSettings s = settingsFor(dir.file("b.spz"), c.codec);
+    s.tile_triangles = c.tile_triangles;
+    s.memory_budget = c.memory_budget;
+    auto enc = encodeFile(s);
+    ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+    EXPECT_EQ(enc->layout.scalars, input->scalar_channels);
+    EXPECT_TRUE(enc->read.dropped.empty()) << describeDropped(enc->read.dropped);
+    EXPECT_EQ(c.memory_budget != 0, enc->out_of_core);
+    if (c.tile_triangles < 131072) {
+      EXPECT_GT(enc->tiles.size(), 4u);
+    }
+    auto file = ContainerFile::open(s.output);
+    ASSERT_TRUE(file.isOk());
+    EXPECT_EQ(file->header().version, kContainerVersionScalars);
+    DecodeSettings d;
+    d.input = s.output;
+    d.output = dir.file("b.ply");
+    auto dec = decodeFile(d);
+    ASSERT_TRUE(dec.isOk()) << dec.status().toString();
+    EXPECT_TRUE(dec->dropped.empty());
+    auto output = readMeshFile(d.output);
+    ASSERT_TRUE(output.isOk());
+    EXPECT_EQ(output->scalar_channels, input->scalar_channels);
+    const auto want = cellRows(*input, file->header().grid), got = cellRows(*output, file->header().grid);
+    ASSERT_EQ(got.size(), want.size());
+    EXPECT_TRUE(got == want);
+  }
+}
+
+// pm and prm drop scalars with the reason in the report (and fail under strict); --no-scalars drops them on
+// request and writes a version 1 container; decoding to a format without scalars lists them.
+TEST(ScalarFiles, WhatIsDroppedIsSaid) {
+  TempDir dir;
+  EncodeSettings pm = settingsFor(dir.file("pm.spz"), "pm");
+  auto r = encodeFile(pm);
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  EXPECT_TRUE(r->layout.scalars.empty());
+  const std::string dropped = describeDropped(r->read.dropped);
+  EXPECT_NE(dropped.find("vertex.confidence (codec pm carries no scalar channels)"), std::string::npos) << dropped;
+  EXPECT_NE(dropped.find("vertex.intensity"), std::string::npos) << dropped;
+  pm.strict = true;
+  auto strict = encodeFile(pm);
+  ASSERT_FALSE(strict.isOk());
+  EXPECT_NE(strict.status().message().find("vertex.confidence"), std::string::npos) << strict.status().toString();
+
+  EncodeSettings none = settingsFor(dir.file("none.spz"), "kdtree");
+  none.keep_scalars = false;
+  r = encodeFile(none);
+  ASSERT_TRUE(r.isOk());
+  EXPECT_TRUE(r->layout.scalars.empty());
+  EXPECT_EQ(describeDropped(r->dropped_on_request), "vertex.confidence x 35947, vertex.intensity x 35947");
+  auto file = ContainerFile::open(none.output);
+  ASSERT_TRUE(file.isOk());
+  EXPECT_EQ(file->header().version, kContainerVersion);
+
+  EncodeSettings kept = settingsFor(dir.file("kept.spz"), "kdtree");
+  ASSERT_TRUE(encodeFile(kept).isOk());
+  DecodeSettings d;
+  d.input = kept.output;
+  d.output = dir.file("b.obj");
+  auto dec = decodeFile(d);
+  ASSERT_TRUE(dec.isOk()) << dec.status().toString();
+  EXPECT_EQ(describeDropped(dec->dropped), "vertex.confidence x 34834, vertex.intensity x 34834");
+  // Under a memory budget the decode streams, which does not write scalars yet: refused, not dropped, for PLY.
+  d.output = dir.file("b.ply");
+  d.memory_budget = 1;
+  auto streamed = decodeFile(d);
+  ASSERT_FALSE(streamed.isOk());
+  EXPECT_EQ(streamed.status().code(), ErrorCode::kUnsupported);
+  EXPECT_FALSE(std::filesystem::exists(d.output));
+}
+
+// Through the command line: the warning on decode to OBJ, and --no-scalars.
+TEST(ScalarFiles, CommandLine) {
+  TempDir dir;
+  std::string out;
+  ASSERT_EQ(testing::run("encode " + kBunny + " " + dir.file("a.spz") + " --codec edgebreaker", &out), 0) << out;
+  EXPECT_EQ(out.find("warning"), std::string::npos) << out;
+  ASSERT_EQ(testing::run("decode " + dir.file("a.spz") + " " + dir.file("a.obj") + " --quiet", &out), 0) << out;
+  EXPECT_NE(out.find("warning: " + dir.file("a.spz") + " holds vertex.confidence"), std::string::npos) << out;
+  ASSERT_EQ(testing::run("encode " + kBunny + " " + dir.file("b.spz") + " --no-scalars", &out), 0) << out;
+  EXPECT_LT(std::filesystem::file_size(dir.file("b.spz")), std::filesystem::file_size(dir.file("a.spz")));
+}
+
+}  // namespace
+}  // namespace scanpress
