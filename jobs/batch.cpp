@@ -255,6 +255,8 @@ std::string outputName(const std::string& pattern, const std::string& input, con
 }
 
 std::string settingsFingerprint(const EncodeSettings& s) {
+  // `scalars` is always written: an earlier build's container of a scan with scalar channels lacks them, so no
+  // fingerprint of a run before this build matches (those inputs are encoded again).
   std::string key = "scanpress-v1|codec=" + s.codec + "|bits=" + std::to_string(s.bits) +
                     "|normal_bits=" + std::to_string(s.normal_bits) + "|normals=" + std::to_string(s.keep_normals) +
                     (s.color_bits != 8 ? "|color_bits=" + std::to_string(s.color_bits) : std::string()) +

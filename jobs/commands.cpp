@@ -301,6 +301,13 @@ Result<DecodedMesh> decodeToMesh(const DecodeSettings& settings) {
   return out;
 }
 
+// The container's scalar channels, when the output's format has no place for them: listed (with the vertices
+// written), never silent.
+void noteDroppedScalars(const ContainerHeader& header, const std::string& output, DecodeResult& result) {
+  if (scalarsWritten(output)) return;
+  for (const ScalarChannel& c : header.layout.scalars) result.dropped.push_back({"vertex." + c.name, result.vertices});
+}
+
 Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   SP_RETURN_IF_ERROR(checkOutputPath(settings.output, {settings.input}));  // `decode X X` must not replace X
   SP_ASSIGN_OR_RETURN(Selection sel, selectTiles(settings));
@@ -316,10 +323,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
                                                       ": --gltf-compression and --gltf-nodes are for glTF output "
                                                       "(.glb, .gltf)");
   result.tiles = static_cast<uint32_t>(chosen.size());
-  if (!scalarsWritten(settings.output))
-    for (const ScalarChannel& c : header.layout.scalars)
-      result.dropped.push_back({"vertex." + c.name, header.vertices});
-  const uint64_t in_memory = inMemoryDecodeBytes(chosen);
+  const uint64_t in_memory = inMemoryDecodeBytes(chosen, size_t(header.layout.scalarStride()));
   if (settings.memory_budget > 0 && in_memory > settings.memory_budget) {
     if (header.layout.hasScalars() && scalarsWritten(settings.output))
       return makeError(ErrorCode::kUnsupported,
@@ -342,6 +346,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     result.faces = streamed.faces;
     result.double_positions = streamed.double_positions;
     result.streamed = true;
+    noteDroppedScalars(header, settings.output, result);
     return result;
   }
   WriteOptions write;
@@ -362,6 +367,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     for (size_t i = 0; i < meshes.size(); ++i) parts.push_back({names[i], &meshes[i]});
     result.tiles = static_cast<uint32_t>(chosen.size());
     SP_RETURN_IF_ERROR(writeGltfParts(settings.output, parts, write));
+    noteDroppedScalars(header, settings.output, result);
     return result;
   }
   SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeChosen(file, chosen, level));
@@ -374,6 +380,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   q = QuantizedMesh();  // the decoded mesh's memory is bounded by the container's size (FORMAT.md): held once
   write.double_positions = result.double_positions;
   SP_RETURN_IF_ERROR(writeMeshFile(settings.output, mesh, write));
+  noteDroppedScalars(header, settings.output, result);
   return result;
 }
 

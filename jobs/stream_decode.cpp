@@ -295,10 +295,11 @@ uint64_t tileDecodeBytes(const TileEntry& e) {
   return e.vertices * kDecodeBytesPerVertex + e.faces * kDecodeBytesPerFace;
 }
 
-uint64_t inMemoryDecodeBytes(const std::vector<const TileEntry*>& chosen) {
+uint64_t inMemoryDecodeBytes(const std::vector<const TileEntry*>& chosen, size_t scalar_stride) {
   uint64_t total = 0, largest = 0;
   for (const TileEntry* e : chosen) {
-    total += e->vertices * kInMemoryBytesPerVertex + e->faces * kInMemoryBytesPerFace;
+    total += e->vertices * (kInMemoryBytesPerVertex + 3 * 4 * uint64_t(scalar_stride)) +
+             e->faces * kInMemoryBytesPerFace;
     largest = std::max(largest, tileDecodeBytes(*e));
   }
   return total + largest;
@@ -421,7 +422,10 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
   for (auto [a, b] : batches) {
     SP_ASSIGN_OR_RETURN(auto tiles, decodeTiles(file, std::span(chosen).subspan(a, b - a), settings.level));
     for (size_t i = a; i < b; ++i) {
-      const QuantizedMesh& m = tiles[i - a].mesh;
+      QuantizedMesh& m = tiles[i - a].mesh;
+      // The streamed output writes no scalar channels (decodeFile refuses PLY here and reports them dropped for the
+      // other formats): the weld ignores them. Its keys outlive the tile, so they must not point into its values.
+      m.scalars.clear();
       if (!settings.level) SP_RETURN_IF_ERROR(checkWithinIndexBounds(file, *chosen[i], m));
       SP_RETURN_IF_ERROR(welder.add(static_cast<uint32_t>(i), m));
       tiles[i - a].mesh = QuantizedMesh();

@@ -35,7 +35,8 @@ namespace scanpress {
 // plus the decoded tile itself).
 uint64_t tileDecodeBytes(const TileEntry& e);
 // What the in-memory decode of `chosen` peaks at (decoded tiles, welded mesh, float copy, weld table).
-uint64_t inMemoryDecodeBytes(const std::vector<const TileEntry*>& chosen);
+// `scalar_stride`: the layout's scalar words per vertex (each held in the tile, the welded copy and the mesh).
+uint64_t inMemoryDecodeBytes(const std::vector<const TileEntry*>& chosen, size_t scalar_stride = 0);
 
 struct DecodedTile {
   QuantizedMesh mesh;

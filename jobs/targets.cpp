@@ -393,6 +393,8 @@ Result<EncodeResult> encodeToTargetAuto(const EncodeSettings& settings, Progress
     TargetSearch search(c, progress, device, hooks);
     search.keepInPlace();
     auto r = search.run();
+    // Under strict, pm refuses a scan whose scalar channels it would drop: edgebreaker alone competes.
+    if (!r.isOk() && settings.strict && r.status().code() == ErrorCode::kUnsupported && c.codec == "pm") continue;
     if (!r.isOk()) {
       for (auto& d : done) discard(d.kept);
       return r.status();
@@ -402,10 +404,11 @@ Result<EncodeResult> encodeToTargetAuto(const EncodeSettings& settings, Progress
   }
   auto metOf = [](const Candidate& c) { return c.result.target && c.result.target->met; };
   auto better = [&](const Candidate& a, const Candidate& b) {  // a is better than b
-    // pm drops a scan's scalar channels (the report lists them): the codec that keeps them wins whatever the sizes.
+    if (metOf(a) != metOf(b)) return metOf(a);
+    // pm drops a scan's scalar channels (the report lists them): of two that meet the target, the one that keeps
+    // them wins whatever the sizes.
     if (a.result.layout.scalars.size() != b.result.layout.scalars.size())
       return a.result.layout.scalars.size() > b.result.layout.scalars.size();
-    if (metOf(a) != metOf(b)) return metOf(a);
     if (settings.target.kind == TargetKind::kMaxError) return a.result.bytes < b.result.bytes;
     return errorOf(a.result, ErrorMetric::kRms) < errorOf(b.result, ErrorMetric::kRms);
   };

@@ -20,7 +20,8 @@ namespace scanpress {
 enum class WeldBy { kPositionAndAttributes, kPosition };
 
 // A vertex's identity for welding: position and attributes (zero attributes when welding by position). `s`: the
-// vertex's scalar values (`stride` words, in its tile), compared word for word.
+// vertex's scalar values (`stride` words, in its tile), compared word for word: a key is valid while its tile's
+// mesh lives (a caller that keeps keys longer clears the tile's scalars first, as the streamed decode does).
 struct WeldKey {
   Vec3u p;
   OctNormal n;

@@ -135,6 +135,48 @@ TEST(ScalarFiles, WhatIsDroppedIsSaid) {
   EXPECT_FALSE(std::filesystem::exists(d.output));
 }
 
+// Decoding under a memory budget streams tile batch by tile batch and writes no scalars: a container of many
+// tiles with scalars decodes to OBJ (welded without them, the same triangles as in memory) and says it dropped
+// them; the weld's keys never point into a freed tile (this runs under ASan in CI).
+TEST(ScalarFiles, StreamedDecodeOfManyTilesWithScalars) {
+  TempDir dir;
+  EncodeSettings s = settingsFor(dir.file("t.spz"), "kdtree");
+  s.tile_triangles = 4000;
+  auto enc = encodeFile(s);
+  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+  ASSERT_GT(enc->tiles.size(), 8u);
+  DecodeSettings d;
+  d.input = s.output;
+  d.output = dir.file("mem.obj");
+  auto whole = decodeFile(d);
+  ASSERT_TRUE(whole.isOk()) << whole.status().toString();
+  EXPECT_FALSE(whole->streamed);
+  d.output = dir.file("streamed.obj");
+  d.memory_budget = 1 << 20;  // the in-memory decode needs about 6 MiB
+  auto streamed = decodeFile(d);
+  ASSERT_TRUE(streamed.isOk()) << streamed.status().toString();
+  EXPECT_TRUE(streamed->streamed);
+  EXPECT_EQ(describeDropped(streamed->dropped), "vertex.confidence x " + std::to_string(streamed->vertices) +
+                                                    ", vertex.intensity x " + std::to_string(streamed->vertices));
+  auto a = readMeshFile(dir.file("mem.obj")), b = readMeshFile(dir.file("streamed.obj"));
+  ASSERT_TRUE(a.isOk() && b.isOk());
+  EXPECT_EQ(a->triangles.size(), b->triangles.size());
+}
+
+// --codec auto under a target with --strict: pm would drop the scalars, so edgebreaker alone competes.
+TEST(ScalarFiles, AutoUnderStrictKeepsTheScalars) {
+  TempDir dir;
+  EncodeSettings s = settingsFor(dir.file("auto.spz"), "auto");
+  s.strict = true;
+  s.target.kind = TargetKind::kMaxError;
+  s.target.metric = ErrorMetric::kRms;
+  s.target.max_error = 1e-3;
+  auto r = encodeFile(s);
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  EXPECT_EQ(r->codec, "edgebreaker");
+  EXPECT_EQ(r->layout.scalars.size(), 2u);
+}
+
 // Through the command line: the warning on decode to OBJ, and --no-scalars.
 TEST(ScalarFiles, CommandLine) {
   TempDir dir;

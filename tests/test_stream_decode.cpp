@@ -126,7 +126,12 @@ TEST_F(StreamDecode, SameBytesAsInMemoryForEveryCodecOptionAndFormat) {
     for (size_t c = 0; c < cases.size(); ++c) {
       SCOPED_TRACE("case " + std::to_string(c));
       // Six tiles need a smaller budget to stream than the whole sphere.
+#if defined(__SANITIZE_ADDRESS__)
+      // ASan: two formats (the streaming and welding are the same for all; the Release lane runs all five).
+      for (const char* ext : {".ply", ".obj"})
+#else
       for (const char* ext : {".ply", ".obj", ".off", ".stl", ".ply.zst"})
+#endif
         expectSameDecode(*dir_, container(codec), cases[c], ext, c == 2 ? kSmallBudget / 2 : kSmallBudget);
     }
   }

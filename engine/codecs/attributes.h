@@ -564,10 +564,15 @@ void codeTileAttributes(Io& io, uint16_t version, const AttributeLayout& layout,
   }
   codeRawAttributes(io, layout, u32(pos.size()), truth, normals, colors);
   // Version 1 payloads predate scalar channels (this build writes none with them); a hostile one in a container
-  // that has them reads them raw, word by word.
+  // that has them reads them raw, each value at its type's width (so that no value holds bits above it).
   const size_t words = size_t(pos.size()) * size_t(layout.scalarStride());
   scalars.resize(words);
-  for (size_t i = 0; i < words; ++i) scalars[i] = io.bits(truth ? truth->scalars[i] : 0, 32);
+  for (size_t i = 0; i < words;)
+    for (const ScalarChannel& c : layout.scalars) {
+      const int bits = std::min(32, scalarBits(c.type));
+      scalars[i] = io.bits(truth ? truth->scalars[i] : 0, bits), ++i;
+      if (c.type == ScalarType::kFloat64) scalars[i] = io.bits(truth ? truth->scalars[i] : 0, 32), ++i;
+    }
 }
 
 }  // namespace scanpress::hierarchy

@@ -8,7 +8,8 @@
 //   if V > 0: per axis x,y,z: u32 minimum coordinate, u8 bits b_a (enough for max - min)
 //   bit stream (LSB first): V x (b_x + b_y + b_z) bits of (coordinate - minimum),
 //   3T x bitsFor(V-1) bits of vertex indices, V x 2 x normal_bits bits of octahedral normals (if any),
-//   V x 8 x channels bits of colors (if any); zero padding to the byte.
+//   V x 8 x channels bits of colors (if any), then per vertex each scalar channel's value at its type's width
+//   (container version 2; float64 as two 32-bit words, low first); zero padding to the byte.
 #include <algorithm>
 #include <string>
 

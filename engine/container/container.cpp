@@ -321,6 +321,10 @@ Result<std::vector<TileEntry>> parseIndex(std::span<const uint8_t> bytes, const 
   if (bytes.size() != footer.index_bytes)
     return makeError(ErrorCode::kTruncated, where + " at byte " + std::to_string(footer.index_offset) + ": expected " +
                                                 std::to_string(footer.index_bytes) + " bytes");
+  if (footer.index_offset < header.header_size)
+    return makeError(ErrorCode::kMalformed, where + " at byte " + std::to_string(footer.index_offset) +
+                                                ": the index starts inside the header (" +
+                                                std::to_string(header.header_size) + " bytes)");
   if (footer.version != header.version)
     return makeError(ErrorCode::kMalformed, what + ": footer says container format version " +
                                                 std::to_string(footer.version) + ", the header " +

@@ -425,7 +425,14 @@ class PlyParser {
       float f = 0;
       const char* b = tok.data() + (!tok.empty() && tok[0] == '+');
       const auto [ptr, ec] = std::from_chars(b, tok.data() + tok.size(), f);
-      if (ec != std::errc() || ptr != tok.data() + tok.size()) return bad("a number");
+      if (ptr != tok.data() + tok.size()) return bad("a number");
+      if (ec == std::errc::result_out_of_range) {  // beyond float's range: infinity or zero, as strtof gives
+        double d = 0;
+        if (!parseDouble(tok, d)) return bad("a number");
+        f = static_cast<float>(d);
+      } else if (ec != std::errc()) {
+        return bad("a number");
+      }
       std::memcpy(w, &f, 4);
       return Status::ok();
     }
