@@ -7,6 +7,7 @@
 
 #include <array>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -56,6 +57,13 @@ struct ScalarChannel {
   bool operator==(const ScalarChannel&) const = default;
 };
 
+// 32-bit words per vertex of these channels' values (ScalarValues' stride).
+inline size_t scalarWords(std::span<const ScalarChannel> channels) {
+  size_t w = 0;
+  for (const ScalarChannel& c : channels) w += size_t(scalarTypeWords(c.type));
+  return w;
+}
+
 // The values of a mesh's scalar channels, vertex after vertex: each value's bit pattern, zero-extended to 32 bits
 // (float64: low word, then high word). `stride` words per vertex (the channels' scalarTypeWords).
 using ScalarValues = std::vector<uint32_t>;
@@ -73,11 +81,7 @@ struct AttributeLayout {
   bool hasColors() const { return color_channels != 0; }
   bool hasScalars() const { return !scalars.empty(); }
   // 32-bit words of scalar values per vertex.
-  int scalarStride() const {
-    int w = 0;
-    for (const auto& c : scalars) w += scalarTypeWords(c.type);
-    return w;
-  }
+  int scalarStride() const { return int(scalarWords(scalars)); }
   bool operator==(const AttributeLayout&) const = default;
 };
 

@@ -61,6 +61,27 @@ BoundingBox usedBoundingBox(const Mesh& mesh) {
   return box;
 }
 
+Result<std::vector<std::pair<size_t, size_t>>> pickScalarChannels(std::span<const ScalarChannel> have,
+                                                                  std::span<const ScalarChannel> wanted) {
+  std::vector<std::pair<size_t, size_t>> picks;
+  for (const ScalarChannel& want : wanted) {
+    size_t offset = 0;
+    bool found = false;
+    for (const ScalarChannel& c : have) {
+      if (c == want) {
+        picks.push_back({offset, size_t(scalarTypeWords(c.type))});
+        found = true;
+        break;
+      }
+      offset += size_t(scalarTypeWords(c.type));
+    }
+    if (!found)
+      return makeError(ErrorCode::kInvalidArgument, "scalar channel '" + want.name + "' (" +
+                                                        scalarTypeName(want.type) + ") is not among the mesh's");
+  }
+  return picks;
+}
+
 Result<QuantizedMesh> quantizeMesh(const Mesh& mesh, const Grid& grid, const AttributeLayout& layout,
                                    QuantizeStats* stats) {
   const size_t n = mesh.positions.size();
@@ -72,30 +93,11 @@ Result<QuantizedMesh> quantizeMesh(const Mesh& mesh, const Grid& grid, const Att
     return makeError(ErrorCode::kInvalidArgument, "layout has colors but the mesh has " +
                                                       std::to_string(mesh.colors.size()) + " for " +
                                                       std::to_string(n) + " vertices");
-  // The layout's scalar channels, each found in the mesh's by name and type: its word offset there.
-  const size_t mesh_stride = [&] {
-    size_t w = 0;
-    for (const auto& c : mesh.scalar_channels) w += size_t(scalarTypeWords(c.type));
-    return w;
-  }();
+  // The layout's scalar channels, each found in the mesh's by name and type.
+  const size_t mesh_stride = scalarWords(mesh.scalar_channels);
   if (mesh.scalars.size() != n * mesh_stride)
     return makeError(ErrorCode::kInvalidArgument, "the mesh's scalar values do not match its vertices");
-  std::vector<std::pair<size_t, int>> picks;  // (offset in the mesh's row, words)
-  for (const ScalarChannel& want : layout.scalars) {
-    size_t offset = 0;
-    bool found = false;
-    for (const ScalarChannel& c : mesh.scalar_channels) {
-      if (c == want) {
-        picks.push_back({offset, scalarTypeWords(c.type)});
-        found = true;
-        break;
-      }
-      offset += size_t(scalarTypeWords(c.type));
-    }
-    if (!found)
-      return makeError(ErrorCode::kInvalidArgument, std::string("layout has scalar channel '") + want.name + "' (" +
-                                                        scalarTypeName(want.type) + "), the mesh has not");
-  }
+  SP_ASSIGN_OR_RETURN(const auto picks, pickScalarChannels(mesh.scalar_channels, layout.scalars));
   std::vector<Vec3u> q(n);
   for (size_t i = 0; i < n; ++i) q[i] = grid.quantize(mesh.positions[i]);
 
@@ -124,7 +126,7 @@ Result<QuantizedMesh> quantizeMesh(const Mesh& mesh, const Grid& grid, const Att
     if (layout.hasNormals()) out.normals.push_back(encodeOctahedral(mesh.normals[i], layout.normal_bits));
     if (layout.hasColors()) out.colors.push_back(quantizeColor(mesh.colors[i], layout));
     for (const auto& [offset, words] : picks)
-      for (int w = 0; w < words; ++w) out.scalars.push_back(mesh.scalars[i * mesh_stride + offset + size_t(w)]);
+      for (size_t w = 0; w < words; ++w) out.scalars.push_back(mesh.scalars[i * mesh_stride + offset + w]);
   }
   for (Triangle& t : out.triangles)
     for (uint32_t& v : t) v = remap[v];

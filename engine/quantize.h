@@ -77,6 +77,11 @@ inline Rgba8 quantizeColor(const Rgba8& c, const AttributeLayout& layout) {
 // the layout wants them), colors to the layout's levels (quantizeColor; as they are at 8 bits). Triangles that quantization makes
 // degenerate and vertices no kept triangle uses are dropped and counted; the other vertices keep their order.
 // Fails with kInvalidArgument if a triangle indexes past the vertex array or attributes do not match the layout.
+// Where each of `wanted`'s channels sits in a row of `have`'s values (found by name and type): (word offset,
+// words) per wanted channel; kInvalidArgument naming the first one `have` lacks.
+Result<std::vector<std::pair<size_t, size_t>>> pickScalarChannels(std::span<const ScalarChannel> have,
+                                                                  std::span<const ScalarChannel> wanted);
+
 Result<QuantizedMesh> quantizeMesh(const Mesh& mesh, const Grid& grid, const AttributeLayout& layout,
                                    QuantizeStats* stats);
 

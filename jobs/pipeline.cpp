@@ -185,8 +185,7 @@ class IngestSink : public MeshSink {
                   const ScalarChunk& s) override {
     const OctNormal no_normal = encodeOctahedral({0, 0, 0}, layout_.hasNormals() ? layout_.normal_bits : 8);
     if (layout_.hasScalars() && picks_.empty()) SP_RETURN_IF_ERROR(pickScalars(s.channels));
-    size_t in_stride = 0;
-    for (const ScalarChannel& ch : s.channels) in_stride += size_t(scalarTypeWords(ch.type));
+    const size_t in_stride = scalarWords(s.channels);
     if (layout_.hasScalars() && s.values.size() != p.size() * in_stride)
       return makeError(ErrorCode::kInternal, "scalar values do not match the vertices");
     for (size_t i = 0; i < p.size(); ++i) {
@@ -241,21 +240,13 @@ class IngestSink : public MeshSink {
     return Status::ok();
   }
 
-  // Where each of the layout's scalar channels sits in the reader's rows (by name and type).
+  // Where each of the layout's scalar channels sits in the reader's rows (by name and type): the survey found
+  // them all, so a miss means the file changed between the reads.
   Status pickScalars(std::span<const ScalarChannel> channels) {
-    for (const ScalarChannel& want : layout_.scalars) {
-      size_t offset = 0;
-      bool found = false;
-      for (const ScalarChannel& c : channels) {
-        if (c == want) {
-          picks_.push_back({offset, size_t(scalarTypeWords(c.type))});
-          found = true;
-          break;
-        }
-        offset += size_t(scalarTypeWords(c.type));
-      }
-      if (!found) return makeError(ErrorCode::kIo, "scalar channel '" + want.name + "' missing from the second read");
-    }
+    auto picks = pickScalarChannels(channels, layout_.scalars);
+    if (!picks.isOk())
+      return makeError(ErrorCode::kIo, "the file changed between the reads: " + picks.status().message());
+    picks_ = std::move(picks).value();
     return Status::ok();
   }
 
@@ -321,8 +312,7 @@ class KeptTriangles : public MeshSink {
 Status replay(const Mesh& m, MeshSink& sink, size_t chunk) {
   for (size_t i = 0; i < m.positions.size(); i += chunk) {
     const size_t n = std::min(chunk, m.positions.size() - i);
-    size_t stride = 0;
-    for (const ScalarChannel& c : m.scalar_channels) stride += size_t(scalarTypeWords(c.type));
+    const size_t stride = scalarWords(m.scalar_channels);
     const ScalarChunk scalars{m.scalar_channels, stride ? std::span(m.scalars).subspan(i * stride, n * stride)
                                                         : std::span<const uint32_t>()};
     SP_RETURN_IF_ERROR(sink.vertices(std::span(m.positions).subspan(i, n),

@@ -58,8 +58,7 @@ py::dict meshDict(const Mesh& m) {
   py::dict d;
   // Scalar channels (a PLY's confidence, intensity, ...): name -> array of the channel's type.
   py::dict scalars;
-  size_t stride = 0;
-  for (const ScalarChannel& c : m.scalar_channels) stride += size_t(scalarTypeWords(c.type));
+  const size_t stride = scalarWords(m.scalar_channels);
   size_t offset = 0;
   for (const ScalarChannel& c : m.scalar_channels) {
     py::array a;

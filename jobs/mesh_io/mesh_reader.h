@@ -116,9 +116,8 @@ class ChunkBuffer {
         chunk_(chunk),
         channels_(color_channels),
         normals_(normals),
-        scalar_channels_(std::move(scalar_channels)) {
-    for (const ScalarChannel& c : scalar_channels_) stride_ += size_t(scalarTypeWords(c.type));
-  }
+        scalar_channels_(std::move(scalar_channels)),
+        stride_(scalarWords(scalar_channels_)) {}
   // `scalars`: the vertex's scalar values (stride words), when the buffer has scalar channels.
   Status addVertex(const Vec3d& p, const Vec3f& n, const Rgba8& c, const uint32_t* scalars = nullptr) {
     pos_.push_back(p);
@@ -145,7 +144,7 @@ class ChunkBuffer {
   uint8_t channels_;
   bool normals_;
   std::vector<ScalarChannel> scalar_channels_;
-  size_t stride_ = 0;
+  size_t stride_;
   ScalarValues sca_;
   std::vector<Vec3d> pos_;
   std::vector<Vec3f> nrm_;

@@ -89,14 +89,8 @@ void putIndex(std::string& out, uint64_t v) {
   out.append(num, r.ptr);
 }
 
-size_t strideOf(const std::vector<ScalarChannel>& channels) {
-  size_t w = 0;
-  for (const ScalarChannel& c : channels) w += size_t(scalarTypeWords(c.type));
-  return w;
-}
-
 Status checkMesh(const std::string& path, const Mesh& mesh) {
-  if (mesh.scalars.size() != mesh.positions.size() * strideOf(mesh.scalar_channels))
+  if (mesh.scalars.size() != mesh.positions.size() * scalarWords(mesh.scalar_channels))
     return makeError(ErrorCode::kInternal, path + ": scalar values do not match vertices");
   if (!mesh.normals.empty() && mesh.normals.size() != mesh.positions.size())
     return makeError(ErrorCode::kInternal, path + ": normals do not match vertices");
@@ -114,7 +108,7 @@ Status writeWith(const std::string& path, const Mesh& mesh, const WriteOptions& 
   layout.color_channels = mesh.colors.empty() ? 0 : (mesh.color_channels == 4 ? 4 : 3);
   layout.double_positions = options.double_positions;
   if (format.kind() == MeshFileFormat::Kind::kPly) layout.scalars = mesh.scalar_channels;
-  const size_t stride = strideOf(layout.scalars);
+  const size_t stride = scalarWords(layout.scalars);
   SP_ASSIGN_OR_RETURN(auto writer, MeshFileWriter::create(path, layout, format));
   if (format.indexed())
     for (size_t i = 0; i < mesh.positions.size(); ++i)

@@ -127,10 +127,9 @@ class PlyParser {
     vertex_count_ = vertex->count;
     std::vector<ScalarChannel> scalars;
     for (const auto& p : vertex->props)
-      if (p.role == Role::kScalar) {
+      if (p.role == Role::kScalar)
         scalars.push_back({p.name, static_cast<ScalarType>(static_cast<uint8_t>(p.type) + 1)});
-        stride_ += size_t(scalarTypeWords(scalars.back().type));
-      }
+    stride_ = scalarWords(scalars);
     ChunkBuffer out(sink_, options_.chunk, channels, has_normals, std::move(scalars));
     out_ = &out;
     bool seen_vertex = false;
