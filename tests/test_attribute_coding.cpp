@@ -253,7 +253,8 @@ TEST_P(AttributeRoundTrip, EveryTruncationFailsCleanly) {
   const auto& bytes = enc->payload;
   // Every cut in the first and last 256 bytes (counts and the coder's start; the attributes' end), a stride of 13
   // through the rest (each cut decodes the whole tile before it fails: every byte would take minutes under ASan).
-  for (size_t n = 0; n < bytes.size(); n += (n < 256 || n + 256 >= bytes.size() ? 1 : 13)) {
+  for (size_t n = 0; n < bytes.size();
+       n += (n < 256 || n + 256 >= bytes.size() ? testing::sampleStride() : 13 * testing::sampleStride())) {
     auto d = codec().decode(ctx, codec().version, std::span<const uint8_t>(bytes.data(), n), limitsOf(enc->decoded));
     EXPECT_FALSE(d.isOk()) << "a payload cut to " << n << " of " << bytes.size() << " bytes decoded";
   }
@@ -306,7 +307,7 @@ TEST_P(AttributeRoundTrip, CorruptedAttributesFailCleanly) {
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
   std::mt19937 rng(11);
   const size_t n = enc->payload.size(), tail = n / 3;
-  for (int trial = 0; trial < 300; ++trial) {
+  for (int trial = 0; trial < testing::sampled(300); ++trial) {
     std::vector<uint8_t> bad = enc->payload;
     for (int k = 0; k < 1 + trial % 4; ++k) bad[n - 1 - rng() % tail] ^= uint8_t(1 + rng() % 255);
     auto d = codec().decode(ctx, codec().version, bad, limitsOf(enc->decoded));

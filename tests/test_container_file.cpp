@@ -56,7 +56,7 @@ TEST(Container, EveryReadErrorNamesTheFileAndAnOffsetOrATile) {
   for (const sweep::SweepContainer& c : sweep::sweepContainers())
     for (const sweep::Family family : sweep::kFamilies) {
 #if defined(__SANITIZE_ADDRESS__)
-      constexpr uint64_t kPerFamily = 25;  // ASan: the decoders run under the sweep and the fuzz lane too
+      constexpr uint64_t kPerFamily = 10;  // ASan: the decoders run under the sweep and the fuzz lane too
 #else
       constexpr uint64_t kPerFamily = 60;
 #endif

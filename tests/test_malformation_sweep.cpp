@@ -72,26 +72,27 @@ namespace scanpress {
 namespace {
 
 constexpr uint64_t kMaxPeakBytes = uint64_t{256} << 20;
-// The checksum-repaired mutations of the progressive codecs (kdtree, octree) reach their decoders, which
-// decode every level of a tile (about 1 ms per tile in Release): each such family is an evenly spaced sample
-// of at most kProgressiveRepairedCap mutations (all of them for the other codecs in Release, and for the
-// mutations that checksums refuse). ASan (the Debug build of the SANITIZE=1 lane) samples fewer, to stay within
-// CI's time: also the single-rate codecs' repaired families. Profiled there (SCANPRESS_SWEEP_VERBOSE=1), the
-// repaired families took 70 of the sweep's 92 s at caps of 100 and 800 (a progressive container's decode of every
-// level about 25 ms), and the sweep 71 s at 50 and 400 with the scalar containers; the fuzz lane's container target
-// explores the same decoders under ASan too. Its RSS includes
-// shadow memory and the quarantine of freed blocks, so peak memory is printed but only the Release lane asserts it.
+// The checksum-repaired mutations reach the decoders, which decode every level of a tile (kdtree, octree: about
+// 2.5 ms per container in Release): each such family is an evenly spaced sample of at most kProgressiveRepairedCap
+// mutations for the progressive codecs and kSingleRateRepairedCap for the others (every mutation that a checksum
+// refuses is tried). Profiled in Release (SCANPRESS_SWEEP_VERBOSE=1): 80 s at caps of 1500 and all, most of it in
+// the repaired families; now 700 and 4000, still over 150,000 decodes. ASan (the Debug build of the SANITIZE=1
+// lane) samples fewer, to stay within CI's time: there the repaired families took 70 of the sweep's 92 s at caps of
+// 100 and 800 (a progressive container's decode of every level about 25 ms), the sweep 71 s at 50 and 400 with the
+// scalar containers, and 54 s at 25 and 200 (now 12 and 100); the fuzz lane's container target explores the same
+// decoders under ASan too. Its RSS includes shadow memory and the quarantine of freed blocks, so peak memory is
+// printed but only the Release lane asserts it.
 #if defined(SCANPRESS_SWEEP_ASAN)
 constexpr bool kAsan = true;
 constexpr int kPayloadEdits = 2500;
-constexpr uint64_t kProgressiveRepairedCap = 25;
-constexpr uint64_t kSingleRateRepairedCap = 200;
+constexpr uint64_t kProgressiveRepairedCap = 12;
+constexpr uint64_t kSingleRateRepairedCap = 100;
 constexpr uint64_t kMinMutations = 50'000;
 #else
 constexpr bool kAsan = false;
 constexpr int kPayloadEdits = 2500;
-constexpr uint64_t kProgressiveRepairedCap = 1500;
-constexpr uint64_t kSingleRateRepairedCap = UINT64_MAX;
+constexpr uint64_t kProgressiveRepairedCap = 700;
+constexpr uint64_t kSingleRateRepairedCap = 4000;
 constexpr uint64_t kMinMutations = 50'000;
 #endif
 

@@ -360,11 +360,11 @@ TEST(Prm, HostilePayloadsFailCleanly) {
   ASSERT_TRUE(good.isOk()) << good.status().toString();
   EXPECT_TRUE(testing::cornerMultiset(*good, 10) == testing::cornerMultiset(q, 10));
   // Every truncation fails.
-  for (size_t n = 0; n < payload.size(); ++n)
+  for (size_t n = 0; n < payload.size(); n += testing::sampleStride())
     EXPECT_FALSE(prm().decode(ctx, 1, std::span(payload).first(n), lim).isOk()) << n;
   // Corruptions: an error or a valid mesh within the limits.
   std::mt19937 rng(21);
-  for (int trial = 0; trial < 3000; ++trial) {
+  for (int trial = 0; trial < testing::sampled(3000); ++trial) {
     auto bytes = payload;
     const int edits = 1 + int(rng() % 4);
     for (int e = 0; e < edits; ++e) bytes[1 + rng() % (bytes.size() - 1)] ^= uint8_t(1 + rng() % 255);

@@ -25,6 +25,17 @@
 
 namespace scanpress::testing {
 
+// Randomized and exhaustive hostile-input loops run `n` trials in the Release lane and a quarter of them under the
+// sanitizers (CI's ASan+UBSan lane runs about five times slower and covers the same decoders with the fuzz lane):
+// `sampled(n)`; `sampleStride()` is the step through a payload's cuts (1, or 4 under the sanitizers).
+#if defined(__SANITIZE_ADDRESS__)
+inline constexpr int kSanitizerSampling = 4;
+#else
+inline constexpr int kSanitizerSampling = 1;
+#endif
+inline int sampled(int n) { return std::max(1, n / kSanitizerSampling); }
+inline size_t sampleStride() { return size_t(kSanitizerSampling); }
+
 // `m` on a grid of `bits` over its bounding box, with `layout`'s attributes (a failed quantization fails the test).
 inline QuantizedMesh quantized(const Mesh& m, int bits, const AttributeLayout& layout = {}) {
   auto grid = makeGrid(boundingBox(m), bits);

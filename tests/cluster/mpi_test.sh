@@ -37,8 +37,9 @@ ranks() {  # ranks N ARGS...: scanpress-mpi at N ranks, its output in mpirun.log
 timeout 60 mpirun -np 2 --oversubscribe --bind-to none true >"$work/mpirun.log" 2>&1 ||
   skip "mpirun cannot start 2 ranks here: $(tail -3 "$work/mpirun.log" | tr '\n' ' ')"
 
-"$bin" synth "$work/a.ply" --triangles 200000 --seed 3 --quiet || fail "synth a"
+"$bin" synth "$work/a.ply" --triangles 100000 --seed 3 --quiet || fail "synth a"
 "$bin" synth "$work/b.ply" --triangles 60000 --seed 4 --quiet || fail "synth b"
+"$bin" synth "$work/c.ply" --triangles 24000 --seed 5 --quiet || fail "synth c"
 
 # same NAME RANKS ENCODE-OPTIONS...: scanpress and scanpress-mpi at RANKS write the same container of a.ply (of
 # $scan.ply when scan is set)
@@ -55,11 +56,11 @@ same edgebreaker 3 --tile-triangles 8192
 same edgebreaker 4 --tile-triangles 8192
 same kdtree 3 --codec kdtree --tile-triangles 8192 --threads 1
 same kdtree-24-bits 3 --codec kdtree --bits 24 --tile-triangles 8192  # 25 levels a tile
-same pm 4 --codec pm --tile-triangles 16384
+same pm 4 --codec pm --tile-triangles 8192
 # Measured on the workers: the report's error and per-tile figures equal the single process's.
-"$bin" encode "$work/a.ply" "$work/m.local.spz" --quiet --codec pm --tile-triangles 16384 --measure \
+"$bin" encode "$work/a.ply" "$work/m.local.spz" --quiet --codec pm --tile-triangles 8192 --measure \
   --report "$work/m.local.json" || fail "measured: scanpress encode"
-ranks 3 encode "$work/a.ply" "$work/m.mpi.spz" --quiet --codec pm --tile-triangles 16384 --measure \
+ranks 3 encode "$work/a.ply" "$work/m.mpi.spz" --quiet --codec pm --tile-triangles 8192 --measure \
   --report "$work/m.mpi.json" || fail "measured: scanpress-mpi at 3 ranks"
 cmp -s "$work/m.local.spz" "$work/m.mpi.spz" || fail "measured: the container at 3 ranks differs"
 python3 - "$work/m.local.json" "$work/m.mpi.json" <<'EOF' || fail "measured: the reports differ"
@@ -71,10 +72,10 @@ strip = lambda ts: [{k: v for k, v in t.items() if "second" not in k} for t in t
 assert strip(a["tiles"]) == strip(b["tiles"]), "per-tile figures differ"
 EOF
 echo "ok: measured on the workers, same report figures"
-same few-tiles 4 --tile-triangles 131072  # 2 tiles, 3 workers: one has none
+same few-tiles 4 --tile-triangles 65536  # 2 tiles, 3 workers: one has none
 same subset 3 --tile-triangles 8192 --subset 1/3
-# The target search on the smaller scan: on a.ply it took 40 of the test's 60 s.
-scan=b same target 3 --codec pm --tile-triangles 8192 --max-error 2e-4
+# The target search (pm's, per tile: 8 tiles) on the smallest scan: on b.ply it took 13 of the test's 25 s.
+scan=c same target 3 --codec pm --tile-triangles 4096 --max-error 2e-4
 
 # A job file over two scans: the workers serve one scan after the other.
 mkdir -p "$work/in" "$work/ref" "$work/out"
