@@ -7,6 +7,7 @@
 #include "jobs/file_io.h"
 #include "jobs/mesh_io/gltf_writer.h"
 #include "jobs/mesh_io/mesh_writer.h"
+#include "jobs/mesh_io/texcoords.h"
 #include "jobs/stream_decode.h"
 #include "spatial/weld.h"
 
@@ -301,11 +302,14 @@ Result<DecodedMesh> decodeToMesh(const DecodeSettings& settings) {
   return out;
 }
 
-// The container's scalar channels, when the output's format has no place for them: listed (with the vertices
-// written), never silent.
+// The container's scalar channels that the output's format has no place for (all but PLY's; OBJ and glTF keep the
+// texture coordinates: texcoords.h), or that a streamed decode does not write: listed (with the vertices written),
+// never silent.
 void noteDroppedScalars(const ContainerHeader& header, const std::string& output, DecodeResult& result) {
-  if (scalarsWritten(output)) return;
-  for (const ScalarChannel& c : header.layout.scalars) result.dropped.push_back({"vertex." + c.name, result.vertices});
+  const std::vector<bool> written = result.streamed ? std::vector<bool>(header.layout.scalars.size(), false)
+                                                    : channelsWritten(output, header.layout.scalars);
+  for (size_t i = 0; i < header.layout.scalars.size(); ++i)
+    if (!written[i]) result.dropped.push_back({"vertex." + header.layout.scalars[i].name, result.vertices});
 }
 
 Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
@@ -325,12 +329,13 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   result.tiles = static_cast<uint32_t>(chosen.size());
   const uint64_t in_memory = inMemoryDecodeBytes(chosen, size_t(header.layout.scalarStride()));
   if (settings.memory_budget > 0 && in_memory > settings.memory_budget) {
-    if (header.layout.hasScalars() && scalarsWritten(settings.output))
+    const std::vector<bool> written = channelsWritten(settings.output, header.layout.scalars);
+    if (std::find(written.begin(), written.end(), true) != written.end())
       return makeError(ErrorCode::kUnsupported,
                        settings.input +
-                           ": the container has scalar channels, which decoding under a memory budget "
-                           "(tile batch by tile batch) does not write yet: raise --memory-budget, or "
-                           "decode to a format without them (.obj, .stl, .off drop them)");
+                           ": the container has scalar channels (or texture coordinates), which decoding under a "
+                           "memory budget (tile batch by tile batch) does not write yet: raise --memory-budget, or "
+                           "decode to a format without them (.stl and .off drop them)");
     if (gltf)
       return makeError(ErrorCode::kLimitExceeded,
                        settings.output + ": glTF output is built in memory, about " + std::to_string(in_memory >> 20) +

@@ -378,7 +378,7 @@ class ScanEncoder {
     if (survey_.triangle_count == 0 || survey_.usedCount() == survey_.vertex_count) return survey_.box;
     UsedBoxSink used(survey_.used(), survey_.vertex_count);
     Status read = survey_.kept() ? replay(survey_.keptMesh(), used, ReadOptions().chunk)
-                                 : readMesh(s_.input, used).status();
+                                 : readMesh(s_.input, used, readOptions()).status();
     if (!used.complete) {
       if (!read.isOk()) return read;
       return makeError(ErrorCode::kIo, s_.input + ": file changed between the two passes");
@@ -630,13 +630,21 @@ class ScanEncoder {
   // Reads the input into `sink`; with more than one thread, the sink runs on a thread of its own while the reader
   // parses the next chunk (the sink sees the same calls in the same order).
   Result<ReadStats> readInput(MeshSink& sink) const {
-    if (result_.threads < 2) return readMesh(s_.input, sink);
+    if (result_.threads < 2) return readMesh(s_.input, sink, readOptions());
     AsyncSink async(sink);
-    auto read = readMesh(s_.input, async);
+    auto read = readMesh(s_.input, async, readOptions());
     const Status delivered = async.finish();
     if (!read.isOk()) return read;
     if (!delivered.isOk()) return delivered;
     return read;
+  }
+
+  // Texture coordinates (OBJ `vt`) split vertices into wedges at seams: only when the scalar channels they become
+  // are kept (a simplifying codec would open the seams; it reads the vertices as they are, `vt` listed dropped).
+  ReadOptions readOptions() const {
+    ReadOptions o;
+    o.texture_coordinates = s_.keep_scalars && codecCarriesScalars();
+    return o;
   }
 
   void stage(const char* name) {

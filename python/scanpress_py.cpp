@@ -19,6 +19,7 @@
 #include "jobs/commands.h"
 #include "jobs/container_file.h"
 #include "jobs/mesh_io/mesh_writer.h"
+#include "jobs/mesh_io/texcoords.h"
 #include "jobs/pipeline.h"
 #include "jobs/report.h"
 
@@ -84,7 +85,17 @@ py::dict meshDict(const Mesh& m) {
   d["faces"] = faces;
   d["normals"] = py::none();
   d["colors"] = py::none();
-  d["uvs"] = py::none();  // containers do not keep texture coordinates yet (the attributes issue)
+  d["uvs"] = py::none();
+  if (const auto tc = findTexcoords(m.scalar_channels)) {  // also in `scalars`, by their names
+    py::array_t<double> uv({py::ssize_t(m.positions.size()), py::ssize_t(2)});
+    double* out = uv.mutable_data();
+    for (size_t i = 0; i < m.positions.size(); ++i) {
+      const uint32_t* words = m.scalars.data() + i * stride;
+      out[2 * i] = floatChannelValue(m.scalar_channels[tc->u], words + tc->u_word);
+      out[2 * i + 1] = floatChannelValue(m.scalar_channels[tc->v], words + tc->v_word);
+    }
+    d["uvs"] = uv;
+  }
   if (!m.normals.empty()) {
     py::array_t<float> n({py::ssize_t(m.normals.size()), py::ssize_t(3)});
     std::memcpy(n.mutable_data(), m.normals.data(), m.normals.size() * sizeof(m.normals[0]));
@@ -219,7 +230,7 @@ PYBIND11_MODULE(scanpress, m) {
   m.def("read", &readContainer, py::arg("path"), py::kw_only(), py::arg("tiles") = py::none(),
         py::arg("level") = py::none(), py::arg("box") = py::none(), py::arg("crop") = false,
         "Decodes a container into a dict of numpy arrays: positions (N, 3) float64, faces (M, 3) uint32, normals "
-        "(N, 3) float32 or None, colors (N, 3|4) uint8 or None, uvs None, scalars a dict of (N,) arrays by name at their type; `tiles` a list of tile ids, `box` "
+        "(N, 3) float32 or None, colors (N, 3|4) uint8 or None, uvs (N, 2) float64 or None, scalars a dict of (N,) arrays by name at their type; `tiles` a list of tile ids, `box` "
         "(xmin, ymin, zmin, xmax, ymax, zmax) in world units (`crop` keeps only the triangles inside), `level` a "
         "progressive codec's level.");
   m.def("info", &info, py::arg("path"),

@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <map>
@@ -20,6 +21,7 @@
 #include "engine/mesh.h"
 #include "engine/shapes.h"
 #include "jobs/mesh_io/mesh_reader.h"
+#include "jobs/mesh_io/gltf_writer.h"
 #include "jobs/mesh_io/mesh_writer.h"
 #include "jobs_util.h"
 
@@ -79,7 +81,9 @@ T at(const std::vector<uint8_t>& b, size_t i) {
 }
 
 // Every node's mesh in world units, appended into one mesh (tile nodes repeat their border vertices).
-Mesh readBack(const std::string& path, std::vector<std::string>* node_names = nullptr) {
+// `uvs`: TEXCOORD_0 per vertex, when given (and present).
+Mesh readBack(const std::string& path, std::vector<std::string>* node_names = nullptr,
+              std::vector<std::array<float, 2>>* uvs = nullptr) {
   json doc;
   std::vector<uint8_t> bin;
   load(path, doc, bin);
@@ -108,7 +112,8 @@ Mesh readBack(const std::string& path, std::vector<std::string>* node_names = nu
         return ext["attributes"].contains(name) ? d.GetAttributeByUniqueId(ext["attributes"][name].get<uint32_t>())
                                                 : nullptr;
       };
-      const draco::PointAttribute *p = attr("POSITION"), *n = attr("NORMAL"), *c = attr("COLOR_0");
+      const draco::PointAttribute *p = attr("POSITION"), *n = attr("NORMAL"), *c = attr("COLOR_0"),
+                                  *tc = attr("TEXCOORD_0");
       for (uint32_t i = 0; i < d.num_points(); ++i) {
         double q[3];
         if (quantized) {
@@ -130,6 +135,11 @@ Mesh readBack(const std::string& path, std::vector<std::string>* node_names = nu
           uint8_t rgba[4];
           c->GetMappedValue(draco::PointIndex(i), rgba);
           out.colors.push_back({rgba[0], rgba[1], rgba[2], rgba[3]});
+        }
+        if (tc && uvs) {
+          std::array<float, 2> uv;
+          tc->GetMappedValue(draco::PointIndex(i), uv.data());
+          uvs->push_back(uv);
         }
       }
       for (uint32_t f = 0; f < d.num_faces(); ++f) {
@@ -159,6 +169,10 @@ Mesh readBack(const std::string& path, std::vector<std::string>* node_names = nu
     if (prim["attributes"].contains("COLOR_0")) {
       const auto cb = accessorBytes(doc, bin, doc["accessors"][prim["attributes"]["COLOR_0"].get<int>()], 4);
       for (size_t i = 0; i < n; ++i) out.colors.push_back({cb[4 * i], cb[4 * i + 1], cb[4 * i + 2], cb[4 * i + 3]});
+    }
+    if (prim["attributes"].contains("TEXCOORD_0") && uvs) {
+      const auto tb = accessorBytes(doc, bin, doc["accessors"][prim["attributes"]["TEXCOORD_0"].get<int>()], 8);
+      for (size_t i = 0; i < n; ++i) uvs->push_back({at<float>(tb, 2 * i), at<float>(tb, 2 * i + 1)});
     }
     const json& ia = doc["accessors"][prim["indices"].get<int>()];
     const auto ib = accessorBytes(doc, bin, ia, 4);
@@ -246,6 +260,55 @@ TEST(Gltf, CompressedAndTiledOutputsValidateAndReadBackThroughThePeersDecoders) 
   EXPECT_NE(out.find("none, meshopt, draco"), std::string::npos) << out;
   EXPECT_EQ(testing::runScanpress("decode '" + spz + "' '" + dir.file("x.glb") + "' --gltf-nodes some", &out), 1);
   EXPECT_NE(out.find("--gltf-nodes"), std::string::npos) << out;
+}
+
+// Texture coordinates (texcoords.h) as TEXCOORD_0, flipped to glTF's top-left origin (1 - v), with every
+// compression: valid, and read back through the peers' decoders every corner has its position and coordinates.
+TEST(Gltf, TextureCoordinatesAsTexcoord0) {
+  testing::TempDir dir;
+  std::string obj = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nv 2 1 0\n";
+  obj += "vt 0 0\nvt 0.5 0\nvt 0.5 1\nvt 0 1\nvt 0.75 0.25\nvt 1 0.25\nvt 1 0.75\nvt 0.75 0.75\n";
+  obj += "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\nf 2/5 5/6 6/7\nf 2/5 6/7 3/8\n";  // a seam along vertices 2 and 3
+  testing::writeBytes(dir.file("q.obj"), obj);
+  auto mesh = readMeshFile(dir.file("q.obj"));
+  ASSERT_TRUE(mesh.isOk()) << mesh.status().toString();
+  ASSERT_EQ(mesh->positions.size(), 8u);
+  // Corners as (position, texture coordinate), per triangle, sorted.
+  using Corner = std::array<float, 5>;
+  auto corners = [](const Mesh& m, const std::vector<std::array<float, 2>>& uv) {
+    std::vector<std::array<Corner, 3>> faces;
+    for (const Triangle& t : m.triangles) {
+      std::array<Corner, 3> f;
+      for (int k = 0; k < 3; ++k) {
+        const Vec3d& p = m.positions[t[size_t(k)]];
+        f[size_t(k)] = {float(p[0]), float(p[1]), float(p[2]), uv[t[size_t(k)]][0], uv[t[size_t(k)]][1]};
+      }
+      std::rotate(f.begin(), std::min_element(f.begin(), f.end()), f.end());
+      faces.push_back(f);
+    }
+    std::sort(faces.begin(), faces.end());
+    return faces;
+  };
+  std::vector<std::array<float, 2>> want_uv;
+  for (size_t i = 0; i < mesh->positions.size(); ++i)
+    want_uv.push_back({std::bit_cast<float>(mesh->scalars[2 * i]),
+                       1.f - std::bit_cast<float>(mesh->scalars[2 * i + 1])});
+  const auto want = corners(*mesh, want_uv);
+  for (const GltfCompression c : {GltfCompression::kNone, GltfCompression::kMeshopt, GltfCompression::kDraco}) {
+    SCOPED_TRACE(int(c));
+    WriteOptions o;
+    o.gltf_compression = c;
+    const std::string path = dir.file("q.glb");
+    ASSERT_TRUE(writeGltf(path, *mesh, o).isOk());
+    const std::string v = testing::validateGltf(path, dir.path());
+    if (v.rfind("SKIP", 0) != 0) {
+      EXPECT_NE(v.find("errors=0 warnings=0"), std::string::npos) << v;
+    }
+    std::vector<std::array<float, 2>> uv;
+    const Mesh back = readBack(path, nullptr, &uv);
+    ASSERT_EQ(uv.size(), back.positions.size());
+    EXPECT_TRUE(corners(back, uv) == want);
+  }
 }
 
 }  // namespace

@@ -375,8 +375,21 @@ TEST(Readers, ObjListsTextureCoordinatesMaterialsAndOtherRecords) {
   EXPECT_EQ(m.triangles.size(), 2u);
   // "s off" states nothing; vn 3 is named by no face; vertices 1 and 3 have normal 1, then a corner names 2.
   EXPECT_EQ(droppedText(stats),
-            "obj mtllib x 1, obj o x 1, obj vt x 3, obj usemtl x 2, obj s x 1, obj vn unused x 1, "
-            "obj vn per corner x 2, obj v w x 1");
+            "obj mtllib x 1, obj o x 1, obj usemtl x 2, obj s x 1, obj vn unused x 1, obj vn per corner x 2, "
+            "obj v w x 1");
+  // Without texture coordinates (ReadOptions::texture_coordinates off: a codec that drops them), `vt` is listed.
+  {
+    Mesh off;
+    MeshCollector sink(off);
+    ReadOptions no_uv;
+    no_uv.texture_coordinates = false;
+    auto read = readMesh(p, sink, no_uv);
+    ASSERT_TRUE(read.isOk()) << read.status().toString();
+    EXPECT_EQ(droppedText(*read),
+              "obj mtllib x 1, obj o x 1, obj vt x 3, obj usemtl x 2, obj s x 1, obj vn unused x 1, "
+              "obj vn per corner x 2, obj v w x 1");
+    EXPECT_TRUE(off.scalar_channels.empty());
+  }
 
   // A plain OBJ drops nothing.
   writeBytes(p, "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n");

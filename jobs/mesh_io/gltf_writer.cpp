@@ -15,6 +15,7 @@
 
 #include "jobs/base64.h"
 #include "jobs/file_io.h"
+#include "jobs/mesh_io/texcoords.h"
 
 namespace scanpress {
 namespace {
@@ -44,6 +45,7 @@ struct Arrays {
   bool short_normals = false;            // normals as int16 normalized (3 + 1 padding), else float
   std::vector<uint8_t> normals;          // stride 8 or 12 (empty: none)
   std::vector<uint8_t> colors;           // RGBA8, stride 4 (empty: none)
+  std::vector<uint8_t> texcoords;        // float (u, 1 - v), stride 8 (empty: none)
   std::vector<uint8_t> indices;          // uint32
   size_t vertices = 0, index_count = 0;
   size_t positionStride() const { return quantized ? 8 : 12; }
@@ -178,6 +180,15 @@ class Builder {
     }
     for (const auto& c : mesh.colors)
       a.colors.insert(a.colors.end(), {c[0], c[1], c[2], mesh.color_channels == 4 ? c[3] : uint8_t(255)});
+    // Texture coordinates (texcoords.h): glTF's origin is the image's top left, OBJ's and PLY's its bottom left.
+    if (const auto tc = findTexcoords(mesh.scalar_channels)) {
+      const size_t stride = scalarWords(mesh.scalar_channels);
+      for (size_t i = 0; i < a.vertices; ++i) {
+        const uint32_t* words = mesh.scalars.data() + i * stride;
+        put(a.texcoords, static_cast<float>(floatChannelValue(mesh.scalar_channels[tc->u], words + tc->u_word)));
+        put(a.texcoords, static_cast<float>(1.0 - floatChannelValue(mesh.scalar_channels[tc->v], words + tc->v_word)));
+      }
+    }
     for (const auto& t : mesh.triangles)
       for (uint32_t v : t) put(a.indices, v);
     a.index_count = mesh.triangles.size() * 3;
@@ -206,6 +217,7 @@ class Builder {
     apply(a.positions, a.positionStride());
     apply(a.normals, a.short_normals ? 8 : 12);
     apply(a.colors, 4);
+    apply(a.texcoords, 8);
   }
 
   // A buffer view of `data`: appended to buffer 0 as is, or with meshopt, compressed into buffer 0 and described
@@ -288,6 +300,11 @@ class Builder {
                             {"type", "VEC4"}});
       attributes["COLOR_0"] = accessors_.size() - 1;
     }
+    if (!a.texcoords.empty()) {
+      SP_ASSIGN_OR_RETURN(size_t v, view(a.texcoords, a.vertices, 8, kArrayBuffer));
+      accessors_.push_back({{"bufferView", v}, {"componentType", kFloat}, {"count", a.vertices}, {"type", "VEC2"}});
+      attributes["TEXCOORD_0"] = accessors_.size() - 1;
+    }
     json primitive = {{"attributes", attributes}};
     if (a.index_count == 0) {
       primitive["mode"] = 0;  // points
@@ -329,6 +346,9 @@ class Builder {
                         : attribute(draco::GeometryAttribute::GENERIC, 3, draco::DT_INT16, true, 2, a.normals, 8);
     const int col =
         a.colors.empty() ? -1 : attribute(draco::GeometryAttribute::COLOR, 4, draco::DT_UINT8, true, 1, a.colors, 4);
+    const int tex = a.texcoords.empty() ? -1
+                                        : attribute(draco::GeometryAttribute::TEX_COORD, 2, draco::DT_FLOAT32, false,
+                                                    4, a.texcoords, 8);
     for (const auto& t : mesh.triangles)
       dm.AddFace({draco::PointIndex(t[0]), draco::PointIndex(t[1]), draco::PointIndex(t[2])});
     draco::Encoder enc;
@@ -386,6 +406,11 @@ class Builder {
                             {"type", "VEC4"}});
       attributes["COLOR_0"] = accessors_.size() - 1;
       ids["COLOR_0"] = dm.attribute(col)->unique_id();
+    }
+    if (tex >= 0) {
+      accessors_.push_back({{"componentType", kFloat}, {"count", d.num_points()}, {"type", "VEC2"}});
+      attributes["TEXCOORD_0"] = accessors_.size() - 1;
+      ids["TEXCOORD_0"] = dm.attribute(tex)->unique_id();
     }
     accessors_.push_back({{"componentType", kUnsignedInt}, {"count", size_t(d.num_faces()) * 3}, {"type", "SCALAR"}});
     used_draco_ = true;

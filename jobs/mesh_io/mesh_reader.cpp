@@ -10,6 +10,7 @@
 #include <string_view>
 
 #include "jobs/mesh_io/input.h"
+#include "jobs/mesh_io/texcoords.h"
 
 namespace scanpress {
 
@@ -147,13 +148,25 @@ Result<ReadStats> readMesh(const std::string& path, MeshSink& sink, const ReadOp
   }
   switch (format) {
     case MeshFormat::kPly: return readPly(in, sink, options);
-    case MeshFormat::kObj: return readObj(in, sink, options);
+    case MeshFormat::kObj: {
+      if (!options.texture_coordinates) return readObj(in, sink, options);
+      // Texture coordinates: a first read learns what faces make of them (readObj's second read delivers wedges).
+      SP_ASSIGN_OR_RETURN(auto first_source, InputSource::open(path));
+      Scanner first(std::move(first_source), path);
+      SP_ASSIGN_OR_RETURN(ObjTexturePlan plan, planObjTextures(first));
+      return readObj(in, sink, options, &plan);
+    }
     case MeshFormat::kStl: return readStl(in, sink, options);
     case MeshFormat::kOff: return readOff(in, sink, options);
     case MeshFormat::kUnknown: break;
   }
   return makeError(ErrorCode::kUnsupported,
                    path + ": unknown mesh format (expected .ply, .obj, .stl or .off, optionally .zst-compressed)");
+}
+
+std::vector<ScalarChannel> texcoordChannels(const ObjTexturePlan* plan) {
+  if (!plan || plan->values.empty()) return {};
+  return {{kTexcoordU, ScalarType::kFloat32}, {kTexcoordV, ScalarType::kFloat32}};
 }
 
 Result<Mesh> readMeshFile(const std::string& path, ReadStats* stats) {

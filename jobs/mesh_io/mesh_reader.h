@@ -8,14 +8,18 @@
 // vertexNormals). Polygons are fan-triangulated.
 //
 // Nothing is dropped silently: every property, element or record a reader skips is listed in ReadStats::dropped
-// by name and count (per-vertex scalars, per-face properties, extra PLY elements, OBJ vt/mtllib/usemtl, ...).
+// by name and count (per-face properties, extra PLY elements, OBJ mtllib/usemtl, ...).
 //
 // Errors name the file and the line (text formats) or byte offset (binary formats; for compressed files, the
 // offset in the decompressed data). Malformed input fails with kMalformed or kTruncated, never a crash; declared
 // counts are never trusted for allocation.
 #pragma once
 
+#include <algorithm>
+#include <array>
+#include <bit>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -29,6 +33,10 @@ enum class MeshFormat { kUnknown, kPly, kObj, kStl, kOff };
 
 struct ReadOptions {
   size_t chunk = 1u << 16;  // vertices or triangles per sink call
+  // OBJ `vt` named by faces: kept as scalar channels u and v, vertices split into wedges at texture seams
+  // (texcoords.h; the file is read twice). Off (a codec that does not carry scalars, whose simplification would open
+  // the seams): listed dropped as "obj vt", vertices as in the file.
+  bool texture_coordinates = true;
 };
 
 // Something the file holds that scanpress does not keep (yet): a PLY property or element, OBJ texture coordinates
@@ -100,10 +108,43 @@ bool cheapToReadAgain(const std::string& path);
 // Convenience: the whole mesh in memory.
 Result<Mesh> readMeshFile(const std::string& path, ReadStats* stats = nullptr);
 
+// What an OBJ's faces make of its texture coordinates (the first of two reads: obj_reader.cpp).
+struct ObjTexturePlan {
+  std::vector<std::array<float, 2>> values;  // the distinct (u, v) values, in order of first `vt`
+  std::vector<uint32_t> canonical;           // per `vt` record: its value's index
+  std::vector<bool> used_records;            // per `vt` record: named by a face corner
+  std::vector<uint32_t> first;               // per `v`: the value of its first corner naming one, or UINT32_MAX
+  std::vector<std::pair<uint32_t, uint32_t>> wedges;  // (v, value) of further values, sorted, distinct
+
+  uint32_t firstOf(uint64_t v) const { return v < first.size() ? first[v] : UINT32_MAX; }
+  // A vertex's scalar words for value `c` ((0, 0) for UINT32_MAX).
+  std::array<uint32_t, 2> words(uint32_t c) const {
+    if (c == UINT32_MAX) return {0, 0};
+    return {std::bit_cast<uint32_t>(values[c][0]), std::bit_cast<uint32_t>(values[c][1])};
+  }
+  // Which of vertex v's delivered vertices (0: the first, k: its k-th wedge) carries `vt` record `record`;
+  // nullopt when the plan has none (the file changed between the reads).
+  std::optional<uint32_t> wedgeOf(uint32_t v, uint32_t record) const {
+    if (record >= canonical.size()) return std::nullopt;
+    const uint32_t c = canonical[record];
+    if (c == firstOf(v)) return 0;
+    const auto begin = std::lower_bound(wedges.begin(), wedges.end(), std::pair<uint32_t, uint32_t>{v, 0});
+    const auto it = std::lower_bound(begin, wedges.end(), std::pair<uint32_t, uint32_t>{v, c});
+    if (it == wedges.end() || *it != std::pair<uint32_t, uint32_t>{v, c}) return std::nullopt;
+    return uint32_t(1 + (it - begin));
+  }
+};
+
+// The scalar channels a plan's vertices carry: u and v (float32), or none without a plan or values.
+std::vector<ScalarChannel> texcoordChannels(const ObjTexturePlan* plan);
+
 // Format-specific entry points (used by readMesh; exposed for tests).
 class Scanner;
 Result<ReadStats> readPly(Scanner& in, MeshSink& sink, const ReadOptions& options);
-Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& options);
+// `plan`: from planObjTextures over the same bytes (nullptr: `vt` records are listed dropped).
+Result<ObjTexturePlan> planObjTextures(Scanner& in);
+Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& options,
+                          const ObjTexturePlan* plan = nullptr);
 Result<ReadStats> readStl(Scanner& in, MeshSink& sink, const ReadOptions& options);
 Result<ReadStats> readOff(Scanner& in, MeshSink& sink, const ReadOptions& options);
 

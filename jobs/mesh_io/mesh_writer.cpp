@@ -2,13 +2,17 @@
 
 #include <zstd.h>
 
+#include <bit>
 #include <charconv>
 #include <cmath>
 #include <cstring>
 #include <vector>
 
+#include <unordered_map>
+
 #include "jobs/file_io.h"
 #include "jobs/mesh_io/gltf_writer.h"
+#include "jobs/mesh_io/texcoords.h"
 
 namespace scanpress {
 namespace {
@@ -99,8 +103,91 @@ Status checkMesh(const std::string& path, const Mesh& mesh) {
   return Status::ok();
 }
 
+// A float channel's value as OBJ text: the shortest digits that read back to the same value at its type.
+void putChannelValue(std::string& out, const ScalarChannel& c, const uint32_t* words) {
+  char num[64];
+  const auto r = c.type == ScalarType::kFloat64 ? std::to_chars(num, num + sizeof num, floatChannelValue(c, words))
+                                                : std::to_chars(num, num + sizeof num, std::bit_cast<float>(words[0]));
+  out.append(num, r.ptr);
+}
+
+// OBJ with texture coordinates: one `v` per distinct position and color (the wedges a reader split at seams share
+// theirs again), a `vt` and (with normals) a `vn` per vertex, and faces `f p/t[/n]`.
+Status writeTexturedObj(const std::string& path, const Mesh& mesh, const WriteOptions& options,
+                        const TexcoordChannels& tc) {
+  SP_ASSIGN_OR_RETURN(auto writer,
+                      MeshFileWriter::create(path, MeshFileLayout{}, MeshFileFormat::of(MeshFileFormat::Kind::kObj)));
+  const size_t n = mesh.positions.size(), stride = scalarWords(mesh.scalar_channels);
+  const bool colors = !mesh.colors.empty(), normals = !mesh.normals.empty();
+  struct Key {
+    Vec3d p;
+    Rgba8 c;
+    bool operator==(const Key& o) const { return std::memcmp(p.data(), o.p.data(), sizeof p) == 0 && c == o.c; }
+  };
+  struct KeyHash {
+    size_t operator()(const Key& k) const {
+      uint64_t h = 0xcbf29ce484222325ull;
+      for (double x : k.p) h = (h ^ std::bit_cast<uint64_t>(x)) * 0x100000001b3ull;
+      for (uint8_t x : k.c) h = (h ^ x) * 0x100000001b3ull;
+      return size_t(h ^ (h >> 29));
+    }
+  };
+  std::unordered_map<Key, uint32_t, KeyHash> welded;
+  welded.reserve(n);
+  std::vector<uint32_t> position_of(n);
+  std::string text;
+  auto flush = [&]() -> Status {
+    if (text.size() < (1u << 20)) return Status::ok();
+    Status st = writer->records(text);
+    text.clear();
+    return st;
+  };
+  for (size_t i = 0; i < n; ++i) {
+    const Key key{mesh.positions[i], colors ? mesh.colors[i] : Rgba8{255, 255, 255, 255}};
+    const auto [it, fresh] = welded.emplace(key, uint32_t(welded.size()));
+    position_of[i] = it->second;
+    if (!fresh) continue;
+    text += 'v';
+    for (double c : key.p) text += ' ', putNumber(text, c, options.double_positions);
+    if (colors)
+      for (int k = 0; k < 3; ++k) text += ' ', putNumber(text, key.c[k] / 255.0, false);
+    text += '\n';
+    SP_RETURN_IF_ERROR(flush());
+  }
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t* words = mesh.scalars.data() + i * stride;
+    text += "vt ";
+    putChannelValue(text, mesh.scalar_channels[tc.u], words + tc.u_word);
+    text += ' ';
+    putChannelValue(text, mesh.scalar_channels[tc.v], words + tc.v_word);
+    text += '\n';
+    if (normals) {
+      text += "vn";
+      for (float c : mesh.normals[i]) text += ' ', putNumber(text, c, false);
+      text += '\n';
+    }
+    SP_RETURN_IF_ERROR(flush());
+  }
+  for (const Triangle& t : mesh.triangles) {
+    text += 'f';
+    for (uint32_t v : t) {
+      text += ' ';
+      putIndex(text, uint64_t(position_of[v]) + 1);
+      text += '/';
+      putIndex(text, uint64_t(v) + 1);
+      if (normals) text += '/', putIndex(text, uint64_t(v) + 1);
+    }
+    text += '\n';
+    SP_RETURN_IF_ERROR(flush());
+  }
+  SP_RETURN_IF_ERROR(writer->records(text));
+  return writer->commit();
+}
+
 Status writeWith(const std::string& path, const Mesh& mesh, const WriteOptions& options, MeshFileFormat format) {
   SP_RETURN_IF_ERROR(checkMesh(path, mesh));
+  if (format.kind() == MeshFileFormat::Kind::kObj)
+    if (const auto tc = findTexcoords(mesh.scalar_channels)) return writeTexturedObj(path, mesh, options, *tc);
   MeshFileLayout layout;
   layout.vertices = mesh.positions.size();
   layout.faces = mesh.triangles.size();
@@ -122,9 +209,13 @@ Status writeWith(const std::string& path, const Mesh& mesh, const WriteOptions& 
 
 }  // namespace
 
-bool scalarsWritten(const std::string& path) {
+std::vector<bool> channelsWritten(const std::string& path, std::span<const ScalarChannel> channels) {
+  std::vector<bool> written(channels.size(), false);
   const auto f = MeshFileFormat::forPath(path);
-  return f.isOk() && f->kind() == MeshFileFormat::Kind::kPly;
+  if (f.isOk() && f->kind() == MeshFileFormat::Kind::kPly) return std::vector<bool>(channels.size(), true);
+  if ((f.isOk() && f->kind() == MeshFileFormat::Kind::kObj) || endsWith(path, ".glb") || endsWith(path, ".gltf"))
+    if (const auto tc = findTexcoords(channels)) written[tc->u] = written[tc->v] = true;
+  return written;
 }
 
 Result<MeshFileFormat> MeshFileFormat::forPath(const std::string& path) {
@@ -310,6 +401,11 @@ Status MeshFileWriter::faceBytes(std::span<const uint8_t> bytes, uint64_t count)
   faces_ += count;
   SP_RETURN_IF_ERROR(drain(true));
   return out_->append(bytes);
+}
+
+Status MeshFileWriter::records(std::string_view text) {
+  SP_RETURN_IF_ERROR(drain(true));
+  return out_->append(text);
 }
 
 Status MeshFileWriter::commit() {

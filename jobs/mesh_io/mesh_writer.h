@@ -1,5 +1,5 @@
-// Mesh writers: PLY binary little endian (with normals and colors when present), OBJ (normals, colors as the
-// common `v x y z r g b` extension), binary STL (geometry only), OFF (COFF with colors), each optionally through
+// Mesh writers: PLY binary little endian (with normals, colors and scalar channels when present), OBJ (normals,
+// colors as the common `v x y z r g b` extension, texture coordinates as `vt`: texcoords.h), binary STL (geometry only), OFF (COFF with colors), each optionally through
 // zstd (a name ending in .zst), and glTF 2.0 (jobs/mesh_io/gltf_writer.h). All write through AtomicFile: the
 // output appears complete or not at all.
 //
@@ -45,12 +45,10 @@ struct MeshFileLayout {
   uint8_t color_channels = 0;  // 0, 3 or 4
   bool double_positions = false;
   // Scalar channels, written by PLY only (at their type, after the colors); other formats have no place for them
-  // (the caller reports them dropped: scalarsWritten).
+  // (the caller reports them dropped: channelsWritten in texcoords.h). The OBJ writer writes a mesh's texture
+  // coordinates itself (writeObj), not through this layout.
   std::vector<ScalarChannel> scalars;
 };
-
-// Whether `format` writes scalar channels (PLY).
-bool scalarsWritten(const std::string& path);
 
 // The byte form of one indexed format (.ply, .obj, .stl, .off; .zst is the output's business).
 class MeshFileFormat {
@@ -90,6 +88,9 @@ class MeshFileWriter {
   Status face(const Triangle& t, const std::array<Vec3d, 3>& corners);
   // Faces already in this format's bytes (MeshFileFormat::face), `count` of them.
   Status faceBytes(std::span<const uint8_t> bytes, uint64_t count);
+  // Records the layout does not count, as they are (a textured OBJ's `v`, `vt`, `vn` and `f` lines, with a layout
+  // of no vertices and faces).
+  Status records(std::string_view text);
   Status commit();
 
  private:

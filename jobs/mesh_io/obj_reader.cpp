@@ -1,18 +1,30 @@
-// Wavefront OBJ reader: `v x y z [w | r g b [a]]`, `vn`, `f` with corners `a`, `a/b`, `a//c`, `a/b/c`, negative
-// (relative) indices, polygons (fan-triangulated). Every other record (vt, g, o, s, usemtl, mtllib, l, p, ...)
-// is skipped and listed in ReadStats::dropped as "obj KEYWORD" with its count ("s off" and "s 0" state nothing
-// and are not listed). A vertex's normal is the `vn` its first face corner names; those arrive at the end
+// Wavefront OBJ reader: `v x y z [w | r g b [a]]`, `vn`, `vt u [v [w]]`, `f` with corners `a`, `a/b`, `a//c`,
+// `a/b/c`, negative (relative) indices, polygons (fan-triangulated). Every other record (g, o, s, usemtl, mtllib, l,
+// p, ...) is skipped and listed in ReadStats::dropped as "obj KEYWORD" with its count ("s off" and "s 0" state
+// nothing and are not listed). A vertex's normal is the `vn` its first face corner names; those arrive at the end
 // (vertexNormals) because OBJ states them only in faces. Also listed: `vn` records no face names ("obj vn
-// unused"), face corners naming another normal than their vertex's first one ("obj vn per corner"), `v`
-// weights other than 1 ("obj v w") and `v` colors after a first `v` without them ("obj v colors").
+// unused"), face corners naming another normal than their vertex's first one ("obj vn per corner"), `v` weights
+// other than 1 ("obj v w") and `v` colors after a first `v` without them ("obj v colors").
+//
+// Texture coordinates (ReadOptions::texture_coordinates; texcoords.h): when faces name `vt` records, the file is
+// read twice. The first read (planTextures) learns, per `v`, the texture coordinates its corners name; the second
+// delivers each vertex with the first of them as scalar channels u and v (float32), followed at once by one more
+// vertex, a wedge at the same position, per further distinct value, and faces name the wedge of their corner's
+// `vt`. So a seam keeps both sides' coordinates, and vertices stay in file order with their wedges beside them.
+// A vertex no corner gives a `vt` gets (0, 0). Listed: `vt` records no face names ("obj vt unused") and third
+// numbers other than 0 ("obj vt w"). Memory: 4 bytes per `v` and per `vt`, 8 per distinct coordinate and per wedge
+// (the first read), and 4 more per `v` in the second.
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "jobs/mesh_io/input.h"
 #include "jobs/mesh_io/mesh_reader.h"
+#include "jobs/mesh_io/texcoords.h"
 
 namespace scanpress {
 namespace {
@@ -58,9 +70,85 @@ class SkippedRecords {
   uint64_t other_ = 0;
 };
 
+// The `vt` field of a face corner (`a/b`, `a/b/c`), empty when it has none (`a`, `a//c`).
+std::string_view texcoordField(std::string_view corner) {
+  const size_t s1 = corner.find('/');
+  if (s1 == std::string_view::npos) return {};
+  const size_t s2 = corner.find('/', s1 + 1);
+  return corner.substr(s1 + 1, s2 == std::string_view::npos ? std::string_view::npos : s2 - s1 - 1);
+}
+
+// Parses a `vt` record's numbers: u [v [w]], finite. False when malformed.
+bool parseTexcoord(Tokenizer& tok, std::array<float, 2>& uv, bool& nonzero_w) {
+  double c[3] = {0, 0, 0};
+  int n = 0;
+  std::string_view t;
+  while (tok.next(t)) {
+    if (t[0] == '#') break;
+    if (n == 3 || !parseDouble(t, c[n]) || !std::isfinite(c[n])) return false;
+    ++n;
+  }
+  uv = {float(c[0]), float(c[1])};
+  nonzero_w = c[2] != 0;
+  return n >= 1;
+}
+
 }  // namespace
 
-Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& options) {
+Result<ObjTexturePlan> planObjTextures(Scanner& in) {
+  ObjTexturePlan plan;
+  std::unordered_map<uint64_t, uint32_t> distinct;  // a value's bits -> its index in plan.values
+  std::string_view line;
+  uint64_t vertices = 0;
+  // Lenient: a record this read cannot use is passed over; the second read reports it.
+  for (;;) {
+    SP_ASSIGN_OR_RETURN(bool got, in.nextLine(line));
+    if (!got) break;
+    Tokenizer tok(line);
+    std::string_view word;
+    if (!tok.next(word)) continue;
+    if (word == "v") {
+      ++vertices;
+      if (!plan.values.empty()) plan.first.push_back(UINT32_MAX);
+    } else if (word == "vt") {
+      if (plan.values.empty()) plan.first.assign(vertices, UINT32_MAX);  // faces name texture coordinates from here
+      std::array<float, 2> uv{0, 0};
+      bool w = false;
+      if (!parseTexcoord(tok, uv, w)) uv = {0, 0};
+      const uint64_t bits = uint64_t(std::bit_cast<uint32_t>(uv[0])) << 32 | std::bit_cast<uint32_t>(uv[1]);
+      const auto [it, fresh] = distinct.emplace(bits, uint32_t(plan.values.size()));
+      if (fresh) plan.values.push_back(uv);
+      plan.canonical.push_back(it->second);
+      plan.used_records.push_back(false);
+    } else if (word == "f" && !plan.values.empty()) {
+      std::string_view t;
+      while (tok.next(t)) {
+        if (t[0] == '#') break;
+        int64_t raw = 0, raw_t = 0;
+        uint32_t v = 0, vt = 0;
+        const std::string_view field = texcoordField(t);
+        if (field.empty() || !parseInt64(t.substr(0, t.find('/')), raw) || !resolveIndex(raw, vertices, v) ||
+            !parseInt64(field, raw_t) || !resolveIndex(raw_t, plan.canonical.size(), vt))
+          continue;
+        plan.used_records[vt] = true;
+        const uint32_t c = plan.canonical[vt];
+        if (plan.first[v] == UINT32_MAX) plan.first[v] = c;
+        else if (plan.first[v] != c) plan.wedges.push_back({v, c});
+      }
+    }
+  }
+  if (std::find(plan.used_records.begin(), plan.used_records.end(), true) == plan.used_records.end())
+    return ObjTexturePlan();  // no face names one: the second read lists the `vt` records as dropped
+  std::sort(plan.wedges.begin(), plan.wedges.end());
+  plan.wedges.erase(std::unique(plan.wedges.begin(), plan.wedges.end()), plan.wedges.end());
+  return plan;
+}
+
+Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& options, const ObjTexturePlan* plan) {
+  if (plan && plan->values.empty()) plan = nullptr;
+  std::vector<uint32_t> first_output;  // with a plan: per `v`, the index of its first delivered vertex
+  size_t next_wedge = 0;               // the plan's next wedge to deliver
+  uint64_t texcoord_count = 0, texcoord_w = 0;
   ReadStats stats;
   stats.format = MeshFormat::kObj;
   stats.format_detail = "OBJ";
@@ -98,7 +186,7 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
         if (!std::isfinite(c[k])) return in.errorAtLine(ErrorCode::kMalformed, "NaN or infinite vertex coordinate");
       if (!out) {
         channels = (n >= 6) ? (n == 7 ? 4 : 3) : 0;
-        out.emplace(sink, options.chunk, channels, false);
+        out.emplace(sink, options.chunk, channels, false, texcoordChannels(plan));
       }
       if (n == 4 && c[3] != 1.0) ++weights;
       if (n >= 6 && channels == 0) ++late_colors;
@@ -108,8 +196,23 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
           const double v = std::round(c[3 + k] * 255.0);
           col[k] = static_cast<uint8_t>(v < 0 || !(v == v) ? 0 : (v > 255 ? 255 : v));
         }
-      if (vertex_count >= kMaxVertices) return in.errorAtLine(ErrorCode::kLimitExceeded, "more than 2^32-2 vertices");
-      SP_RETURN_IF_ERROR(out->addVertex({c[0], c[1], c[2]}, {0, 0, 0}, col));
+      if (vertex_count >= kMaxVertices || out->vertices() >= kMaxVertices)
+        return in.errorAtLine(ErrorCode::kLimitExceeded, "more than 2^32-2 vertices");
+      if (!plan) {
+        SP_RETURN_IF_ERROR(out->addVertex({c[0], c[1], c[2]}, {0, 0, 0}, col));
+      } else {
+        // The vertex with its first corner's texture coordinates, then its wedges (the plan's, in order).
+        first_output.push_back(uint32_t(out->vertices()));
+        const uint32_t first = plan->firstOf(vertex_count);
+        SP_RETURN_IF_ERROR(out->addVertex({c[0], c[1], c[2]}, {0, 0, 0}, col, plan->words(first).data()));
+        for (; next_wedge < plan->wedges.size() && plan->wedges[next_wedge].first == vertex_count; ++next_wedge) {
+          if (out->vertices() >= kMaxVertices)
+            return in.errorAtLine(ErrorCode::kLimitExceeded,
+                                  "more than 2^32-2 vertices with the texture seams' wedges");
+          SP_RETURN_IF_ERROR(out->addVertex({c[0], c[1], c[2]}, {0, 0, 0}, col,
+                                            plan->words(plan->wedges[next_wedge].second).data()));
+        }
+      }
       ++vertex_count;
     } else if (word == "vn") {
       double c[3];
@@ -120,6 +223,13 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
       if (vn.size() >= kMaxVertices) return in.errorAtLine(ErrorCode::kLimitExceeded, "too many 'vn' records");
       vn.push_back({static_cast<float>(c[0]), static_cast<float>(c[1]), static_cast<float>(c[2])});
       vn_used.push_back(false);
+    } else if (word == "vt" && plan) {
+      std::array<float, 2> uv;
+      bool w = false;
+      if (!parseTexcoord(tok, uv, w))
+        return in.errorAtLine(ErrorCode::kMalformed, "'vt' record needs one to three finite numbers");
+      texcoord_w += w;
+      ++texcoord_count;
     } else if (word == "f") {
       poly.clear();
       poly_normals.clear();
@@ -136,6 +246,21 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
           return in.errorAtLine(ErrorCode::kMalformed, "face index " + std::to_string(raw) +
                                                            " does not name one of the " +
                                                            std::to_string(vertex_count) + " vertices so far");
+        if (plan) {  // the corner's wedge: its vertex's first, or the one its `vt` made
+          const std::string_view field = texcoordField(t);
+          uint32_t vt = 0;
+          int64_t rt = 0;
+          if (!field.empty() && (!parseInt64(field, rt) || !resolveIndex(rt, texcoord_count, vt)))
+            return in.errorAtLine(ErrorCode::kMalformed,
+                                  "bad texture coordinate index in face corner '" + std::string(t) + "'");
+          const uint32_t source = v;
+          v = first_output[source];
+          if (!field.empty()) {
+            const std::optional<uint32_t> wedge = plan->wedgeOf(source, vt);
+            if (!wedge) return in.errorAtLine(ErrorCode::kIo, "the file changed between its two reads");
+            v += *wedge;
+          }
+        }
         uint32_t n = UINT32_MAX;
         if (s1 != std::string_view::npos) {
           const size_t s2 = t.find('/', s1 + 1);
@@ -172,23 +297,31 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
     }
   }
   if (out) SP_RETURN_IF_ERROR(out->flush());
+  if (plan && (texcoord_count != plan->canonical.size() || next_wedge != plan->wedges.size()))
+    return makeError(ErrorCode::kIo, in.name() + ": the file changed between its two reads");
+  const uint64_t delivered = out ? out->vertices() : 0;
   if (!vertex_normal.empty()) {
     std::vector<Vec3f> chunk;
     const float nan = std::numeric_limits<float>::quiet_NaN();
-    for (uint64_t first = 0; first < vertex_count; first += options.chunk) {
+    for (uint64_t first = 0; first < delivered; first += options.chunk) {
       chunk.clear();
-      for (uint64_t v = first; v < std::min<uint64_t>(vertex_count, first + options.chunk); ++v)
+      for (uint64_t v = first; v < std::min<uint64_t>(delivered, first + options.chunk); ++v)
         chunk.push_back(v < vertex_normal.size() && vertex_normal[v] != UINT32_MAX ? vn[vertex_normal[v]]
                                                                                    : Vec3f{nan, nan, nan});
       SP_RETURN_IF_ERROR(sink.vertexNormals(first, chunk));
     }
   }
   const uint64_t vn_unused = static_cast<uint64_t>(std::count(vn_used.begin(), vn_used.end(), false));
+  const uint64_t vt_unused =
+      plan ? static_cast<uint64_t>(std::count(plan->used_records.begin(), plan->used_records.end(), false)) : 0;
   stats.dropped = skipped.take({{"obj vn unused", vn_unused},
                                 {"obj vn per corner", corner_normals},
                                 {"obj v w", weights},
-                                {"obj v colors", late_colors}});
-  stats.vertices = stats.source_vertices = vertex_count;
+                                {"obj v colors", late_colors},
+                                {"obj vt unused", vt_unused},
+                                {"obj vt w", texcoord_w}});
+  stats.vertices = delivered;
+  stats.source_vertices = vertex_count;
   stats.triangles = out ? out->triangles() : 0;
   return stats;
 }

@@ -87,6 +87,25 @@ def test_read_equals_the_cli_decode(bunny):
         assert np.array_equal(m["scalars"][name].view(np.uint32), verts[name].view(np.uint32))
 
 
+def test_read_gives_texture_coordinates(tmp_path):
+    # A seam along vertices 2 and 3: their corners name two coordinates each, so the reader splits them (wedges).
+    obj = tmp_path / "q.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nv 2 1 0\n"
+                   "vt 0 0\nvt 0.5 0\nvt 0.5 1\nvt 0 1\nvt 0.75 0.25\nvt 1 0.25\nvt 1 0.75\nvt 0.75 0.75\n"
+                   "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\nf 2/5 5/6 6/7\nf 2/5 6/7 3/8\n")
+    spz = tmp_path / "q.spz"
+    cli("encode", obj, spz, "--codec", "kdtree", "--quiet")
+    m = scanpress.read(str(spz))
+    assert m["uvs"].dtype == np.float64 and m["uvs"].shape == (8, 2)
+    corners = sorted((tuple(m["positions"][v].round(3)), tuple(m["uvs"][v])) for f in m["faces"] for v in f)
+    want = sorted([((0, 0, 0), (0, 0)), ((1, 0, 0), (0.5, 0)), ((1, 1, 0), (0.5, 1)), ((0, 0, 0), (0, 0)),
+                   ((1, 1, 0), (0.5, 1)), ((0, 1, 0), (0, 1)), ((1, 0, 0), (0.75, 0.25)), ((2, 0, 0), (1, 0.25)),
+                   ((2, 1, 0), (1, 0.75)), ((1, 0, 0), (0.75, 0.25)), ((2, 1, 0), (1, 0.75)),
+                   ((1, 1, 0), (0.75, 0.75))])
+    assert corners == want
+    assert sorted(m["scalars"]) == ["u", "v"]
+
+
 def test_levels_tiles_and_boxes_select_as_the_cli(bunny):
     d, spz = bunny
     info = scanpress.info(str(spz))

@@ -1,0 +1,62 @@
+// Texture coordinates (issue 22 part 1): a pair of scalar channels, by PLY's conventions. They travel as scalar
+// channels do (kept bit for bit by every codec that carries scalars; FORMAT.md "Scalar channels"), so a container
+// needs nothing of its own for them; the OBJ and glTF writers find the pair and write it as `vt` and TEXCOORD_0.
+//
+// A vertex has one pair. Where a file gives a vertex's corners different texture coordinates (an OBJ `vt` seam), the
+// reader splits the vertex into wedges: one vertex per distinct coordinate, at the same position
+// (jobs/mesh_io/obj_reader.cpp); the OBJ writer joins the wedges' positions again.
+#pragma once
+
+#include <array>
+#include <bit>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "engine/mesh.h"
+
+namespace scanpress {
+
+// The channel names the OBJ reader gives `vt` (float32).
+inline constexpr const char* kTexcoordU = "u";
+inline constexpr const char* kTexcoordV = "v";
+
+// Indices of the texture coordinate channels, and their first word in a vertex's scalar words.
+struct TexcoordChannels {
+  size_t u = 0, v = 0;
+  size_t u_word = 0, v_word = 0;
+};
+
+// The first pair of float channels named (u, v), (s, t), (texture_u, texture_v) or (texture_s, texture_t).
+inline std::optional<TexcoordChannels> findTexcoords(std::span<const ScalarChannel> channels) {
+  static constexpr std::array<std::array<const char*, 2>, 4> kNames = {
+      {{"u", "v"}, {"s", "t"}, {"texture_u", "texture_v"}, {"texture_s", "texture_t"}}};
+  auto isFloat = [](ScalarType t) { return t == ScalarType::kFloat32 || t == ScalarType::kFloat64; };
+  for (const auto& names : kNames) {
+    TexcoordChannels tc;
+    bool found_u = false, found_v = false;
+    size_t word = 0;
+    for (size_t i = 0; i < channels.size(); ++i) {
+      const ScalarChannel& c = channels[i];
+      if (!found_u && c.name == names[0] && isFloat(c.type)) tc.u = i, tc.u_word = word, found_u = true;
+      if (!found_v && c.name == names[1] && isFloat(c.type)) tc.v = i, tc.v_word = word, found_v = true;
+      word += size_t(scalarTypeWords(c.type));
+    }
+    if (found_u && found_v) return tc;
+  }
+  return std::nullopt;
+}
+
+// The value of float channel `c` whose first word is `words[0]`.
+inline double floatChannelValue(const ScalarChannel& c, const uint32_t* words) {
+  if (c.type == ScalarType::kFloat64) return std::bit_cast<double>(uint64_t(words[0]) | uint64_t(words[1]) << 32);
+  return double(std::bit_cast<float>(words[0]));
+}
+
+// Whether a mesh file at `path` writes each of `channels`: all of them for PLY, the texture coordinates for OBJ and
+// glTF (.glb, .gltf), none for STL and OFF. What is not written is reported dropped by the caller.
+std::vector<bool> channelsWritten(const std::string& path, std::span<const ScalarChannel> channels);
+
+}  // namespace scanpress
