@@ -40,7 +40,7 @@ const Prepared& prepared(const std::string& name, int bits) {
   auto key = std::make_pair(name, bits);
   auto it = cache.find(key);
   if (it != cache.end()) return it->second;
-  auto mesh = readMeshFile(scanPath(name));
+  auto mesh = readMeshFile(scanPath(name), nullptr, ReadOptions::asInFile());
   if (!mesh.isOk()) throw std::runtime_error(mesh.status().toString());
   Prepared p;
   auto grid = makeGrid(boundingBox(*mesh), bits);
@@ -134,7 +134,7 @@ void BM_Read(benchmark::State& state, std::string scan) {
   const std::string path = scanPath(scan);
   ReadStats stats;
   for (auto _ : state) {
-    auto m = readMeshFile(path, &stats);
+    auto m = readMeshFile(path, &stats, ReadOptions::asInFile());
     if (!m.isOk()) state.SkipWithError(m.status().message().c_str());
     benchmark::DoNotOptimize(m);
   }
@@ -227,7 +227,7 @@ void BM_SimplifyHausdorff(benchmark::State& state, std::string scan) {
   const Prepared& p = prepared(scan, 16);
   auto device = EmbreeDevice::create();
   if (!device.isOk()) return state.SkipWithError(device.status().message().c_str());
-  auto source = readMeshFile(scanPath(scan));
+  auto source = readMeshFile(scanPath(scan), nullptr, ReadOptions::asInFile());
   if (!source.isOk()) return state.SkipWithError(source.status().message().c_str());
   auto grid = makeGrid(boundingBox(*source), 16);
   const Mesh original = dequantizeMesh(p.mesh, *grid, AttributeLayout{});

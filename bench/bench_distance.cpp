@@ -37,7 +37,7 @@ const Fixture& fixture() {
     std::string path = std::string(SCANPRESS_SHARED_DATA) + "/igea.ply.zst";
     if (!std::filesystem::exists(path)) path = std::string(SCANPRESS_REPO_DATA) + "/bun_zipper.ply.zst";
     x.scan = std::filesystem::path(path).filename().string();
-    auto m = readMeshFile(path);
+    auto m = readMeshFile(path, nullptr, ReadOptions::asInFile());
     if (!m.isOk()) throw std::runtime_error(m.status().toString());
     x.full = std::move(m).value();
     std::vector<float> pos;

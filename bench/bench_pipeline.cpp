@@ -87,7 +87,7 @@ uint64_t triangleCount(const std::string& path) {
     Status triangles(std::span<const Triangle>) override { return Status::ok(); }
     Status vertexNormals(uint64_t, std::span<const Vec3f>) override { return Status::ok(); }
   } sink;
-  auto r = readMesh(path, sink);
+  auto r = readMesh(path, sink, ReadOptions::asInFile());
   return r.isOk() ? r->triangles : 0;
 }
 

@@ -92,7 +92,7 @@ void measureRow(const Mesh& original, const Grid& grid, const std::vector<Vec3u>
 void runScan(const std::string& path, int bits, int first_bits, const Options& opt, std::vector<Row>& rows,
              std::vector<AttributeRow>& attribute_rows) {
   const int runs = opt.runs;
-  auto mesh = readMeshFile(path);
+  auto mesh = readMeshFile(path, nullptr, ReadOptions::asInFile());
   if (!mesh.isOk()) {
     std::fprintf(stderr, "skipping %s: %s\n", path.c_str(), mesh.status().toString().c_str());
     return;
@@ -320,7 +320,7 @@ int main(int argc, char** argv) {
       runScan(s, b, bits.front(), opt, rows, attribute_rows);
     }
     if (!targets) continue;
-    auto mesh = readMeshFile(s);
+    auto mesh = readMeshFile(s, nullptr, ReadOptions::asInFile());
     if (!mesh.isOk()) continue;
     std::vector<Row> anchors;
     for (const auto& r : rows)

@@ -58,7 +58,7 @@ Status renderErrorPicture(const EncodeSettings& s, const std::string& png, std::
     SP_ASSIGN_OR_RETURN(RenderResult picture, renderSurface(decoded, rs, device, &original, surfaceCacheBytes(budget)));
     return writePng(png, picture.image);
   }
-  SP_ASSIGN_OR_RETURN(Mesh original, readMeshFile(s.input));
+  SP_ASSIGN_OR_RETURN(Mesh original, readMeshFile(s.input, nullptr, ReadOptions::asInFile()));
   SP_ASSIGN_OR_RETURN(Mesh decoded, readSurfaceFile(s.output));
   SP_ASSIGN_OR_RETURN(RenderResult picture, renderMesh(decoded, rs, device, &original));
   return writePng(png, picture.image);

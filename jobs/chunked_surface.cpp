@@ -331,7 +331,7 @@ Result<ChunkedSurface> ChunkedSurface::fromMeshFile(const std::string& path, uin
   {
     VertexTable table(source->dir.file("vertices"), cache_bytes);
     ChunkWriter writer(*source, table, std::max<uint64_t>(run, 1), [&](const Mesh& m) { s.addChunk(m); });
-    SP_RETURN_IF_ERROR(readMesh(path, writer).status());
+    SP_RETURN_IF_ERROR(readMesh(path, writer, ReadOptions::asInFile()).status());
     SP_RETURN_IF_ERROR(writer.finishChunk());
     s.box_ = writer.box();
   }
@@ -364,7 +364,7 @@ bool isContainerPath(const std::string& path) {
 }
 
 Result<Mesh> readSurfaceFile(const std::string& path) {
-  if (!isContainerPath(path)) return readMeshFile(path);
+  if (!isContainerPath(path)) return readMeshFile(path, nullptr, ReadOptions::asInFile());
   ContainerHeader header;
   SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeContainer(path, std::nullopt, &header));
   return dequantizeMesh(q, header.grid, header.layout);

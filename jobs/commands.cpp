@@ -106,8 +106,10 @@ Result<std::vector<uint64_t>> levelBytes(const ContainerFile& file, const std::v
 // Decodes the chosen tiles (at `level` when given) and welds them. Tiles decoded at a coarse level weld by position
 // (their vertices' attributes differ between tiles along a seam): a welded vertex keeps its first tile's attributes
 // when that tile has its own (kdtree and octree from version 3), else gets them derived from the welded mesh.
+// `drop_scalars`: the tiles' scalar channels are cleared before they are welded (an output that writes none: the
+// same vertices as the streamed decode, which never welds by them), and the result has none.
 Result<QuantizedMesh> decodeChosen(const ContainerFile& file, const std::vector<const TileEntry*>& chosen,
-                                   std::optional<uint32_t> level) {
+                                   std::optional<uint32_t> level, bool drop_scalars = false) {
   // Tiles decode independently: in parallel, then welded in index order (deterministic).
   SP_ASSIGN_OR_RETURN(auto tiles, decodeTiles(file, chosen, level));
   std::vector<QuantizedMesh> decoded;
@@ -117,6 +119,10 @@ Result<QuantizedMesh> decodeChosen(const ContainerFile& file, const std::vector<
   for (DecodedTile& t : tiles)
     decoded.push_back(std::move(t.mesh)), all_complete &= t.complete, own.push_back(t.own_attributes);
   tiles.clear();
+  if (drop_scalars)
+    for (QuantizedMesh& m : decoded) m.scalars.clear();
+  AttributeLayout layout = file.header().layout;
+  if (drop_scalars) layout.scalars.clear();
   if (decoded.empty()) return QuantizedMesh();
   if (all_complete && decoded.size() == 1) return std::move(decoded[0]);  // what weldTiles would copy
   if (all_complete) return weldTiles(decoded);
@@ -125,7 +131,7 @@ Result<QuantizedMesh> decodeChosen(const ContainerFile& file, const std::vector<
   QuantizedMesh welded = weldTiles(decoded, WeldBy::kPosition, &owner);
   std::vector<uint8_t> keep(owner.size());
   for (size_t v = 0; v < owner.size(); ++v) keep[v] = own[owner[v]];
-  deriveAttributes(welded, file.header().layout, keep);
+  deriveAttributes(welded, layout, keep);
   return welded;
 }
 
@@ -307,7 +313,7 @@ Result<DecodedMesh> decodeToMesh(const DecodeSettings& settings) {
 // never silent.
 void noteDroppedScalars(const ContainerHeader& header, const std::string& output, DecodeResult& result) {
   const std::vector<bool> written = result.streamed ? std::vector<bool>(header.layout.scalars.size(), false)
-                                                    : channelsWritten(output, header.layout.scalars);
+                                                    : channelsWritten(output, header.layout.scalars, result.faces > 0);
   for (size_t i = 0; i < header.layout.scalars.size(); ++i)
     if (!written[i]) result.dropped.push_back({"vertex." + header.layout.scalars[i].name, result.vertices});
 }
@@ -375,13 +381,20 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     noteDroppedScalars(header, settings.output, result);
     return result;
   }
-  SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeChosen(file, chosen, level));
+  // A format that writes none of the scalar channels gets the vertices the streamed decode writes: welded without
+  // them (texture seams' wedges on tile borders weld into one vertex, as in the tiles' interiors they stay apart).
+  const std::vector<bool> written = channelsWritten(settings.output, header.layout.scalars);
+  const bool drop_scalars = header.layout.hasScalars() &&
+                            std::find(written.begin(), written.end(), true) == written.end();
+  AttributeLayout layout = header.layout;
+  if (drop_scalars) layout.scalars.clear();
+  SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeChosen(file, chosen, level, drop_scalars));
   if (settings.crop) q = cropToBox(q, header.grid, *settings.box);
   result.vertices = q.positions.size();
   result.faces = q.triangles.size();
   result.tiles = static_cast<uint32_t>(chosen.size());
   result.double_positions = !floatPositionsSuffice(q, header.grid);
-  const Mesh mesh = dequantizeMesh(q, header.grid, header.layout);
+  const Mesh mesh = dequantizeMesh(q, header.grid, layout);
   q = QuantizedMesh();  // the decoded mesh's memory is bounded by the container's size (FORMAT.md): held once
   write.double_positions = result.double_positions;
   SP_RETURN_IF_ERROR(writeMeshFile(settings.output, mesh, write));

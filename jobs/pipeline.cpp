@@ -583,6 +583,17 @@ class ScanEncoder {
       result_.dropped_on_request.push_back({"vertex normals", survey_.vertex_count});
     if (!s_.keep_colors && survey_.colorChannels())
       result_.dropped_on_request.push_back({"vertex colors", survey_.vertex_count});
+    // Texture coordinates that --no-scalars kept the reader from splitting wedges for: dropped on request.
+    if (!s_.keep_scalars)
+      std::erase_if(result_.read.dropped, [&](const DroppedProperty& d) {
+        const bool texcoords = d.name == "obj vt" || d.name == "face.texcoord";
+        if (texcoords) result_.dropped_on_request.push_back(d);
+        return texcoords;
+      });
+    else if (!codecCarriesScalars())
+      for (DroppedProperty& d : result_.read.dropped)
+        if (d.name == "obj vt" || d.name == "face.texcoord")
+          d.name += " (" + scalarsDroppedBy() + " carries no texture coordinates)";
     for (const ScalarChannel& c : survey_.scalar_channels) {
       if (!s_.keep_scalars) result_.dropped_on_request.push_back({"vertex." + c.name, survey_.vertex_count});
       else if (!codecCarriesScalars())
@@ -639,11 +650,13 @@ class ScanEncoder {
     return read;
   }
 
-  // Texture coordinates (OBJ `vt`) split vertices into wedges at seams: only when the scalar channels they become
-  // are kept (a simplifying codec would open the seams; it reads the vertices as they are, `vt` listed dropped).
+  // Texture coordinates and normals per corner (OBJ `vt`, `vn`) split vertices into wedges at seams and creases:
+  // only for codecs that keep every vertex (pm, prm and the remesh stage would open the seams: they read the
+  // vertices as they are, `vt` listed dropped, a vertex's normal its first corner's), and what is kept.
   ReadOptions readOptions() const {
     ReadOptions o;
     o.texture_coordinates = s_.keep_scalars && codecCarriesScalars();
+    o.corner_normals = s_.keep_normals && codecCarriesScalars();
     return o;
   }
 

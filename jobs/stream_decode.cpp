@@ -423,8 +423,9 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
     SP_ASSIGN_OR_RETURN(auto tiles, decodeTiles(file, std::span(chosen).subspan(a, b - a), settings.level));
     for (size_t i = a; i < b; ++i) {
       QuantizedMesh& m = tiles[i - a].mesh;
-      // The streamed output writes no scalar channels (decodeFile refuses PLY here and reports them dropped for the
-      // other formats): the weld ignores them. Its keys outlive the tile, so they must not point into its values.
+      // The streamed output writes no scalar channels (decodeFile refuses PLY here, and OBJ with texture
+      // coordinates, and reports them dropped for the other formats): the weld ignores them, as the in-memory
+      // decode's does for those formats. Its keys outlive the tile, so they must not point into its values.
       m.scalars.clear();
       if (!settings.level) SP_RETURN_IF_ERROR(checkWithinIndexBounds(file, *chosen[i], m));
       SP_RETURN_IF_ERROR(welder.add(static_cast<uint32_t>(i), m));

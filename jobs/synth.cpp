@@ -99,7 +99,7 @@ Result<SynthResult> synthesize(const SynthSettings& s) {
   if (s.from.empty()) {
     base = bumpyIcosphere(4, s.seed);
   } else {
-    SP_ASSIGN_OR_RETURN(base, readMeshFile(s.from));
+    SP_ASSIGN_OR_RETURN(base, readMeshFile(s.from, nullptr, ReadOptions::asInFile()));
   }
   // Base triangles with three distinct, finite corners.
   std::vector<Triangle> faces;

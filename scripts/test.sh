@@ -25,7 +25,10 @@ if [ "${SANITIZE:-0}" = "1" ]; then
   # unlocked vertex over real scans and the kill-and-resume batch (process-level, 34 s each).
   # The malformation sweep through the CLI (MalformationSweepCli: `scanpress decode` on mutated files, for its exit
   # codes) too: MalformationSweep.* runs the same decoders in-process here, and the fuzz lane under ASan as well.
-  exclude=(-E '^(Targets\.|Data/SimplifyScans\.|ChunkedSurface\.(CliMeasures|JobErrorPicture)|RemeshScans\.|PrmCodec\.|Pipeline\.StageMovingEveryUnlockedVertex|Durability\.KilledAndResumed|MalformationSweepCli\.)')
+  # And the tests that drive the binary over real scans or many processes, whose code the in-process tests run here
+  # (a process start under ASan and TBB is slow): the commands on real scans (Scans/DataRoundTrip.ThroughFiles...,
+  # 27 s here), the Slurm array, the streamed decode's CLI messages, stdin/stdout pipes and the interrupt test.
+  exclude=(-E '^(Targets\.|Data/SimplifyScans\.|ChunkedSurface\.(CliMeasures|JobErrorPicture)|RemeshScans\.|PrmCodec\.|Pipeline\.StageMovingEveryUnlockedVertex|Durability\.KilledAndResumed|MalformationSweepCli\.|Scans/DataRoundTrip\.ThroughFilesWithTheCommands/|Cluster\.SlurmArray|StreamDecodeCli\.|Cli\.StdinAndStdoutThroughPipes|Outputs\.InterruptRemovesTemporariesAndScratch)')
 fi
 # ctest starts the longest tests first when it knows their times (its cost file); a fresh build does not, and ran
 # them in declaration order, with long tests left alone at the end. So a fresh build starts from the times of a

@@ -109,7 +109,10 @@ TEST(ObjReader, CornerFormsNegativeIndicesColorsAndNormals) {
              "vt 0 0\nvn 0 0 1\nvn 0 0 -1\ng grp\ns off\nusemtl m\n"
              "f 1 2 3\nf 1/1 3/1 4/1\nf -4//2 -3//2 -1//2\nf 1/1/1 2/1/1 3/1/1 4/1/1\nl 1 2\n");
   ReadStats stats;
-  Mesh m = readOk(p, &stats);
+  // As the file has the vertices (no wedges: a vertex's normal is its first corner's).
+  auto as_in_file = readMeshFile(p, &stats, ReadOptions::asInFile());
+  ASSERT_TRUE(as_in_file.isOk()) << as_in_file.status().toString();
+  Mesh m = *as_in_file;
   ASSERT_EQ(m.positions.size(), 4u);
   EXPECT_EQ(m.colors[1], (Rgba8{0, 255, 0, 255}));
   ASSERT_EQ(m.triangles.size(), 5u);
@@ -118,6 +121,11 @@ TEST(ObjReader, CornerFormsNegativeIndicesColorsAndNormals) {
   EXPECT_EQ(m.normals[0], (Vec3f{0, 0, -1}));  // first corner naming vertex 1 used vn 2
   EXPECT_EQ(m.normals[2], (Vec3f{0, 0, 1}));
   EXPECT_EQ(stats.polygons, 1u);
+  // With wedges (the default): each distinct (vt, vn) a vertex's corners name, `1/1`, `//2` and `1/1/1` alike, is a
+  // vertex of its own (corners naming neither take the first): 3 + 2 + 2 + 3.
+  Mesh w = readOk(p, &stats);
+  EXPECT_EQ(w.positions.size(), 10u);
+  EXPECT_EQ(w.triangles.size(), 5u);
 }
 
 TEST(StlReader, AsciiAndBinaryWeldBitIdenticalCorners) {
@@ -374,15 +382,16 @@ TEST(Readers, ObjListsTextureCoordinatesMaterialsAndOtherRecords) {
   Mesh m = readOk(p, &stats);
   EXPECT_EQ(m.triangles.size(), 2u);
   // "s off" states nothing; vn 3 is named by no face; vertices 1 and 3 have normal 1, then a corner names 2.
-  EXPECT_EQ(droppedText(stats),
-            "obj mtllib x 1, obj o x 1, obj usemtl x 2, obj s x 1, obj vn unused x 1, obj vn per corner x 2, "
-            "obj v w x 1");
-  // Without texture coordinates (ReadOptions::texture_coordinates off: a codec that drops them), `vt` is listed.
+  // Texture coordinates and normals per corner are kept (wedges: vertices 1 and 3 get a second, for normal 2).
+  EXPECT_EQ(droppedText(stats), "obj mtllib x 1, obj o x 1, obj usemtl x 2, obj s x 1, obj vn unused x 1, obj v w x 1");
+  EXPECT_EQ(m.positions.size(), 6u);
+  // Without them (ReadOptions off: a codec that simplifies), `vt` and the second normals are listed.
   {
     Mesh off;
     MeshCollector sink(off);
     ReadOptions no_uv;
     no_uv.texture_coordinates = false;
+    no_uv.corner_normals = false;
     auto read = readMesh(p, sink, no_uv);
     ASSERT_TRUE(read.isOk()) << read.status().toString();
     EXPECT_EQ(droppedText(*read),

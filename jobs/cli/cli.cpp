@@ -100,8 +100,8 @@ options:
                       --max-error, whose measured error accounts for them
   --strict            fail (exit 2) when the input holds anything the container would not keep
                       (materials, per-face properties, extra PLY elements, per-vertex scalars and texture
-                      coordinates under pm or prm); without it they are dropped with one warning and listed
-                      in the report
+                      coordinates under pm, prm or the remesh stage); without it they are dropped with one
+                      warning and listed in the report
   --tile-triangles N  target triangles per tile (default 131072; tiles adapt to density around it)
   --threads N         worker threads (default: all cores); the output is the same at any count
   --memory-budget S   bound the memory for tile data, e.g. 512M, 2GiB or 1.5G (units K, M, G, T of 1024;

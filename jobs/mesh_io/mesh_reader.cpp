@@ -138,6 +138,14 @@ void MeshCollector::finish() {
   if (!mesh_.colors.empty()) mesh_.colors.resize(mesh_.positions.size(), Rgba8{255, 255, 255, 255});
 }
 
+namespace {
+// A file that can be read twice (a FIFO or a device cannot: its wedges are not split, what they hold is listed).
+bool regularFile(const std::string& path) {
+  struct stat st;
+  return ::stat(path.c_str(), &st) == 0 && S_ISREG(st.st_mode);
+}
+}  // namespace
+
 Result<ReadStats> readMesh(const std::string& path, MeshSink& sink, const ReadOptions& options) {
   SP_ASSIGN_OR_RETURN(auto source, InputSource::open(path));
   Scanner in(std::move(source), path);
@@ -147,13 +155,22 @@ Result<ReadStats> readMesh(const std::string& path, MeshSink& sink, const ReadOp
     format = sniffFormat(head);
   }
   switch (format) {
-    case MeshFormat::kPly: return readPly(in, sink, options);
-    case MeshFormat::kObj: {
-      if (!options.texture_coordinates) return readObj(in, sink, options);
-      // Texture coordinates: a first read learns what faces make of them (readObj's second read delivers wedges).
+    case MeshFormat::kPly: {
+      if (!options.texture_coordinates || !regularFile(path)) return readPly(in, sink, options);
+      // Faces' texcoord lists: a first read (which stops after the header of a file without them) plans the wedges.
       SP_ASSIGN_OR_RETURN(auto first_source, InputSource::open(path));
       Scanner first(std::move(first_source), path);
-      SP_ASSIGN_OR_RETURN(ObjTexturePlan plan, planObjTextures(first));
+      SP_ASSIGN_OR_RETURN(WedgePlan plan, planPlyWedges(first, options));
+      return readPly(in, sink, options, &plan);
+    }
+    case MeshFormat::kObj: {
+      if ((!options.texture_coordinates && !options.corner_normals) || !regularFile(path))
+        return readObj(in, sink, options);
+      // Texture coordinates and normals per corner: a first read learns what faces make of them (readObj's second
+      // read delivers the wedges).
+      SP_ASSIGN_OR_RETURN(auto first_source, InputSource::open(path));
+      Scanner first(std::move(first_source), path);
+      SP_ASSIGN_OR_RETURN(WedgePlan plan, planObjWedges(first, options));
       return readObj(in, sink, options, &plan);
     }
     case MeshFormat::kStl: return readStl(in, sink, options);
@@ -164,15 +181,67 @@ Result<ReadStats> readMesh(const std::string& path, MeshSink& sink, const ReadOp
                    path + ": unknown mesh format (expected .ply, .obj, .stl or .off, optionally .zst-compressed)");
 }
 
-std::vector<ScalarChannel> texcoordChannels(const ObjTexturePlan* plan) {
-  if (!plan || plan->values.empty()) return {};
+uint32_t WedgePlan::addUv(const std::array<float, 2>& uv) {
+  const uint64_t bits = uint64_t(std::bit_cast<uint32_t>(uv[0])) << 32 | std::bit_cast<uint32_t>(uv[1]);
+  const auto [it, fresh] = uv_ids.emplace(bits, uint32_t(uvs.size()));
+  if (fresh) uvs.push_back(uv);
+  return it->second;
+}
+
+uint32_t WedgePlan::uvId(const std::array<float, 2>& uv) const {
+  const uint64_t bits = uint64_t(std::bit_cast<uint32_t>(uv[0])) << 32 | std::bit_cast<uint32_t>(uv[1]);
+  const auto it = uv_ids.find(bits);
+  return it == uv_ids.end() ? kNone - 1 : it->second;
+}
+
+uint32_t WedgePlan::keyOf(uint64_t pair) {
+  const auto [it, fresh] = key_ids.emplace(pair, uint32_t(keys.size()));
+  if (fresh) keys.push_back({uint32_t(pair >> 32), uint32_t(pair)});
+  return it->second;
+}
+
+void WedgePlan::addCorner(uint32_t v, uint32_t t, uint32_t n) {
+  if (!textures) t = kNone;
+  if (!normals) n = kNone;
+  if (t == kNone && n == kNone) return;  // the vertex's first wedge
+  const uint32_t key = keyOf(uint64_t(t) << 32 | n);
+  if (first[v] == kNone) first[v] = key;
+  else if (key != first[v]) wedges.push_back({v, key});
+  if (wedges.size() >= 2 * deduplicated_ + 4096) {  // a vertex's corners name the same pair again and again
+    finish();
+    deduplicated_ = wedges.size();
+  }
+}
+
+void WedgePlan::finish() {
+  std::sort(wedges.begin(), wedges.end());
+  wedges.erase(std::unique(wedges.begin(), wedges.end()), wedges.end());
+}
+
+std::optional<uint32_t> WedgePlan::wedgeOf(uint32_t v, uint32_t t, uint32_t n) const {
+  if (!textures) t = kNone;
+  if (!normals) n = kNone;
+  if (t == kNone && n == kNone) return 0;
+  if (v >= first.size()) return std::nullopt;
+  const auto id = key_ids.find(uint64_t(t) << 32 | n);
+  if (id == key_ids.end()) return std::nullopt;
+  const uint32_t key = id->second;
+  if (key == first[v]) return 0;
+  const auto begin = std::lower_bound(wedges.begin(), wedges.end(), std::pair<uint32_t, uint32_t>{v, 0});
+  const auto it = std::lower_bound(begin, wedges.end(), std::pair<uint32_t, uint32_t>{v, key});
+  if (it == wedges.end() || *it != std::pair<uint32_t, uint32_t>{v, key}) return std::nullopt;
+  return uint32_t(1 + (it - begin));
+}
+
+std::vector<ScalarChannel> texcoordChannels(const WedgePlan* plan) {
+  if (!plan || !plan->textures) return {};
   return {{kTexcoordU, ScalarType::kFloat32}, {kTexcoordV, ScalarType::kFloat32}};
 }
 
-Result<Mesh> readMeshFile(const std::string& path, ReadStats* stats) {
+Result<Mesh> readMeshFile(const std::string& path, ReadStats* stats, const ReadOptions& options) {
   Mesh mesh;
   MeshCollector sink(mesh);
-  SP_ASSIGN_OR_RETURN(ReadStats s, readMesh(path, sink));
+  SP_ASSIGN_OR_RETURN(ReadStats s, readMesh(path, sink, options));
   sink.finish();
   if (stats) *stats = s;
   return mesh;

@@ -2,7 +2,9 @@
 // welded), OFF; any of them zstd-compressed.
 //
 // A reader hands vertices and triangles to a MeshSink in chunks of at most `ReadOptions::chunk` elements, so its
-// own memory stays bounded whatever the file size (STL keeps one hash entry per distinct position, to weld).
+// own memory stays bounded whatever the file size (STL keeps one hash entry per distinct position, to weld; OBJ
+// and PLY files whose faces give corners texture coordinates or normals keep a few bytes per vertex and per
+// distinct value: WedgePlan).
 // Guarantees to the sink: every triangle's indices refer to vertices already delivered; normals and colors, when
 // present, come with their vertices (OBJ only: normals that faces assign to vertices arrive at the end through
 // vertexNormals). Polygons are fan-triangulated.
@@ -21,6 +23,7 @@
 #include <cstdint>
 #include <optional>
 #include <span>
+#include <unordered_map>
 #include <string>
 #include <vector>
 
@@ -37,6 +40,18 @@ struct ReadOptions {
   // (texcoords.h; the file is read twice). Off (a codec that does not carry scalars, whose simplification would open
   // the seams): listed dropped as "obj vt", vertices as in the file.
   bool texture_coordinates = true;
+  // OBJ `vn` per corner: a vertex whose corners name different normals (a crease) is split into wedges, one per
+  // normal. Off (a simplifying codec): a vertex's normal is its first corner's, the others listed "obj vn per
+  // corner".
+  bool corner_normals = true;
+
+  // Vertices as the file has them (no wedges: OBJ `vt` and PLY `texcoord` lists listed dropped, a vertex's normal its
+  // first corner's), the file read once: what surface measurement, rendering, synthesis and the benchmarks read.
+  static ReadOptions asInFile() {
+    ReadOptions o;
+    o.texture_coordinates = o.corner_normals = false;
+    return o;
+  }
 };
 
 // Something the file holds that scanpress does not keep (yet): a PLY property or element, OBJ texture coordinates
@@ -106,45 +121,66 @@ Result<ReadStats> readMesh(const std::string& path, MeshSink& sink, const ReadOp
 bool cheapToReadAgain(const std::string& path);
 
 // Convenience: the whole mesh in memory.
-Result<Mesh> readMeshFile(const std::string& path, ReadStats* stats = nullptr);
+Result<Mesh> readMeshFile(const std::string& path, ReadStats* stats = nullptr, const ReadOptions& options = {});
 
-// What an OBJ's faces make of its texture coordinates (the first of two reads: obj_reader.cpp).
-struct ObjTexturePlan {
-  std::vector<std::array<float, 2>> values;  // the distinct (u, v) values, in order of first `vt`
-  std::vector<uint32_t> canonical;           // per `vt` record: its value's index
-  std::vector<bool> used_records;            // per `vt` record: named by a face corner
-  std::vector<uint32_t> first;               // per `v`: the value of its first corner naming one, or UINT32_MAX
-  std::vector<std::pair<uint32_t, uint32_t>> wedges;  // (v, value) of further values, sorted, distinct
+// What a file's faces make of their corners' texture coordinates and normals (OBJ `vt`/`vn`, PLY per-face
+// `texcoord` lists), learnt by a first read: a vertex whose corners name different values is split into wedges,
+// one per distinct value, delivered right after it by the second read (texcoords.h).
+//
+// A corner's key is its (texture coordinate, normal) pair of value indices, kNone for a kind it does not name (a
+// corner `v/t` beside `v/t/n` corners is a wedge of its own, without a normal: as the file has it); a corner naming
+// neither takes the vertex's first wedge, whose key is its first corner naming either.
+struct WedgePlan {
+  static constexpr uint32_t kNone = UINT32_MAX;
+  bool textures = false;  // split on texture coordinates (delivered as channels u and v): some face names one
+  bool normals = false;   // split on normals (OBJ `vn`)
+  std::vector<std::array<float, 2>> uvs;              // the distinct (u, v) values, in order of first appearance
+  std::unordered_map<uint64_t, uint32_t> uv_ids;      // a (u, v)'s bits -> its index in uvs
+  std::vector<uint32_t> uv_of;                        // OBJ: per `vt` record, its value's index
+  std::vector<bool> vt_used;                          // OBJ: per `vt` record, named by a face corner
+  std::vector<uint32_t> normal_of;                    // OBJ: per `vn` record, its distinct value's index
+  std::vector<std::pair<uint32_t, uint32_t>> keys;    // distinct (uv, normal) pairs of corners (kNone: none)
+  std::unordered_map<uint64_t, uint32_t> key_ids;     // a pair -> its index in keys
+  std::vector<uint32_t> first;                        // per vertex: the key of wedge 0, or kNone
+  std::vector<std::pair<uint32_t, uint32_t>> wedges;  // (vertex, key) of its further keys, sorted, distinct
 
-  uint32_t firstOf(uint64_t v) const { return v < first.size() ? first[v] : UINT32_MAX; }
-  // A vertex's scalar words for value `c` ((0, 0) for UINT32_MAX).
-  std::array<uint32_t, 2> words(uint32_t c) const {
-    if (c == UINT32_MAX) return {0, 0};
-    return {std::bit_cast<uint32_t>(values[c][0]), std::bit_cast<uint32_t>(values[c][1])};
+  bool splits() const { return !keys.empty(); }
+  // The vertex count: the first read grows it as it goes (OBJ) or sets it once the vertices are read (PLY).
+  void resizeVertices(size_t n) { first.resize(n, kNone); }
+  // The index of a (u, v) value, added when new (the first read).
+  uint32_t addUv(const std::array<float, 2>& uv);
+  // The index of a (u, v) value the first read saw, else kNone - 1.
+  uint32_t uvId(const std::array<float, 2>& uv) const;
+  // The first read: a corner of vertex v (< the vertex count) naming values t and n (kNone: none).
+  void addCorner(uint32_t v, uint32_t t, uint32_t n);
+  // The end of the first read.
+  void finish();
+  // The second read: which of vertex v's delivered vertices (0: the first, k: its k-th wedge) a corner naming t and
+  // n takes; nullopt when the first read saw no such corner (the file changed between the reads).
+  std::optional<uint32_t> wedgeOf(uint32_t v, uint32_t t, uint32_t n) const;
+  // The u and v words of a vertex with key `key` ((0, 0) when it names no texture coordinate).
+  std::array<uint32_t, 2> words(uint32_t key) const {
+    const uint32_t t = key == kNone ? kNone : keys[key].first;
+    if (t == kNone) return {0, 0};
+    return {std::bit_cast<uint32_t>(uvs[t][0]), std::bit_cast<uint32_t>(uvs[t][1])};
   }
-  // Which of vertex v's delivered vertices (0: the first, k: its k-th wedge) carries `vt` record `record`;
-  // nullopt when the plan has none (the file changed between the reads).
-  std::optional<uint32_t> wedgeOf(uint32_t v, uint32_t record) const {
-    if (record >= canonical.size()) return std::nullopt;
-    const uint32_t c = canonical[record];
-    if (c == firstOf(v)) return 0;
-    const auto begin = std::lower_bound(wedges.begin(), wedges.end(), std::pair<uint32_t, uint32_t>{v, 0});
-    const auto it = std::lower_bound(begin, wedges.end(), std::pair<uint32_t, uint32_t>{v, c});
-    if (it == wedges.end() || *it != std::pair<uint32_t, uint32_t>{v, c}) return std::nullopt;
-    return uint32_t(1 + (it - begin));
-  }
+
+ private:
+  uint32_t keyOf(uint64_t pair);
+  size_t deduplicated_ = 0;  // wedges' size at their last deduplication
 };
 
-// The scalar channels a plan's vertices carry: u and v (float32), or none without a plan or values.
-std::vector<ScalarChannel> texcoordChannels(const ObjTexturePlan* plan);
+// The scalar channels a plan's vertices carry: u and v (float32) when it splits on texture coordinates, else none.
+std::vector<ScalarChannel> texcoordChannels(const WedgePlan* plan);
 
 // Format-specific entry points (used by readMesh; exposed for tests).
 class Scanner;
-Result<ReadStats> readPly(Scanner& in, MeshSink& sink, const ReadOptions& options);
-// `plan`: from planObjTextures over the same bytes (nullptr: `vt` records are listed dropped).
-Result<ObjTexturePlan> planObjTextures(Scanner& in);
-Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& options,
-                          const ObjTexturePlan* plan = nullptr);
+Result<ReadStats> readPly(Scanner& in, MeshSink& sink, const ReadOptions& options, const WedgePlan* plan = nullptr);
+// `plan`: from planObjWedges (planPlyWedges) over the same bytes (nullptr: `vt` records are listed dropped, a vertex's normal is
+// its first corner's).
+Result<WedgePlan> planObjWedges(Scanner& in, const ReadOptions& options);
+Result<WedgePlan> planPlyWedges(Scanner& in, const ReadOptions& options);
+Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& options, const WedgePlan* plan = nullptr);
 Result<ReadStats> readStl(Scanner& in, MeshSink& sink, const ReadOptions& options);
 Result<ReadStats> readOff(Scanner& in, MeshSink& sink, const ReadOptions& options);
 

@@ -112,9 +112,12 @@ void putChannelValue(std::string& out, const ScalarChannel& c, const uint32_t* w
 }
 
 // OBJ with texture coordinates: one `v` per distinct position and color (the wedges a reader split at seams share
-// theirs again), a `vt` and (with normals) a `vn` per vertex, and faces `f p/t[/n]`.
+// theirs again; so do any other vertices at one position and color), a `vt` and (with normals) a `vn` per vertex,
+// and faces `f p/t[/n]`. A vertex no face uses keeps its `v`, and its `vt` is named by no face.
 Status writeTexturedObj(const std::string& path, const Mesh& mesh, const WriteOptions& options,
                         const TexcoordChannels& tc) {
+  if (mesh.triangles.size() > 0x7FFFFFFF || mesh.positions.size() > 0x7FFFFFFF)
+    return makeError(ErrorCode::kLimitExceeded, path + ": mesh too large for an int32-indexed OBJ");
   SP_ASSIGN_OR_RETURN(auto writer,
                       MeshFileWriter::create(path, MeshFileLayout{}, MeshFileFormat::of(MeshFileFormat::Kind::kObj)));
   const size_t n = mesh.positions.size(), stride = scalarWords(mesh.scalar_channels);
@@ -186,7 +189,7 @@ Status writeTexturedObj(const std::string& path, const Mesh& mesh, const WriteOp
 
 Status writeWith(const std::string& path, const Mesh& mesh, const WriteOptions& options, MeshFileFormat format) {
   SP_RETURN_IF_ERROR(checkMesh(path, mesh));
-  if (format.kind() == MeshFileFormat::Kind::kObj)
+  if (format.kind() == MeshFileFormat::Kind::kObj && !mesh.triangles.empty())
     if (const auto tc = findTexcoords(mesh.scalar_channels)) return writeTexturedObj(path, mesh, options, *tc);
   MeshFileLayout layout;
   layout.vertices = mesh.positions.size();
@@ -209,11 +212,12 @@ Status writeWith(const std::string& path, const Mesh& mesh, const WriteOptions& 
 
 }  // namespace
 
-std::vector<bool> channelsWritten(const std::string& path, std::span<const ScalarChannel> channels) {
+std::vector<bool> channelsWritten(const std::string& path, std::span<const ScalarChannel> channels, bool triangles) {
   std::vector<bool> written(channels.size(), false);
   const auto f = MeshFileFormat::forPath(path);
   if (f.isOk() && f->kind() == MeshFileFormat::Kind::kPly) return std::vector<bool>(channels.size(), true);
-  if ((f.isOk() && f->kind() == MeshFileFormat::Kind::kObj) || endsWith(path, ".glb") || endsWith(path, ".gltf"))
+  if ((f.isOk() && f->kind() == MeshFileFormat::Kind::kObj && triangles) || endsWith(path, ".glb") ||
+      endsWith(path, ".gltf"))
     if (const auto tc = findTexcoords(channels)) written[tc->u] = written[tc->v] = true;
   return written;
 }

@@ -6,17 +6,21 @@
 // unused"), face corners naming another normal than their vertex's first one ("obj vn per corner"), `v` weights
 // other than 1 ("obj v w") and `v` colors after a first `v` without them ("obj v colors").
 //
-// Texture coordinates (ReadOptions::texture_coordinates; texcoords.h): when faces name `vt` records, the file is
-// read twice. The first read (planTextures) learns, per `v`, the texture coordinates its corners name; the second
-// delivers each vertex with the first of them as scalar channels u and v (float32), followed at once by one more
-// vertex, a wedge at the same position, per further distinct value, and faces name the wedge of their corner's
-// `vt`. So a seam keeps both sides' coordinates, and vertices stay in file order with their wedges beside them.
-// A vertex no corner gives a `vt` gets (0, 0). Listed: `vt` records no face names ("obj vt unused") and third
-// numbers other than 0 ("obj vt w"). Memory: 4 bytes per `v` and per `vt`, 8 per distinct coordinate and per wedge
-// (the first read), and 4 more per `v` in the second.
+// Texture coordinates and normals per corner (ReadOptions::texture_coordinates, corner_normals; texcoords.h): when
+// faces name `vt` or `vn` records, the file is read twice. The first read (planObjWedges) learns, per `v`, the
+// distinct (texture coordinate, normal) values its corners name (compared by value: records that repeat a value
+// are one); the second delivers each vertex with the first of them (u and v as float32 scalar channels, the normal
+// through vertexNormals), followed at once by one more vertex, a wedge at the same position, per further distinct
+// value, and faces name the wedge of their corner. So a seam keeps both sides' coordinates and a crease both sides'
+// normals, and vertices stay in file order with their wedges beside them. A corner that names neither takes its
+// vertex's first; one that names only one of them is a wedge of its own, without the other (as the file has it;
+// WedgePlan). A vertex no corner gives a `vt` gets (0, 0). Listed: `vt` records no face names ("obj vt unused") and third numbers other than 0 ("obj vt
+// w"). Memory: 4 bytes per `v`, `vt` and `vn`, about 24 per distinct value and per wedge (the first read), and 4
+// more per `v` in the second.
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <string>
 #include <unordered_map>
@@ -78,14 +82,22 @@ std::string_view texcoordField(std::string_view corner) {
   return corner.substr(s1 + 1, s2 == std::string_view::npos ? std::string_view::npos : s2 - s1 - 1);
 }
 
-// Parses a `vt` record's numbers: u [v [w]], finite. False when malformed.
+// The `vn` field of a face corner (`a//c`, `a/b/c`), empty when it has none.
+std::string_view normalField(std::string_view corner) {
+  const size_t s1 = corner.find('/');
+  if (s1 == std::string_view::npos) return {};
+  const size_t s2 = corner.find('/', s1 + 1);
+  return s2 == std::string_view::npos ? std::string_view() : corner.substr(s2 + 1);
+}
+
+// Parses a `vt` record's numbers: u [v [w]], finite as float. False when malformed.
 bool parseTexcoord(Tokenizer& tok, std::array<float, 2>& uv, bool& nonzero_w) {
   double c[3] = {0, 0, 0};
   int n = 0;
   std::string_view t;
   while (tok.next(t)) {
     if (t[0] == '#') break;
-    if (n == 3 || !parseDouble(t, c[n]) || !std::isfinite(c[n])) return false;
+    if (n == 3 || !parseDouble(t, c[n]) || !std::isfinite(static_cast<float>(c[n]))) return false;
     ++n;
   }
   uv = {float(c[0]), float(c[1])};
@@ -95,12 +107,26 @@ bool parseTexcoord(Tokenizer& tok, std::array<float, 2>& uv, bool& nonzero_w) {
 
 }  // namespace
 
-Result<ObjTexturePlan> planObjTextures(Scanner& in) {
-  ObjTexturePlan plan;
-  std::unordered_map<uint64_t, uint32_t> distinct;  // a value's bits -> its index in plan.values
+Result<WedgePlan> planObjWedges(Scanner& in, const ReadOptions& options) {
+  WedgePlan plan;
+  plan.textures = options.texture_coordinates;
+  plan.normals = options.corner_normals;
+  struct NormalBits {
+    std::array<uint32_t, 3> b;
+    bool operator==(const NormalBits&) const = default;
+  };
+  struct NormalHash {
+    size_t operator()(const NormalBits& n) const {
+      return size_t((uint64_t(n.b[0]) * 0x9E3779B97F4A7C15ull) ^ (uint64_t(n.b[1]) << 21) ^ (uint64_t(n.b[2]) << 42) ^
+                    n.b[2]);
+    }
+  };
+  std::unordered_map<NormalBits, uint32_t, NormalHash> distinct_normal;
   std::string_view line;
   uint64_t vertices = 0;
-  // Lenient: a record this read cannot use is passed over; the second read reports it.
+  bool named = false;  // a `vt` or `vn` was seen: faces from here may name them
+  // Lenient: a record this read cannot use is passed over; the second read reports it. The first read counts `v`,
+  // `vt` and `vn` records as the second does (every line whose first word is the keyword).
   for (;;) {
     SP_ASSIGN_OR_RETURN(bool got, in.nextLine(line));
     if (!got) break;
@@ -108,47 +134,57 @@ Result<ObjTexturePlan> planObjTextures(Scanner& in) {
     std::string_view word;
     if (!tok.next(word)) continue;
     if (word == "v") {
-      ++vertices;
-      if (!plan.values.empty()) plan.first.push_back(UINT32_MAX);
-    } else if (word == "vt") {
-      if (plan.values.empty()) plan.first.assign(vertices, UINT32_MAX);  // faces name texture coordinates from here
-      std::array<float, 2> uv{0, 0};
-      bool w = false;
-      if (!parseTexcoord(tok, uv, w)) uv = {0, 0};
-      const uint64_t bits = uint64_t(std::bit_cast<uint32_t>(uv[0])) << 32 | std::bit_cast<uint32_t>(uv[1]);
-      const auto [it, fresh] = distinct.emplace(bits, uint32_t(plan.values.size()));
-      if (fresh) plan.values.push_back(uv);
-      plan.canonical.push_back(it->second);
-      plan.used_records.push_back(false);
-    } else if (word == "f" && !plan.values.empty()) {
+      if (++vertices > kMaxVertices) return in.errorAtLine(ErrorCode::kLimitExceeded, "more than 2^32-2 vertices");
+      if (named) plan.resizeVertices(vertices);
+    } else if (word == "vt" || word == "vn") {
+      if (!named) plan.resizeVertices(vertices), named = true;
+      if (plan.uv_of.size() + plan.normal_of.size() >= kMaxVertices)
+        return in.errorAtLine(ErrorCode::kLimitExceeded, "more than 2^32-2 'vt' and 'vn' records");
+      if (word == "vt") {
+        std::array<float, 2> uv{0, 0};
+        bool w = false;
+        if (!parseTexcoord(tok, uv, w)) uv = {0, 0};
+        plan.uv_of.push_back(plan.addUv(uv));
+        plan.vt_used.push_back(false);
+      } else {
+        NormalBits n{{0, 0, 0}};
+        std::string_view t;
+        for (uint32_t& b : n.b) {
+          double c = 0;
+          if (!tok.next(t) || !parseDouble(t, c)) break;
+          b = std::bit_cast<uint32_t>(static_cast<float>(c));
+        }
+        const auto [it, fresh] = distinct_normal.emplace(n, uint32_t(distinct_normal.size()));
+        plan.normal_of.push_back(it->second);
+      }
+    } else if (word == "f" && named) {
       std::string_view t;
       while (tok.next(t)) {
         if (t[0] == '#') break;
-        int64_t raw = 0, raw_t = 0;
-        uint32_t v = 0, vt = 0;
-        const std::string_view field = texcoordField(t);
-        if (field.empty() || !parseInt64(t.substr(0, t.find('/')), raw) || !resolveIndex(raw, vertices, v) ||
-            !parseInt64(field, raw_t) || !resolveIndex(raw_t, plan.canonical.size(), vt))
-          continue;
-        plan.used_records[vt] = true;
-        const uint32_t c = plan.canonical[vt];
-        if (plan.first[v] == UINT32_MAX) plan.first[v] = c;
-        else if (plan.first[v] != c) plan.wedges.push_back({v, c});
+        int64_t raw = 0;
+        uint32_t v = 0, vt = WedgePlan::kNone, vn = WedgePlan::kNone;
+        if (!parseInt64(t.substr(0, t.find('/')), raw) || !resolveIndex(raw, vertices, v)) continue;
+        if (const std::string_view field = texcoordField(t); !field.empty())
+          if (!parseInt64(field, raw) || !resolveIndex(raw, plan.uv_of.size(), vt)) continue;
+        if (const std::string_view field = normalField(t); !field.empty())
+          if (!parseInt64(field, raw) || !resolveIndex(raw, plan.normal_of.size(), vn)) continue;
+        if (vt != WedgePlan::kNone) plan.vt_used[vt] = true;
+        plan.addCorner(v, vt == WedgePlan::kNone ? vt : plan.uv_of[vt],
+                       vn == WedgePlan::kNone ? vn : plan.normal_of[vn]);
       }
     }
   }
-  if (std::find(plan.used_records.begin(), plan.used_records.end(), true) == plan.used_records.end())
-    return ObjTexturePlan();  // no face names one: the second read lists the `vt` records as dropped
-  std::sort(plan.wedges.begin(), plan.wedges.end());
-  plan.wedges.erase(std::unique(plan.wedges.begin(), plan.wedges.end()), plan.wedges.end());
+  // No face names a `vt`: the second read lists them dropped and delivers no u and v.
+  if (std::find(plan.vt_used.begin(), plan.vt_used.end(), true) == plan.vt_used.end()) plan.textures = false;
+  plan.finish();
   return plan;
 }
 
-Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& options, const ObjTexturePlan* plan) {
-  if (plan && plan->values.empty()) plan = nullptr;
+Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& options, const WedgePlan* plan) {
+  if (plan && !plan->splits()) plan = nullptr;
   std::vector<uint32_t> first_output;  // with a plan: per `v`, the index of its first delivered vertex
   size_t next_wedge = 0;               // the plan's next wedge to deliver
-  uint64_t texcoord_count = 0, texcoord_w = 0;
+  uint64_t texcoord_count = 0, texcoord_w = 0, texcoord_malformed = 0, corners_without_vt = 0;
   ReadStats stats;
   stats.format = MeshFormat::kObj;
   stats.format_detail = "OBJ";
@@ -203,12 +239,11 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
       } else {
         // The vertex with its first corner's texture coordinates, then its wedges (the plan's, in order).
         first_output.push_back(uint32_t(out->vertices()));
-        const uint32_t first = plan->firstOf(vertex_count);
+        const uint32_t first = vertex_count < plan->first.size() ? plan->first[vertex_count] : WedgePlan::kNone;
         SP_RETURN_IF_ERROR(out->addVertex({c[0], c[1], c[2]}, {0, 0, 0}, col, plan->words(first).data()));
         for (; next_wedge < plan->wedges.size() && plan->wedges[next_wedge].first == vertex_count; ++next_wedge) {
           if (out->vertices() >= kMaxVertices)
-            return in.errorAtLine(ErrorCode::kLimitExceeded,
-                                  "more than 2^32-2 vertices with the texture seams' wedges");
+            return in.errorAtLine(ErrorCode::kLimitExceeded, "more than 2^32-2 vertices with the seams' wedges");
           SP_RETURN_IF_ERROR(out->addVertex({c[0], c[1], c[2]}, {0, 0, 0}, col,
                                             plan->words(plan->wedges[next_wedge].second).data()));
         }
@@ -223,12 +258,12 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
       if (vn.size() >= kMaxVertices) return in.errorAtLine(ErrorCode::kLimitExceeded, "too many 'vn' records");
       vn.push_back({static_cast<float>(c[0]), static_cast<float>(c[1]), static_cast<float>(c[2])});
       vn_used.push_back(false);
-    } else if (word == "vt" && plan) {
+    } else if (word == "vt" && plan && plan->textures) {
+      // A record that is not one to three finite numbers (as float) reads as (0, 0), listed (as the first read has it).
       std::array<float, 2> uv;
       bool w = false;
-      if (!parseTexcoord(tok, uv, w))
-        return in.errorAtLine(ErrorCode::kMalformed, "'vt' record needs one to three finite numbers");
-      texcoord_w += w;
+      if (parseTexcoord(tok, uv, w)) texcoord_w += w;
+      else ++texcoord_malformed;
       ++texcoord_count;
     } else if (word == "f") {
       poly.clear();
@@ -246,29 +281,30 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
           return in.errorAtLine(ErrorCode::kMalformed, "face index " + std::to_string(raw) +
                                                            " does not name one of the " +
                                                            std::to_string(vertex_count) + " vertices so far");
-        if (plan) {  // the corner's wedge: its vertex's first, or the one its `vt` made
-          const std::string_view field = texcoordField(t);
-          uint32_t vt = 0;
-          int64_t rt = 0;
-          if (!field.empty() && (!parseInt64(field, rt) || !resolveIndex(rt, texcoord_count, vt)))
-            return in.errorAtLine(ErrorCode::kMalformed,
-                                  "bad texture coordinate index in face corner '" + std::string(t) + "'");
-          const uint32_t source = v;
-          v = first_output[source];
-          if (!field.empty()) {
-            const std::optional<uint32_t> wedge = plan->wedgeOf(source, vt);
-            if (!wedge) return in.errorAtLine(ErrorCode::kIo, "the file changed between its two reads");
-            v += *wedge;
-          }
-        }
         uint32_t n = UINT32_MAX;
-        if (s1 != std::string_view::npos) {
-          const size_t s2 = t.find('/', s1 + 1);
-          if (s2 != std::string_view::npos && s2 + 1 < t.size()) {
-            int64_t rn = 0;
-            if (!parseInt64(t.substr(s2 + 1), rn) || !resolveIndex(rn, vn.size(), n))
-              return in.errorAtLine(ErrorCode::kMalformed, "bad normal index in face corner '" + std::string(t) + "'");
+        if (const std::string_view field = normalField(t); !field.empty()) {
+          int64_t rn = 0;
+          if (!parseInt64(field, rn) || !resolveIndex(rn, vn.size(), n))
+            return in.errorAtLine(ErrorCode::kMalformed, "bad normal index in face corner '" + std::string(t) + "'");
+        }
+        if (plan) {  // the corner's wedge: its vertex's first, or the one its `vt` and `vn` made
+          uint32_t vt = WedgePlan::kNone;
+          if (const std::string_view field = texcoordField(t); plan->textures && !field.empty()) {
+            int64_t rt = 0;
+            if (!parseInt64(field, rt) || !resolveIndex(rt, texcoord_count, vt))
+              return in.errorAtLine(ErrorCode::kMalformed,
+                                    "bad texture coordinate index in face corner '" + std::string(t) + "'");
+          } else if (plan->textures) {
+            ++corners_without_vt;  // it takes its vertex's first coordinates (naming no `vn` either), or (0, 0)
           }
+          if ((vt != WedgePlan::kNone && vt >= plan->uv_of.size()) ||
+              (n != UINT32_MAX && plan->normals && n >= plan->normal_of.size()))
+            return in.errorAtLine(ErrorCode::kIo, "the file changed between its two reads");
+          const std::optional<uint32_t> wedge =
+              plan->wedgeOf(v, vt == WedgePlan::kNone ? vt : plan->uv_of[vt],
+                            n == UINT32_MAX || !plan->normals ? WedgePlan::kNone : plan->normal_of[n]);
+          if (!wedge) return in.errorAtLine(ErrorCode::kIo, "the file changed between its two reads");
+          v = first_output[v] + *wedge;
         }
         if (poly.size() >= kMaxPolygonCorners)
           return in.errorAtLine(ErrorCode::kLimitExceeded, "face with more than 65536 corners");
@@ -287,7 +323,7 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
         vn_used[poly_normals[i]] = true;
         if (vertex_normal.size() <= poly[i]) vertex_normal.resize(poly[i] + 1, UINT32_MAX);
         if (vertex_normal[poly[i]] == UINT32_MAX) vertex_normal[poly[i]] = poly_normals[i];
-        else if (vertex_normal[poly[i]] != poly_normals[i]) ++corner_normals;
+        else if (std::memcmp(&vn[vertex_normal[poly[i]]], &vn[poly_normals[i]], sizeof(Vec3f)) != 0) ++corner_normals;
       }
     } else if (word == "s") {
       std::string_view t;
@@ -297,7 +333,7 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
     }
   }
   if (out) SP_RETURN_IF_ERROR(out->flush());
-  if (plan && (texcoord_count != plan->canonical.size() || next_wedge != plan->wedges.size()))
+  if (plan && ((plan->textures && texcoord_count != plan->uv_of.size()) || next_wedge != plan->wedges.size()))
     return makeError(ErrorCode::kIo, in.name() + ": the file changed between its two reads");
   const uint64_t delivered = out ? out->vertices() : 0;
   if (!vertex_normal.empty()) {
@@ -312,14 +348,17 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
     }
   }
   const uint64_t vn_unused = static_cast<uint64_t>(std::count(vn_used.begin(), vn_used.end(), false));
-  const uint64_t vt_unused =
-      plan ? static_cast<uint64_t>(std::count(plan->used_records.begin(), plan->used_records.end(), false)) : 0;
+  const uint64_t vt_unused = plan && plan->textures
+                                 ? static_cast<uint64_t>(std::count(plan->vt_used.begin(), plan->vt_used.end(), false))
+                                 : 0;
   stats.dropped = skipped.take({{"obj vn unused", vn_unused},
                                 {"obj vn per corner", corner_normals},
                                 {"obj v w", weights},
                                 {"obj v colors", late_colors},
                                 {"obj vt unused", vt_unused},
-                                {"obj vt w", texcoord_w}});
+                                {"obj vt w", texcoord_w},
+                                {"obj vt malformed (read as 0 0)", texcoord_malformed},
+                                {"obj f corners without vt", corners_without_vt}});
   stats.vertices = delivered;
   stats.source_vertices = vertex_count;
   stats.triangles = out ? out->triangles() : 0;

@@ -3,8 +3,11 @@
 // ascii, binary_little_endian and binary_big_endian; any property order and types; float or double x/y/z;
 // optional nx/ny/nz and red/green/blue[/alpha] (uchar, other integer types or float); faces as
 // `vertex_indices` or `vertex_index` lists of any integer types (fan-triangulated); `tristrips` with -1
-// restarts (odd triangles flipped, the usual strip decoding); every other element and property is skipped and
-// listed in ReadStats::dropped.
+// restarts (odd triangles flipped, the usual strip decoding); every other vertex property kept as a scalar channel
+// at its type; a face's `texcoord` list of float32 (u and v per corner, MeshLab's wedge texture coordinates) kept
+// as channels u and v, with vertices split into wedges where corners differ (WedgePlan: the file is read twice,
+// the first read stopping after the header of a file without such lists); every other element and property is
+// skipped and listed in ReadStats::dropped.
 #include <algorithm>
 #include <bit>
 #include <charconv>
@@ -15,6 +18,7 @@
 
 #include "jobs/mesh_io/input.h"
 #include "jobs/mesh_io/mesh_reader.h"
+#include "jobs/mesh_io/texcoords.h"
 
 namespace scanpress {
 namespace {
@@ -22,7 +26,22 @@ namespace {
 enum class PlyType : uint8_t { kInt8, kUint8, kInt16, kUint16, kInt32, kUint32, kFloat32, kFloat64 };
 enum class Encoding { kAscii, kLittle, kBig };
 // kScalar: any other non-list vertex property (confidence, intensity, quality, flags, ...), kept at its type.
-enum class Role : uint8_t { kNone, kX, kY, kZ, kNx, kNy, kNz, kRed, kGreen, kBlue, kAlpha, kIndices, kScalar };
+enum class Role : uint8_t {
+  kNone,
+  kX,
+  kY,
+  kZ,
+  kNx,
+  kNy,
+  kNz,
+  kRed,
+  kGreen,
+  kBlue,
+  kAlpha,
+  kIndices,
+  kScalar,
+  kTexcoords  // a face's `texcoord` list (float32): u and v per corner (texcoords.h)
+};
 enum class ElementKind { kVertex, kFace, kTristrips, kOther };
 
 bool parseType(std::string_view s, PlyType& t) {
@@ -106,10 +125,28 @@ uint8_t colorByte(double v, PlyType t) {
 
 class PlyParser {
  public:
-  PlyParser(Scanner& in, MeshSink& sink, const ReadOptions& options) : in_(in), sink_(sink), options_(options) {}
+  // `plan`: the wedges of the faces' texture coordinates (the second read); `planning`: the first read, which
+  // fills it (its sink discards what it gets).
+  PlyParser(Scanner& in, MeshSink& sink, const ReadOptions& options, const WedgePlan* plan = nullptr,
+            WedgePlan* planning = nullptr)
+      : in_(in), sink_(sink), options_(options), plan_(plan && plan->splits() ? plan : nullptr), planning_(planning) {}
+
+  // The first read: the plan of a file whose faces have `texcoord` lists (none: it stops after the header).
+  Result<WedgePlan> plan() {
+    SP_RETURN_IF_ERROR(run().status());
+    planning_->finish();
+    return std::move(*planning_);
+  }
 
   Result<ReadStats> run() {
     SP_RETURN_IF_ERROR(parseHeader());
+    if (planning_) {
+      bool lists = false;
+      for (const auto& e : elements_)
+        for (const auto& p : e.props) lists |= p.role == Role::kTexcoords && e.count > 0;
+      if (!lists) return ReadStats();
+      planning_->textures = true;
+    }
     const Element* vertex = nullptr;
     for (const auto& e : elements_)
       if (e.kind == ElementKind::kVertex) vertex = &e;
@@ -130,6 +167,10 @@ class PlyParser {
       if (p.role == Role::kScalar)
         scalars.push_back({p.name, static_cast<ScalarType>(static_cast<uint8_t>(p.type) + 1)});
     stride_ = scalarWords(scalars);
+    if (plan_ && plan_->textures) {  // the faces' texture coordinates, as u and v after the vertex's own
+      scalars.push_back({kTexcoordU, ScalarType::kFloat32});
+      scalars.push_back({kTexcoordV, ScalarType::kFloat32});
+    }
     ChunkBuffer out(sink_, options_.chunk, channels, has_normals, std::move(scalars));
     out_ = &out;
     bool seen_vertex = false;
@@ -142,9 +183,11 @@ class PlyParser {
       SP_RETURN_IF_ERROR(readElement(e));
     }
     SP_RETURN_IF_ERROR(out.flush());
+    if (plan_ && next_wedge_ != plan_->wedges.size())
+      return makeError(ErrorCode::kIo, in_.name() + ": the file changed between its two reads");
     listDropped();
     stats_.vertices = out.vertices();
-    stats_.source_vertices = out.vertices();
+    stats_.source_vertices = vertex_count_;
     stats_.triangles = out.triangles();
     stats_.format = MeshFormat::kPly;
     return stats_;
@@ -162,7 +205,8 @@ class PlyParser {
         continue;
       }
       for (const auto& p : e.props)
-        if (p.role == Role::kNone) stats_.dropped.push_back({e.name + "." + p.name, e.count});
+        if (p.role == Role::kNone || (p.role == Role::kTexcoords && !plan_ && !planning_))
+          stats_.dropped.push_back({e.name + "." + p.name, e.count});
     }
   }
 
@@ -249,6 +293,18 @@ class PlyParser {
       }
     }
     if (!have_format) return headerError("PLY header has no 'format' line");
+    // A face's `texcoord` list of float32 is kept (u and v per corner) unless the vertices have a texture
+    // coordinate pair of their own.
+    std::vector<ScalarChannel> vertex_channels;
+    for (const auto& e : elements_)
+      if (e.kind == ElementKind::kVertex)
+        for (const auto& p : e.props)
+          if (p.role == Role::kScalar) vertex_channels.push_back({p.name, ScalarType(uint8_t(p.type) + 1)});
+    if (options_.texture_coordinates && !findTexcoords(vertex_channels))
+      for (auto& e : elements_)
+        if (e.kind == ElementKind::kFace)
+          for (auto& p : e.props)
+            if (p.is_list && p.name == "texcoord" && p.type == PlyType::kFloat32) p.role = Role::kTexcoords;
     for (auto& e : elements_) {
       bool has_indices = false;
       for (auto& p : e.props) {
@@ -457,7 +513,7 @@ class PlyParser {
 
   Status readVertices(const Element& e) {
     std::vector<uint8_t> record(e.record_size);
-    std::vector<uint32_t> row(stride_);
+    std::vector<uint32_t> row(stride_ + (plan_ && plan_->textures ? 2 : 0));
     for (uint64_t r = 0; r < e.count; ++r) {
       Vec3d pos{0, 0, 0};
       Vec3f nrm{0, 0, 0};
@@ -499,7 +555,23 @@ class PlyParser {
         return placeError(ErrorCode::kMalformed, "vertex " + std::to_string(r) + " has a NaN or infinite coordinate");
       if (!std::isfinite(nrm[0]) || !std::isfinite(nrm[1]) || !std::isfinite(nrm[2]))
         return placeError(ErrorCode::kMalformed, "vertex " + std::to_string(r) + " has a NaN or infinite normal");
-      SP_RETURN_IF_ERROR(out_->addVertex(pos, nrm, col, row.data()));
+      if (!plan_) {
+        SP_RETURN_IF_ERROR(out_->addVertex(pos, nrm, col, row.data()));
+        continue;
+      }
+      // The vertex with its first corner's texture coordinates, then its wedges (the plan's, in order).
+      first_output_.push_back(uint32_t(out_->vertices()));
+      auto add = [&](uint32_t key) {
+        const auto uv = plan_->words(key);
+        if (plan_->textures) row[stride_] = uv[0], row[stride_ + 1] = uv[1];
+        return out_->addVertex(pos, nrm, col, row.data());
+      };
+      SP_RETURN_IF_ERROR(add(r < plan_->first.size() ? plan_->first[r] : WedgePlan::kNone));
+      for (; next_wedge_ < plan_->wedges.size() && plan_->wedges[next_wedge_].first == r; ++next_wedge_) {
+        if (out_->vertices() >= kMaxVertices)
+          return placeError(ErrorCode::kLimitExceeded, "more than 2^32-2 vertices with the seams' wedges");
+        SP_RETURN_IF_ERROR(add(plan_->wedges[next_wedge_].second));
+      }
     }
     return out_->flushVertices();
   }
@@ -521,10 +593,26 @@ class PlyParser {
 
   Status readFaces(const Element& e, bool strips) {
     std::vector<uint32_t> poly;
+    std::vector<float> uv;  // the face's texcoord list
     for (uint64_t r = 0; r < e.count; ++r) {
+      bool have_uv = false;
+      poly.clear();
       for (const auto& p : e.props) {
         uint64_t n = 1;
         if (p.is_list) SP_RETURN_IF_ERROR(readListCount(p, n));
+        if (p.role == Role::kTexcoords) {
+          if (n > 2 * uint64_t(kMaxPolygonCorners))
+            return placeError(ErrorCode::kLimitExceeded, "face " + std::to_string(r) + " has " + std::to_string(n) +
+                                                             " texture coordinate values");
+          uv.resize(n);
+          for (uint64_t i = 0; i < n; ++i) {
+            double v = 0;
+            SP_RETURN_IF_ERROR(readValue(p.type, v));
+            uv[i] = static_cast<float>(v);
+          }
+          have_uv = n > 0;  // an empty list: the face has none
+          continue;
+        }
         if (p.role != Role::kIndices) {
           double v;
           for (uint64_t i = 0; i < n; ++i) SP_RETURN_IF_ERROR(readValue(p.type, v));
@@ -542,12 +630,42 @@ class PlyParser {
                                                            " vertices (limit " + std::to_string(kMaxPolygonCorners) +
                                                            ")");
         SP_RETURN_IF_ERROR(readIndexList(p.type, n, r, poly));
-        if (n > 3) ++stats_.polygons;
-        for (size_t i = 1; i + 1 < poly.size(); ++i)
-          SP_RETURN_IF_ERROR(out_->addTriangle({poly[0], poly[i], poly[i + 1]}));
       }
+      if (strips || poly.empty()) continue;
+      if (have_uv) {
+        SP_RETURN_IF_ERROR(texturedCorners(r, poly, uv));
+      } else if (plan_) {  // the vertices' first wedges
+        for (uint32_t& v : poly) v = first_output_[v];
+      }
+      if (poly.size() > 3) ++stats_.polygons;
+      for (size_t i = 1; i + 1 < poly.size(); ++i)
+        SP_RETURN_IF_ERROR(out_->addTriangle({poly[0], poly[i], poly[i + 1]}));
     }
     return out_->flushTriangles();
+  }
+
+  // A face's corners with their texture coordinates (u, v per corner): the first read plans the wedges, the second
+  // names them (poly: the vertices' indices in the file, then the delivered vertices').
+  Status texturedCorners(uint64_t r, std::vector<uint32_t>& poly, const std::vector<float>& uv) {
+    if (uv.size() != 2 * poly.size())
+      return placeError(ErrorCode::kMalformed, "face " + std::to_string(r) + " has " + std::to_string(uv.size()) +
+                                                   " texture coordinate values for " + std::to_string(poly.size()) +
+                                                   " corners (2 per corner)");
+    for (size_t i = 0; i < poly.size(); ++i) {
+      const std::array<float, 2> value{uv[2 * i], uv[2 * i + 1]};
+      if (planning_) {
+        // Sized when the vertices have been read (a declared count is not trusted for allocation).
+        if (planning_->first.size() != vertex_count_) planning_->resizeVertices(vertex_count_);
+        planning_->addCorner(poly[i], planning_->addUv(value), WedgePlan::kNone);
+        continue;
+      }
+      if (!plan_) continue;
+      const std::optional<uint32_t> wedge = plan_->wedgeOf(poly[i], plan_->uvId(value), WedgePlan::kNone);
+      if (!wedge || poly[i] >= first_output_.size())
+        return makeError(ErrorCode::kIo, in_.name() + ": the file changed between its two reads");
+      poly[i] = first_output_[poly[i]] + *wedge;
+    }
+    return Status::ok();
   }
 
   // Reads a face's n indices into `poly`, checking each. Binary lists are read in one call and converted with the
@@ -614,7 +732,7 @@ class PlyParser {
         continue;
       }
       SP_RETURN_IF_ERROR(checkIndex(idx, record));
-      const uint32_t c = static_cast<uint32_t>(idx);
+      const uint32_t c = plan_ ? first_output_[size_t(idx)] : static_cast<uint32_t>(idx);
       if (have < 2) {
         (have == 0 ? a : b) = c;
         ++have;
@@ -631,6 +749,10 @@ class PlyParser {
   Scanner& in_;
   MeshSink& sink_;
   ReadOptions options_;
+  const WedgePlan* plan_ = nullptr;
+  WedgePlan* planning_ = nullptr;
+  std::vector<uint32_t> first_output_;  // with a plan: per vertex in the file, its first delivered vertex's index
+  size_t next_wedge_ = 0;               // the plan's next wedge to deliver
   ChunkBuffer* out_ = nullptr;
   Encoding encoding_ = Encoding::kAscii;
   std::vector<Element> elements_;
@@ -645,9 +767,29 @@ class PlyParser {
 
 }  // namespace
 
-Result<ReadStats> readPly(Scanner& in, MeshSink& sink, const ReadOptions& options) {
-  PlyParser parser(in, sink, options);
+Result<ReadStats> readPly(Scanner& in, MeshSink& sink, const ReadOptions& options, const WedgePlan* plan) {
+  PlyParser parser(in, sink, options, plan);
   return parser.run();
+}
+
+namespace {
+// The first read's sink: keeps nothing.
+class DiscardSink : public MeshSink {
+ public:
+  Status vertices(std::span<const Vec3d>, std::span<const Vec3f>, std::span<const Rgba8>, uint8_t,
+                  const ScalarChunk&) override {
+    return Status::ok();
+  }
+  Status triangles(std::span<const Triangle>) override { return Status::ok(); }
+  Status vertexNormals(uint64_t, std::span<const Vec3f>) override { return Status::ok(); }
+};
+}  // namespace
+
+Result<WedgePlan> planPlyWedges(Scanner& in, const ReadOptions& options) {
+  DiscardSink discard;
+  WedgePlan plan;
+  PlyParser parser(in, discard, options, nullptr, &plan);
+  return parser.plan();
 }
 
 }  // namespace scanpress

@@ -55,8 +55,10 @@ inline double floatChannelValue(const ScalarChannel& c, const uint32_t* words) {
   return double(std::bit_cast<float>(words[0]));
 }
 
-// Whether a mesh file at `path` writes each of `channels`: all of them for PLY, the texture coordinates for OBJ and
-// glTF (.glb, .gltf), none for STL and OFF. What is not written is reported dropped by the caller.
-std::vector<bool> channelsWritten(const std::string& path, std::span<const ScalarChannel> channels);
+// Whether a mesh file at `path` writes each of `channels`: all of them for PLY, the texture coordinates for OBJ (of a
+// mesh with triangles: `vt` are named by faces) and glTF (.glb, .gltf), none for STL and OFF. What is not written is
+// reported dropped by the caller.
+std::vector<bool> channelsWritten(const std::string& path, std::span<const ScalarChannel> channels,
+                                  bool triangles = true);
 
 }  // namespace scanpress

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <cstring>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "jobs/mesh_io/input.h"
@@ -38,13 +39,25 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace scanpress;
   if (size == 0) return 0;
   const int format = data[0] % 4;
+  // Bit 2 of the first byte: PLY and OBJ read twice, a first read planning the wedges of texture coordinates and
+  // normals per corner (as readMesh does), else once.
+  const bool wedges = (data[0] & 4) != 0 && format < 2;
   Scanner in(std::make_unique<MemorySource>(data + 1, size - 1), "fuzz");
   Mesh mesh;
   MeshCollector sink(mesh);
   ReadOptions options;
   options.chunk = 7;
-  Result<ReadStats> r = format == 0   ? readPly(in, sink, options)
-                        : format == 1 ? readObj(in, sink, options)
+  options.texture_coordinates = options.corner_normals = wedges;
+  std::optional<WedgePlan> plan;
+  if (wedges) {
+    Scanner first(std::make_unique<MemorySource>(data + 1, size - 1), "fuzz");
+    auto planned = format == 0 ? planPlyWedges(first, options) : planObjWedges(first, options);
+    if (!planned.isOk()) return 0;
+    plan = std::move(*planned);
+  }
+  const WedgePlan* p = plan ? &*plan : nullptr;
+  Result<ReadStats> r = format == 0   ? readPly(in, sink, options, p)
+                        : format == 1 ? readObj(in, sink, options, p)
                         : format == 2 ? readStl(in, sink, options)
                                       : readOff(in, sink, options);
   if (r.isOk()) sink.finish();
