@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "engine/mesh.h"
+#include "jobs/pipeline.h"
 
 #include "test_util.h"
 
@@ -97,6 +98,16 @@ inline std::vector<std::array<std::array<float, 3>, 3>> positionTriangles(const 
   }
   std::sort(t.begin(), t.end());
   return t;
+}
+
+// An encode of `input` to `output` with `codec` on two threads: what the file tests start from.
+inline EncodeSettings encodeSettings(const std::string& input, const std::string& output, const std::string& codec) {
+  EncodeSettings s;
+  s.input = input;
+  s.output = output;
+  s.codec = codec;
+  s.threads = 2;
+  return s;
 }
 
 inline std::string sharedDataDir() {

@@ -40,12 +40,7 @@ std::vector<std::pair<Vec3u, std::vector<uint32_t>>> cellRows(const Mesh& m, con
 }
 
 EncodeSettings settingsFor(const std::string& out, const std::string& codec) {
-  EncodeSettings s;
-  s.input = kBunny;
-  s.output = out;
-  s.codec = codec;
-  s.threads = 2;
-  return s;
+  return testing::encodeSettings(kBunny, out, codec);
 }
 
 TEST(ScalarFiles, BunnyConfidenceAndIntensityComeBackBitForBit) {

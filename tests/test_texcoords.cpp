@@ -288,11 +288,7 @@ TEST(Texcoords, PlyFaceTexcoordListsAreWedges) {
 }
 
 EncodeSettings settingsFor(const std::string& in, const std::string& out, const std::string& codec) {
-  EncodeSettings s;
-  s.input = in;
-  s.output = out;
-  s.codec = codec;
-  s.threads = 2;
+  EncodeSettings s = testing::encodeSettings(in, out, codec);
   s.bits = 20;
   return s;
 }
