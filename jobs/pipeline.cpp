@@ -584,16 +584,21 @@ class ScanEncoder {
     if (!s_.keep_colors && survey_.colorChannels())
       result_.dropped_on_request.push_back({"vertex colors", survey_.vertex_count});
     // Texture coordinates that --no-scalars kept the reader from splitting wedges for: dropped on request.
-    if (!s_.keep_scalars)
+    if (!s_.keep_scalars) {
       std::erase_if(result_.read.dropped, [&](const DroppedProperty& d) {
         const bool texcoords = d.name == "obj vt" || d.name == "face.texcoord";
         if (texcoords) result_.dropped_on_request.push_back(d);
         return texcoords;
       });
-    else if (!codecCarriesScalars())
-      for (DroppedProperty& d : result_.read.dropped)
+    }
+    // What a codec that does not keep every vertex made the reader drop, with the reason.
+    if (!codecCarriesScalars()) {
+      for (DroppedProperty& d : result_.read.dropped) {
         if (d.name == "obj vt" || d.name == "face.texcoord")
           d.name += " (" + scalarsDroppedBy() + " carries no texture coordinates)";
+        else if (d.name == "obj vn per corner") d.name += " (" + scalarsDroppedBy() + " keeps a normal per vertex)";
+      }
+    }
     for (const ScalarChannel& c : survey_.scalar_channels) {
       if (!s_.keep_scalars) result_.dropped_on_request.push_back({"vertex." + c.name, survey_.vertex_count});
       else if (!codecCarriesScalars())

@@ -409,6 +409,9 @@ Result<EncodeResult> encodeToTargetAuto(const EncodeSettings& settings, Progress
     // them wins whatever the sizes.
     if (a.result.layout.scalars.size() != b.result.layout.scalars.size())
       return a.result.layout.scalars.size() > b.result.layout.scalars.size();
+    // Likewise the one whose read dropped less (pm keeps one normal per vertex of an OBJ with normals per corner).
+    if (a.result.read.dropped.size() != b.result.read.dropped.size())
+      return a.result.read.dropped.size() < b.result.read.dropped.size();
     if (settings.target.kind == TargetKind::kMaxError) return a.result.bytes < b.result.bytes;
     return errorOf(a.result, ErrorMetric::kRms) < errorOf(b.result, ErrorMetric::kRms);
   };

@@ -36,13 +36,14 @@ enum class MeshFormat { kUnknown, kPly, kObj, kStl, kOff };
 
 struct ReadOptions {
   size_t chunk = 1u << 16;  // vertices or triangles per sink call
-  // OBJ `vt` named by faces: kept as scalar channels u and v, vertices split into wedges at texture seams
-  // (texcoords.h; the file is read twice). Off (a codec that does not carry scalars, whose simplification would open
-  // the seams): listed dropped as "obj vt", vertices as in the file.
+  // OBJ `vt` and PLY `texcoord` lists named by faces: kept as scalar channels u and v, vertices split into wedges
+  // at texture seams (texcoords.h; the file is read twice). Off (a codec that does not carry scalars, whose
+  // simplification would open the seams): listed dropped as "obj vt" or "face.texcoord", not split by them.
   bool texture_coordinates = true;
   // OBJ `vn` per corner: a vertex whose corners name different normals (a crease) is split into wedges, one per
-  // normal. Off (a simplifying codec): a vertex's normal is its first corner's, the others listed "obj vn per
-  // corner".
+  // normal (compared by bit pattern; a flat-shaded file's vertex splits once per face normal). Off (a simplifying
+  // codec): a vertex's normal is its first corner's, the others listed "obj vn per corner". The wedges stay apart
+  // in decoded output, except that OBJ output with texture coordinates shares their `v` lines.
   bool corner_normals = true;
 
   // Vertices as the file has them (no wedges: OBJ `vt` and PLY `texcoord` lists listed dropped, a vertex's normal its

@@ -15,7 +15,7 @@
 // normals, and vertices stay in file order with their wedges beside them. A corner that names neither takes its
 // vertex's first; one that names only one of them is a wedge of its own, without the other (as the file has it;
 // WedgePlan). A vertex no corner gives a `vt` gets (0, 0). Listed: `vt` records no face names ("obj vt unused") and third numbers other than 0 ("obj vt
-// w"). Memory: 4 bytes per `v`, `vt` and `vn`, about 24 per distinct value and per wedge (the first read), and 4
+// w"). Memory: 4 bytes per `v`, `vt` and `vn`, about 60 per distinct value and 8 per wedge (the first read), and 4
 // more per `v` in the second.
 #include <algorithm>
 #include <bit>
@@ -164,11 +164,15 @@ Result<WedgePlan> planObjWedges(Scanner& in, const ReadOptions& options) {
         int64_t raw = 0;
         uint32_t v = 0, vt = WedgePlan::kNone, vn = WedgePlan::kNone;
         if (!parseInt64(t.substr(0, t.find('/')), raw) || !resolveIndex(raw, vertices, v)) continue;
-        if (const std::string_view field = texcoordField(t); !field.empty())
-          if (!parseInt64(field, raw) || !resolveIndex(raw, plan.uv_of.size(), vt)) continue;
+        // A field this read cannot resolve names nothing here (the second read fails on it, or ignores a `vt` field
+        // when texture coordinates are off): the corner's other field still counts.
+        if (const std::string_view field = texcoordField(t); !field.empty() && plan.textures)
+          if (!parseInt64(field, raw) || !resolveIndex(raw, plan.uv_of.size(), vt)) vt = WedgePlan::kNone;
         if (const std::string_view field = normalField(t); !field.empty())
-          if (!parseInt64(field, raw) || !resolveIndex(raw, plan.normal_of.size(), vn)) continue;
+          if (!parseInt64(field, raw) || !resolveIndex(raw, plan.normal_of.size(), vn)) vn = WedgePlan::kNone;
         if (vt != WedgePlan::kNone) plan.vt_used[vt] = true;
+        if (plan.keys.size() >= kMaxVertices)
+          return in.errorAtLine(ErrorCode::kLimitExceeded, "more than 2^32-2 distinct vt and vn pairs");
         plan.addCorner(v, vt == WedgePlan::kNone ? vt : plan.uv_of[vt],
                        vn == WedgePlan::kNone ? vn : plan.normal_of[vn]);
       }

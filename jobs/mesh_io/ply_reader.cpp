@@ -205,8 +205,9 @@ class PlyParser {
         continue;
       }
       for (const auto& p : e.props)
-        if (p.role == Role::kNone || (p.role == Role::kTexcoords && !plan_ && !planning_))
-          stats_.dropped.push_back({e.name + "." + p.name, e.count});
+        if (p.role == Role::kNone) stats_.dropped.push_back({e.name + "." + p.name, e.count});
+        else if (p.role == Role::kTexcoords && texcoords_dropped_)
+          stats_.dropped.push_back({e.name + "." + p.name, texcoords_dropped_});
     }
   }
 
@@ -300,7 +301,10 @@ class PlyParser {
       if (e.kind == ElementKind::kVertex)
         for (const auto& p : e.props)
           if (p.role == Role::kScalar) vertex_channels.push_back({p.name, ScalarType(uint8_t(p.type) + 1)});
-    if (options_.texture_coordinates && !findTexcoords(vertex_channels))
+    // (Nor when the vertices have a channel named u or v, or too many channels for two more.)
+    bool named_uv = false;
+    for (const ScalarChannel& c : vertex_channels) named_uv |= c.name == kTexcoordU || c.name == kTexcoordV;
+    if (options_.texture_coordinates && !findTexcoords(vertex_channels) && !named_uv && vertex_channels.size() <= 253)
       for (auto& e : elements_)
         if (e.kind == ElementKind::kFace)
           for (auto& p : e.props)
@@ -632,9 +636,11 @@ class PlyParser {
         SP_RETURN_IF_ERROR(readIndexList(p.type, n, r, poly));
       }
       if (strips || poly.empty()) continue;
-      if (have_uv) {
+      if (have_uv && (plan_ || planning_)) {
         SP_RETURN_IF_ERROR(texturedCorners(r, poly, uv));
-      } else if (plan_) {  // the vertices' first wedges
+      } else if (have_uv) {
+        ++texcoords_dropped_;  // read without a plan (a FIFO, or readPly called alone): listed
+      } else if (plan_) {      // the vertices' first wedges
         for (uint32_t& v : poly) v = first_output_[v];
       }
       if (poly.size() > 3) ++stats_.polygons;
@@ -656,6 +662,8 @@ class PlyParser {
       if (planning_) {
         // Sized when the vertices have been read (a declared count is not trusted for allocation).
         if (planning_->first.size() != vertex_count_) planning_->resizeVertices(vertex_count_);
+        if (planning_->keys.size() >= kMaxVertices)
+          return placeError(ErrorCode::kLimitExceeded, "more than 2^32-2 distinct texture coordinates");
         planning_->addCorner(poly[i], planning_->addUv(value), WedgePlan::kNone);
         continue;
       }
@@ -753,6 +761,7 @@ class PlyParser {
   WedgePlan* planning_ = nullptr;
   std::vector<uint32_t> first_output_;  // with a plan: per vertex in the file, its first delivered vertex's index
   size_t next_wedge_ = 0;               // the plan's next wedge to deliver
+  uint64_t texcoords_dropped_ = 0;      // faces whose texcoord list was read past (no plan)
   ChunkBuffer* out_ = nullptr;
   Encoding encoding_ = Encoding::kAscii;
   std::vector<Element> elements_;

@@ -2,9 +2,9 @@
 // channels do (kept bit for bit by every codec that carries scalars; FORMAT.md "Scalar channels"), so a container
 // needs nothing of its own for them; the OBJ and glTF writers find the pair and write it as `vt` and TEXCOORD_0.
 //
-// A vertex has one pair. Where a file gives a vertex's corners different texture coordinates (an OBJ `vt` seam), the
-// reader splits the vertex into wedges: one vertex per distinct coordinate, at the same position
-// (jobs/mesh_io/obj_reader.cpp); the OBJ writer joins the wedges' positions again.
+// A vertex has one pair. Where a file gives a vertex's corners different texture coordinates (an OBJ `vt` seam, a
+// PLY face's `texcoord` list), the reader splits the vertex into wedges: one vertex per distinct coordinate, at the
+// same position (WedgePlan in mesh_reader.h); the OBJ writer joins the wedges' positions again.
 #pragma once
 
 #include <array>
@@ -19,7 +19,7 @@
 
 namespace scanpress {
 
-// The channel names the OBJ reader gives `vt` (float32).
+// The channel names the readers give OBJ `vt` and PLY face `texcoord` lists (float32).
 inline constexpr const char* kTexcoordU = "u";
 inline constexpr const char* kTexcoordV = "v";
 

@@ -40,14 +40,15 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size == 0) return 0;
   const int format = data[0] % 4;
   // Bit 2 of the first byte: PLY and OBJ read twice, a first read planning the wedges of texture coordinates and
-  // normals per corner (as readMesh does), else once.
+  // normals per corner (as readMesh does), else once; bit 3: the options on (with one read: what a FIFO gets).
   const bool wedges = (data[0] & 4) != 0 && format < 2;
+  const bool options_on = wedges || (data[0] & 8) != 0;
   Scanner in(std::make_unique<MemorySource>(data + 1, size - 1), "fuzz");
   Mesh mesh;
   MeshCollector sink(mesh);
   ReadOptions options;
   options.chunk = 7;
-  options.texture_coordinates = options.corner_normals = wedges;
+  options.texture_coordinates = options.corner_normals = options_on;
   std::optional<WedgePlan> plan;
   if (wedges) {
     Scanner first(std::make_unique<MemorySource>(data + 1, size - 1), "fuzz");
