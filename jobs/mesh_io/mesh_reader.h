@@ -177,8 +177,8 @@ std::vector<ScalarChannel> texcoordChannels(const WedgePlan* plan);
 // Format-specific entry points (used by readMesh; exposed for tests).
 class Scanner;
 Result<ReadStats> readPly(Scanner& in, MeshSink& sink, const ReadOptions& options, const WedgePlan* plan = nullptr);
-// `plan`: from planObjWedges (planPlyWedges) over the same bytes (nullptr: `vt` records are listed dropped, a vertex's normal is
-// its first corner's).
+// `plan`: from planObjWedges (planPlyWedges) over the same bytes (nullptr: `vt` records and `texcoord` lists are
+// listed dropped, a vertex's normal is its first corner's).
 Result<WedgePlan> planObjWedges(Scanner& in, const ReadOptions& options);
 Result<WedgePlan> planPlyWedges(Scanner& in, const ReadOptions& options);
 Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& options, const WedgePlan* plan = nullptr);

@@ -1,7 +1,7 @@
 // Mesh writers: PLY binary little endian (with normals, colors and scalar channels when present), OBJ (normals,
-// colors as the common `v x y z r g b` extension, texture coordinates as `vt`: texcoords.h), binary STL (geometry only), OFF (COFF with colors), each optionally through
-// zstd (a name ending in .zst), and glTF 2.0 (jobs/mesh_io/gltf_writer.h). All write through AtomicFile: the
-// output appears complete or not at all.
+// colors as the common `v x y z r g b` extension, texture coordinates as `vt`: texcoords.h), binary STL (geometry
+// only), OFF (COFF with colors), each optionally through zstd (a name ending in .zst), and glTF 2.0
+// (jobs/mesh_io/gltf_writer.h). All write through AtomicFile: the output appears complete or not at all.
 //
 // The four indexed formats are also written piece by piece (MeshFileWriter), for a mesh that is never whole in
 // memory: the streaming decode (jobs/stream_decode.h) learns the counts every header needs only at its end, so it

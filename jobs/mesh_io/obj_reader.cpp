@@ -14,9 +14,10 @@
 // value, and faces name the wedge of their corner. So a seam keeps both sides' coordinates and a crease both sides'
 // normals, and vertices stay in file order with their wedges beside them. A corner that names neither takes its
 // vertex's first; one that names only one of them is a wedge of its own, without the other (as the file has it;
-// WedgePlan). A vertex no corner gives a `vt` gets (0, 0). Listed: `vt` records no face names ("obj vt unused") and third numbers other than 0 ("obj vt
-// w"). Memory: 4 bytes per `v`, `vt` and `vn`, about 60 per distinct value and 8 per wedge (the first read), and 4
-// more per `v` in the second.
+// WedgePlan). A vertex no corner gives a `vt` gets (0, 0). Listed: `vt` records no face names ("obj vt unused"),
+// third numbers other than 0 ("obj vt w"), records that are not finite numbers as float (read as 0 0) and corners
+// without `vt`. Memory: 4 bytes per `v`, `vt` and `vn`, about 60 per distinct value and 8 per wedge (the first
+// read), and 4 more per `v` in the second.
 #include <algorithm>
 #include <bit>
 #include <cmath>
