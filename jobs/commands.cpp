@@ -333,10 +333,13 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
                                                       ": --gltf-compression and --gltf-nodes are for glTF output "
                                                       "(.glb, .gltf)");
   result.tiles = static_cast<uint32_t>(chosen.size());
+  // Whether the output format writes any of the container's scalar channels (PLY all, OBJ and glTF texture
+  // coordinates): a streamed decode, which writes none, is refused then; otherwise tiles weld without them.
+  const std::vector<bool> written = channelsWritten(settings.output, header.layout.scalars);
+  const bool writes_scalars = std::find(written.begin(), written.end(), true) != written.end();
   const uint64_t in_memory = inMemoryDecodeBytes(chosen, size_t(header.layout.scalarStride()));
   if (settings.memory_budget > 0 && in_memory > settings.memory_budget) {
-    const std::vector<bool> written = channelsWritten(settings.output, header.layout.scalars);
-    if (std::find(written.begin(), written.end(), true) != written.end())
+    if (writes_scalars)
       return makeError(ErrorCode::kUnsupported,
                        settings.input +
                            ": the container has scalar channels (or texture coordinates), which decoding under a "
@@ -383,9 +386,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   }
   // A format that writes none of the scalar channels gets the vertices the streamed decode writes: welded without
   // them (texture seams' wedges on tile borders weld into one vertex, as in the tiles' interiors they stay apart).
-  const std::vector<bool> written = channelsWritten(settings.output, header.layout.scalars);
-  const bool drop_scalars = header.layout.hasScalars() &&
-                            std::find(written.begin(), written.end(), true) == written.end();
+  const bool drop_scalars = header.layout.hasScalars() && !writes_scalars;
   AttributeLayout layout = header.layout;
   if (drop_scalars) layout.scalars.clear();
   SP_ASSIGN_OR_RETURN(QuantizedMesh q, decodeChosen(file, chosen, level, drop_scalars));

@@ -182,15 +182,13 @@ Result<ReadStats> readMesh(const std::string& path, MeshSink& sink, const ReadOp
 }
 
 uint32_t WedgePlan::addUv(const std::array<float, 2>& uv) {
-  const uint64_t bits = uint64_t(std::bit_cast<uint32_t>(uv[0])) << 32 | std::bit_cast<uint32_t>(uv[1]);
-  const auto [it, fresh] = uv_ids.emplace(bits, uint32_t(uvs.size()));
+  const auto [it, fresh] = uv_ids.emplace(uvBits(uv), uint32_t(uvs.size()));
   if (fresh) uvs.push_back(uv);
   return it->second;
 }
 
 uint32_t WedgePlan::uvId(const std::array<float, 2>& uv) const {
-  const uint64_t bits = uint64_t(std::bit_cast<uint32_t>(uv[0])) << 32 | std::bit_cast<uint32_t>(uv[1]);
-  const auto it = uv_ids.find(bits);
+  const auto it = uv_ids.find(uvBits(uv));
   return it == uv_ids.end() ? kNone - 1 : it->second;
 }
 

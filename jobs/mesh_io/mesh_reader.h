@@ -167,6 +167,9 @@ struct WedgePlan {
   }
 
  private:
+  static uint64_t uvBits(const std::array<float, 2>& uv) {
+    return uint64_t(std::bit_cast<uint32_t>(uv[0])) << 32 | std::bit_cast<uint32_t>(uv[1]);
+  }
   uint32_t keyOf(uint64_t pair);
   size_t deduplicated_ = 0;  // wedges' size at their last deduplication
 };
