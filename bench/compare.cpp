@@ -244,6 +244,7 @@ void runScan(const std::string& path, int bits, int first_bits, const Options& o
   }
   if (opt.rd && bits == first_bits) runAnchors(scan, *mesh, opt, rows);
   runAttributes(scan, *mesh, bits, attribute_rows);
+  runTexcoords(scan, path, *mesh, bits, attribute_rows);
 }
 
 }  // namespace

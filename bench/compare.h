@@ -77,9 +77,16 @@ struct AttributeRow {
   bool exact = false;         // scanpress: every (position, normal code, color) came back
   double max_angle_deg = -1;  // Draco: the largest angle between a decoded normal and the input's
   bool colors_exact = true;   // Draco: every color came back
+  double max_uv_error = -1;   // Draco: the largest difference between a decoded texture coordinate and the input's
+  int uv_qt = 0;              // Draco: its -qt (the nearest step to scanpress's 2^-bits over the coordinates' range)
 };
 // Scans without normals or colors add no rows.
 void runAttributes(const std::string& scan, const Mesh& mesh, int bits, std::vector<AttributeRow>& rows);
+// Texture coordinates: a scan whose file gives corners texture coordinates, read again with its wedges, at 10, 12 and
+// 14 bits (scanpress --uv-bits, Draco -qt). `as_in_file`: the scan as runScan read it (its geometry alone). Scans
+// without texture coordinates add no rows.
+void runTexcoords(const std::string& scan, const std::string& path, const Mesh& as_in_file, int bits,
+                  std::vector<AttributeRow>& rows);
 void writeAttributeTable(std::ostream& md, const std::vector<AttributeRow>& rows);
 
 }  // namespace scanpress

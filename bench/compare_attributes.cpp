@@ -8,6 +8,12 @@
 // coder on the positions and triangles alone. scanpress must give back its codes exactly (pm: per position, those of
 // the scan's first vertex there, as its weld keeps them); for Draco the table shows
 // the largest angle between its decoded normals and the input's (its octahedral grid is not ours).
+//
+// Texture coordinates (runTexcoords): the scan read with its wedges (a vertex per distinct coordinate of its
+// corners), snapped to scanpress's multiples of 2^-bits; scanpress codes those, and Draco gets one position per
+// distinct grid position (its connectivity over positions, a seam an attribute seam, as its own OBJ loader builds
+// it) with a coordinate per wedge, at -qt of the same bits (over its own range: on [0, 1] coordinates, the same
+// step). The geometry alone is the scan as in the file.
 #include <draco/compression/decode.h>
 #include <draco/compression/encode.h>
 #include <draco/mesh/mesh.h>
@@ -20,6 +26,9 @@
 #include "bench/compare.h"
 #include "engine/codecs/codec.h"
 #include "engine/octahedral.h"
+#include "engine/quantize.h"
+#include "jobs/mesh_io/mesh_reader.h"
+#include "jobs/mesh_io/texcoords.h"
 
 namespace scanpress {
 namespace {
@@ -113,7 +122,165 @@ size_t dracoBytes(const QuantizedMesh& q, const Grid& grid, const AttributeLayou
   return buffer.size();
 }
 
+// Draco -cl 10 on the wedge mesh `q` (texture coordinates in `q.scalars`, channels `tc` of `layout`) at -qt
+// `uv_bits` (0: the positions alone, one per distinct grid position); 0 on failure. `max_error`: the largest
+// coordinate difference after Draco's round trip, matched by position and nearest coordinate.
+size_t dracoTexcoordBytes(const QuantizedMesh& q, const Grid& grid, const AttributeLayout& layout,
+                          const TexcoordChannels& tc, int bits, int uv_bits, double* max_error) {
+  const uint32_t n = uint32_t(q.positions.size());
+  const size_t stride = size_t(layout.scalarStride());
+  std::map<Vec3u, uint32_t> position_index;
+  std::vector<uint32_t> value_of(n);
+  for (uint32_t i = 0; i < n; ++i)
+    value_of[i] = position_index.emplace(q.positions[i], uint32_t(position_index.size())).first->second;
+  const auto uv = [&](uint32_t i) {
+    const uint32_t* w = q.scalars.data() + i * stride;
+    return std::array<float, 2>{float(floatChannelValue(layout.scalars[tc.u], w + tc.u_word)),
+                                float(floatChannelValue(layout.scalars[tc.v], w + tc.v_word))};
+  };
+  // Points: the wedges, or without coordinates the distinct positions.
+  const auto point = [&](uint32_t i) { return uv_bits ? i : value_of[i]; };
+  const uint32_t points = uv_bits ? n : uint32_t(position_index.size());
+  draco::Mesh dm;
+  dm.set_num_points(points);
+  draco::GeometryAttribute ga;
+  ga.Init(draco::GeometryAttribute::POSITION, nullptr, 3, draco::DT_FLOAT32, false, 12, 0);
+  const int pos_att = dm.AddAttribute(ga, false, uint32_t(position_index.size()));
+  int uv_att = -1;
+  if (uv_bits) {
+    ga.Init(draco::GeometryAttribute::TEX_COORD, nullptr, 2, draco::DT_FLOAT32, false, 8, 0);
+    uv_att = dm.AddAttribute(ga, true, n);
+  }
+  dm.attribute(pos_att)->SetExplicitMapping(points);
+  for (const auto& [p, v] : position_index) {
+    const Vec3d c = grid.dequantize(p);
+    const float f[3] = {float(c[0]), float(c[1]), float(c[2])};
+    dm.attribute(pos_att)->SetAttributeValue(draco::AttributeValueIndex(v), f);
+  }
+  for (uint32_t i = 0; i < n; ++i) {
+    dm.attribute(pos_att)->SetPointMapEntry(draco::PointIndex(point(i)), draco::AttributeValueIndex(value_of[i]));
+    if (uv_att >= 0) dm.attribute(uv_att)->SetAttributeValue(draco::AttributeValueIndex(i), uv(i).data());
+  }
+  for (const auto& t : q.triangles)
+    dm.AddFace({draco::PointIndex(point(t[0])), draco::PointIndex(point(t[1])), draco::PointIndex(point(t[2]))});
+  draco::Encoder enc;
+  enc.SetAttributeQuantization(draco::GeometryAttribute::POSITION, bits);
+  if (uv_att >= 0) enc.SetAttributeQuantization(draco::GeometryAttribute::TEX_COORD, uv_bits);
+  enc.SetSpeedOptions(0, 0);  // -cl 10
+  enc.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
+  draco::EncoderBuffer buffer;
+  if (!enc.EncodeMeshToBuffer(dm, &buffer).ok()) return 0;
+  if (max_error && uv_att >= 0) {
+    draco::DecoderBuffer in;
+    in.Init(buffer.data(), buffer.size());
+    draco::Decoder dec;
+    auto r = dec.DecodeMeshFromBuffer(&in);
+    if (!r.ok()) return 0;
+    const auto& out = *r.value();
+    std::multimap<Vec3u, uint32_t> at;
+    for (uint32_t i = 0; i < n; ++i) at.emplace(q.positions[i], i);
+    const draco::PointAttribute* pa = out.GetNamedAttribute(draco::GeometryAttribute::POSITION);
+    const draco::PointAttribute* ta = out.GetNamedAttribute(draco::GeometryAttribute::TEX_COORD);
+    if (!pa || !ta) return 0;
+    double worst = 0;
+    for (uint32_t i = 0; i < out.num_points(); ++i) {
+      float p[3], t[2];
+      pa->GetMappedValue(draco::PointIndex(i), p);
+      ta->GetMappedValue(draco::PointIndex(i), t);
+      const auto range = at.equal_range(grid.quantize({p[0], p[1], p[2]}));
+      if (range.first == range.second) return 0;
+      double best = 1e300;
+      for (auto j = range.first; j != range.second; ++j) {
+        const auto w = uv(j->second);
+        best = std::min(best, std::max(std::fabs(double(t[0]) - w[0]), std::fabs(double(t[1]) - w[1])));
+      }
+      worst = std::max(worst, best);
+    }
+    *max_error = worst;
+  }
+  return buffer.size();
+}
+
 }  // namespace
+
+void runTexcoords(const std::string& scan, const std::string& path, const Mesh& as_in_file, int bits,
+                  std::vector<AttributeRow>& rows) {
+  auto wedged = readMeshFile(path);  // the default options: wedges at seams
+  if (!wedged.isOk()) return;
+  const auto tc = findTexcoords(wedged->scalar_channels);
+  if (!tc) return;
+  const Grid grid = *makeGrid(boundingBox(as_in_file), bits);
+  const QuantizedMesh bare = *quantizeMesh(as_in_file, grid, {}, nullptr);
+  std::map<std::string, size_t> geometry;
+  for (const char* codec : {"kdtree", "octree", "edgebreaker"}) {
+    auto e = encodeMesh(*findCodec(codec), TileContext{bits, {}}, bare);
+    geometry[std::string("scanpress ") + codec] = e.isOk() ? e->payload.size() : 0;
+  }
+  for (int uv_bits : {10, 12, 14}) {
+    AttributeLayout layout;
+    layout.scalars = {wedged->scalar_channels[tc->u], wedged->scalar_channels[tc->v]};
+    for (ScalarChannel& c : layout.scalars) c.bits = uint8_t(uv_bits);
+    auto q = quantizeMesh(*wedged, grid, layout, nullptr);
+    if (!q.isOk()) {
+      std::fprintf(stderr, "%s: %s\n", scan.c_str(), q.status().toString().c_str());
+      return;
+    }
+    const auto base = [&](const std::string& codec) {
+      AttributeRow r;
+      r.scan = scan;
+      r.bits = bits;
+      r.config = "uv " + std::to_string(uv_bits);
+      r.codec = codec;
+      r.vertices = bare.positions.size();
+      r.geometry_bytes = geometry[codec];
+      return r;
+    };
+    const TexcoordChannels pair = *findTexcoords(layout.scalars);
+    const size_t stride = size_t(layout.scalarStride());
+    // Draco's geometry alone: the same points without their coordinates (one per distinct grid position). Its -qt
+    // spreads 2^qt - 1 steps over the coordinates' range: qt is the nearest to a step of ours, 2^-uv_bits.
+    geometry["draco -cl 10"] = dracoTexcoordBytes(*q, grid, layout, pair, bits, 0, nullptr);
+    double lo = 1e300, hi = -1e300;
+    for (size_t i = 0; i < q->positions.size(); ++i)
+      for (size_t word : {pair.u_word, pair.v_word}) {
+        const double x = floatChannelValue(layout.scalars[0], q->scalars.data() + i * stride + word);
+        lo = std::min(lo, x), hi = std::max(hi, x);
+      }
+    const int draco_qt =
+        std::clamp(int(std::lround(std::log2(std::max(hi - lo, 0.0) * std::ldexp(1.0, uv_bits) + 1))), 1, 30);
+    for (const char* name : {"kdtree", "octree", "edgebreaker"}) {
+      const CodecInfo& codec = *findCodec(name);
+      AttributeRow r = base(std::string("scanpress ") + name);
+      const TileContext ctx{bits, layout};
+      auto e = encodeMesh(codec, ctx, *q);
+      if (!e.isOk()) {
+        std::fprintf(stderr, "%s %s: %s\n", scan.c_str(), name, e.status().toString().c_str());
+        continue;
+      }
+      r.bytes = e->payload.size();
+      auto d = codec.decode(ctx, codec.version, e->payload, limitsOf(e->decoded));
+      if (d.isOk()) {  // exact: the same (position, u, v) vertices
+        const auto key = [&](const QuantizedMesh& m) {
+          std::vector<std::pair<Vec3u, std::vector<uint32_t>>> v;
+          for (size_t i = 0; i < m.positions.size(); ++i)
+            v.emplace_back(m.positions[i], std::vector<uint32_t>(m.scalars.begin() + i * stride,
+                                                                 m.scalars.begin() + (i + 1) * stride));
+          std::sort(v.begin(), v.end());
+          v.erase(std::unique(v.begin(), v.end()), v.end());
+          return v;
+        };
+        r.exact = key(*d) == key(*q);
+      }
+      rows.push_back(r);
+    }
+    AttributeRow r = base("draco -cl 10");
+    double error = 0;
+    r.bytes = dracoTexcoordBytes(*q, grid, layout, pair, bits, draco_qt, &error);
+    r.max_uv_error = error;
+    r.uv_qt = draco_qt;
+    rows.push_back(r);
+  }
+}
 
 void runAttributes(const std::string& scan, const Mesh& mesh, int bits, std::vector<AttributeRow>& rows) {
   const bool has_normals = !mesh.normals.empty(), has_colors = !mesh.colors.empty();
@@ -196,7 +363,11 @@ void writeAttributeTable(std::ostream& md, const std::vector<AttributeRow>& rows
   for (const auto& r : rows) {
     const long long attr = (long long)r.bytes - (long long)r.geometry_bytes;
     std::string check;
-    if (r.codec.rfind("draco", 0) == 0) {
+    if (r.codec.rfind("draco", 0) == 0 && r.max_uv_error >= 0) {
+      char b[96];
+      std::snprintf(b, sizeof b, "-qt %d: max texture coordinate error %.2g", r.uv_qt, r.max_uv_error);
+      check = b;
+    } else if (r.codec.rfind("draco", 0) == 0) {
       char b[96];
       std::snprintf(b, sizeof b, "%.3f deg, colors %s", r.max_angle_deg, r.colors_exact ? "exact" : "NOT exact");
       check = b;

@@ -7,6 +7,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -50,12 +51,18 @@ inline bool validScalarName(const std::string& name) {
   return true;
 }
 
-// A per-vertex scalar channel: its name (the PLY property's, at most 255 bytes) and type.
+// A per-vertex scalar channel: its name (the PLY property's, at most 255 bytes), type and precision.
 struct ScalarChannel {
   std::string name;
   ScalarType type = ScalarType::kFloat32;
+  // 0: lossless. 1..kMaxScalarBits (float types only): values are multiples of 2^-bits (`--uv-bits`; quantize.h's
+  // snapScalar), and codecs code the multiple. Readers make lossless channels; an encode's layout sets the bits.
+  uint8_t bits = 0;
   bool operator==(const ScalarChannel&) const = default;
+  bool sameValues(const ScalarChannel& o) const { return name == o.name && type == o.type; }  // bits aside
 };
+inline constexpr int kMaxScalarBits = 24;
+inline bool isFloatScalar(ScalarType t) { return t == ScalarType::kFloat32 || t == ScalarType::kFloat64; }
 
 // 32-bit words per vertex of these channels' values (ScalarValues' stride).
 inline size_t scalarWords(std::span<const ScalarChannel> channels) {
@@ -67,6 +74,32 @@ inline size_t scalarWords(std::span<const ScalarChannel> channels) {
 // The values of a mesh's scalar channels, vertex after vertex: each value's bit pattern, zero-extended to 32 bits
 // (float64: low word, then high word). `stride` words per vertex (the channels' scalarTypeWords).
 using ScalarValues = std::vector<uint32_t>;
+
+// Texture coordinates (issue 22) are a pair of float channels: indices of the pair, and their first word in a
+// vertex's scalar words.
+struct TexcoordChannels {
+  size_t u = 0, v = 0;
+  size_t u_word = 0, v_word = 0;
+};
+
+// The first pair of float channels named (u, v), (s, t), (texture_u, texture_v) or (texture_s, texture_t).
+inline std::optional<TexcoordChannels> findTexcoords(std::span<const ScalarChannel> channels) {
+  static constexpr std::array<std::array<const char*, 2>, 4> kNames = {
+      {{"u", "v"}, {"s", "t"}, {"texture_u", "texture_v"}, {"texture_s", "texture_t"}}};
+  for (const auto& names : kNames) {
+    TexcoordChannels tc;
+    bool found_u = false, found_v = false;
+    size_t word = 0;
+    for (size_t i = 0; i < channels.size(); ++i) {
+      const ScalarChannel& c = channels[i];
+      if (!found_u && c.name == names[0] && isFloatScalar(c.type)) tc.u = i, tc.u_word = word, found_u = true;
+      if (!found_v && c.name == names[1] && isFloatScalar(c.type)) tc.v = i, tc.v_word = word, found_v = true;
+      word += size_t(scalarTypeWords(c.type));
+    }
+    if (found_u && found_v) return tc;
+  }
+  return std::nullopt;
+}
 
 // Which per-vertex attributes a scan carries, and at what precision they are stored.
 struct AttributeLayout {

@@ -1,7 +1,9 @@
 #include "engine/quantize.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 #include "engine/octahedral.h"
@@ -61,6 +63,51 @@ BoundingBox usedBoundingBox(const Mesh& mesh) {
   return box;
 }
 
+namespace {
+double channelValue(const ScalarChannel& c, const uint32_t* w) {
+  if (c.type == ScalarType::kFloat64) return std::bit_cast<double>(uint64_t(w[0]) | uint64_t(w[1]) << 32);
+  return double(std::bit_cast<float>(w[0]));
+}
+}  // namespace
+
+int64_t scalarLevel(const ScalarChannel& c, const uint32_t* words) {
+  const double x = std::round(std::ldexp(channelValue(c, words), c.bits));
+  return std::isfinite(x) && std::fabs(x) <= double(kMaxScalarLevel) ? int64_t(x) : kMaxScalarLevel + 1;
+}
+
+void scalarOfLevel(const ScalarChannel& c, int64_t level, uint32_t* words) {
+  const double x = std::ldexp(double(level), -int(c.bits));  // exact: |level| < 2^53
+  if (c.type == ScalarType::kFloat64) {
+    const uint64_t b = std::bit_cast<uint64_t>(x);
+    words[0] = uint32_t(b), words[1] = uint32_t(b >> 32);
+  } else {
+    words[0] = std::bit_cast<uint32_t>(float(x));
+  }
+}
+
+bool onScalarLevel(const ScalarChannel& c, const uint32_t* words) {
+  const int64_t level = scalarLevel(c, words);
+  if (level < -kMaxScalarLevel || level > kMaxScalarLevel) return false;
+  uint32_t back[2] = {0, 0};
+  scalarOfLevel(c, level, back);
+  return back[0] == words[0] && (c.type != ScalarType::kFloat64 || back[1] == words[1]);
+}
+
+bool snapScalar(const ScalarChannel& c, uint32_t* words) {
+  // A float32 level beyond 2^24 rounds to a float whose own level differs (a multiple of a coarser power of two):
+  // snap twice, then check that the result is a level's value.
+  uint32_t w[2] = {words[0], c.type == ScalarType::kFloat64 ? words[1] : 0};
+  for (int pass = 0; pass < 2; ++pass) {
+    const int64_t level = scalarLevel(c, w);
+    if (level < -kMaxScalarLevel || level > kMaxScalarLevel) return false;
+    scalarOfLevel(c, level, w);
+  }
+  if (!onScalarLevel(c, w)) return false;
+  words[0] = w[0];
+  if (c.type == ScalarType::kFloat64) words[1] = w[1];
+  return true;
+}
+
 Result<std::vector<std::pair<size_t, size_t>>> pickScalarChannels(std::span<const ScalarChannel> have,
                                                                   std::span<const ScalarChannel> wanted) {
   std::vector<std::pair<size_t, size_t>> picks;
@@ -68,7 +115,7 @@ Result<std::vector<std::pair<size_t, size_t>>> pickScalarChannels(std::span<cons
     size_t offset = 0;
     bool found = false;
     for (const ScalarChannel& c : have) {
-      if (c == want) {
+      if (c.sameValues(want)) {
         picks.push_back({offset, size_t(scalarTypeWords(c.type))});
         found = true;
         break;
@@ -80,6 +127,22 @@ Result<std::vector<std::pair<size_t, size_t>>> pickScalarChannels(std::span<cons
                                                         scalarTypeName(want.type) + ") is not among the mesh's");
   }
   return picks;
+}
+
+Status snapScalarRow(std::span<const ScalarChannel> channels, uint32_t* row, uint64_t vertex) {
+  for (const ScalarChannel& c : channels) {
+    if (c.bits && !snapScalar(c, row)) {
+      char value[32] = "?";
+      if (isFloatScalar(c.type)) std::snprintf(value, sizeof value, "%.9g", channelValue(c, row));
+      return makeError(ErrorCode::kInvalidArgument,
+                       "vertex " + std::to_string(vertex) + ": " + c.name + " = " + std::string(value) +
+                           " cannot be kept at " + std::to_string(int(c.bits)) + " bits (a finite value below 2^" +
+                           std::to_string(31 - int(c.bits)) + " in magnitude); encode without --uv-bits to keep it " +
+                           "as it is");
+    }
+    row += scalarTypeWords(c.type);
+  }
+  return Status::ok();
 }
 
 Result<QuantizedMesh> quantizeMesh(const Mesh& mesh, const Grid& grid, const AttributeLayout& layout,
@@ -125,8 +188,10 @@ Result<QuantizedMesh> quantizeMesh(const Mesh& mesh, const Grid& grid, const Att
     out.positions.push_back(q[i]);
     if (layout.hasNormals()) out.normals.push_back(encodeOctahedral(mesh.normals[i], layout.normal_bits));
     if (layout.hasColors()) out.colors.push_back(quantizeColor(mesh.colors[i], layout));
+    const size_t row = out.scalars.size();
     for (const auto& [offset, words] : picks)
       for (size_t w = 0; w < words; ++w) out.scalars.push_back(mesh.scalars[i * mesh_stride + offset + w]);
+    SP_RETURN_IF_ERROR(snapScalarRow(layout.scalars, out.scalars.data() + row, i));
   }
   for (Triangle& t : out.triangles)
     for (uint32_t& v : t) v = remap[v];

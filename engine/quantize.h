@@ -73,9 +73,26 @@ inline Rgba8 quantizeColor(const Rgba8& c, const AttributeLayout& layout) {
   return out;
 }
 
+// A quantized float channel (ScalarChannel::bits = b > 0): its values are multiples of 2^-b, and codecs code the
+// multiple, the value's level. scalarLevel(c, w) = round(value x 2^b) (half away from zero) of the value at `w`;
+// scalarOfLevel writes the value of a level. snapScalar replaces the value at `w` with the nearest level's; false,
+// leaving it, when the value is not finite or its level is beyond +-kMaxScalarLevel. Snapped values are exactly
+// their level's (scalarOfLevel(c, scalarLevel(c, w)) gives w's bits back), so coding the level is lossless.
+inline constexpr int64_t kMaxScalarLevel = (int64_t{1} << 31) - 1;
+int64_t scalarLevel(const ScalarChannel& c, const uint32_t* words);
+void scalarOfLevel(const ScalarChannel& c, int64_t level, uint32_t* words);
+bool snapScalar(const ScalarChannel& c, uint32_t* words);
+// Whether the value at `w` is a level's value (what snapScalar leaves).
+bool onScalarLevel(const ScalarChannel& c, const uint32_t* words);
+// Snaps the quantized channels of one vertex's row of values (`channels`' words); kInvalidArgument naming the
+// vertex, channel and value that cannot be snapped.
+Status snapScalarRow(std::span<const ScalarChannel> channels, uint32_t* row, uint64_t vertex);
+
 // Quantizes positions onto `grid`, normals to octahedral `layout.normal_bits` bits (if the mesh has normals and
-// the layout wants them), colors to the layout's levels (quantizeColor; as they are at 8 bits). Triangles that quantization makes
-// degenerate and vertices no kept triangle uses are dropped and counted; the other vertices keep their order.
+// the layout wants them), colors to the layout's levels (quantizeColor; as they are at 8 bits), the layout's
+// quantized scalar channels to their levels (snapScalar; kInvalidArgument naming a value it cannot snap).
+// Triangles that quantization makes degenerate and vertices no kept triangle uses are dropped and counted; the
+// other vertices keep their order.
 // Fails with kInvalidArgument if a triangle indexes past the vertex array or attributes do not match the layout.
 // Where each of `wanted`'s channels sits in a row of `have`'s values (found by name and type): (word offset,
 // words) per wanted channel; kInvalidArgument naming the first one `have` lacks.

@@ -260,6 +260,7 @@ std::string settingsFingerprint(const EncodeSettings& s) {
   std::string key = "scanpress-v1|codec=" + s.codec + "|bits=" + std::to_string(s.bits) +
                     "|normal_bits=" + std::to_string(s.normal_bits) + "|normals=" + std::to_string(s.keep_normals) +
                     (s.color_bits != 8 ? "|color_bits=" + std::to_string(s.color_bits) : std::string()) +
+                    (s.uv_bits != 0 ? "|uv_bits=" + std::to_string(s.uv_bits) : std::string()) +
                     "|colors=" + std::to_string(s.keep_colors) + "|scalars=" + std::to_string(s.keep_scalars) +
                     "|tile=" + std::to_string(effectiveTileTarget(s)) +
                     "|input=" + fs::absolute(s.input).lexically_normal().string();

@@ -177,7 +177,7 @@ Result<MergeResult> mergeContainers(const std::vector<std::string>& parts, const
                                                         std::to_string(h.subset_count) + ", not of " +
                                                         std::to_string(n) + " as " + parts[0]);
     if (h.grid.bits != first.grid.bits || h.grid.cell != first.grid.cell || h.grid.origin != first.grid.origin ||
-        h.layout != first.layout)
+        h.layout != first.layout || h.material_library != first.material_library || h.material != first.material)
       return makeError(ErrorCode::kInvalidArgument, f.path() + ": another grid or attribute layout than " + parts[0] +
                                                         ": parts of different scans or settings");
     if (by_index[h.subset_index])
@@ -203,6 +203,7 @@ Result<MergeResult> mergeContainers(const std::vector<std::string>& parts, const
   std::sort(tiles.begin(), tiles.end(), [](auto& a, auto& b) { return a.first->tile_id < b.first->tile_id; });
   SP_ASSIGN_OR_RETURN(auto out, AtomicFile::create(output));
   ContainerWriter writer(*out, first.grid, first.layout);
+  writer.setMaterial(first.material_library, first.material);
   SP_RETURN_IF_ERROR(writer.begin());
   std::vector<uint8_t> chunk;
   for (const auto& [e, f] : tiles) {
@@ -316,6 +317,11 @@ void noteDroppedScalars(const ContainerHeader& header, const std::string& output
                                                     : channelsWritten(output, header.layout.scalars, result.faces > 0);
   for (size_t i = 0; i < header.layout.scalars.size(); ++i)
     if (!written[i]) result.dropped.push_back({"vertex." + header.layout.scalars[i].name, result.vertices});
+  const auto format = MeshFileFormat::forPath(output);
+  if (!format.isOk() || format->kind() != MeshFileFormat::Kind::kObj)  // only OBJ has a place for them
+    for (const auto& [name, value] :
+         {std::pair{"obj mtllib", &header.material_library}, {"obj usemtl", &header.material}})
+      if (!value->empty()) result.dropped.push_back({std::string(name) + " " + *value, 1});
 }
 
 Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
@@ -355,6 +361,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     if (settings.crop) stream.crop = settings.box;
     stream.memory_budget = settings.memory_budget;
     stream.scratch_parent = settings.scratch_dir;
+    stream.material_library = header.material_library, stream.material = header.material;
     SP_ASSIGN_OR_RETURN(StreamDecodeResult streamed, streamDecode(file, chosen, settings.output, stream));
     result.vertices = streamed.vertices;
     result.faces = streamed.faces;
@@ -366,6 +373,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   WriteOptions write;
   write.gltf_compression = settings.gltf_compression;
   write.grid = &header.grid;
+  write.material_library = header.material_library, write.material = header.material;
   if (settings.gltf_tile_nodes) {  // one node per tile, each decoded on its own (border vertices in both)
     std::vector<Mesh> meshes;
     std::vector<std::string> names;

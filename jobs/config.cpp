@@ -254,6 +254,7 @@ std::vector<std::string> knownConfigKeys() {
           "/codec/bits",
           "/codec/normal_bits",
           "/codec/color_bits",
+          "/codec/uv_bits",
           "/codec/normals",
           "/codec/colors",
           "/codec/scalars",
@@ -350,6 +351,7 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     c.integer("bits", kMinGridBits, kMaxGridBits, s.encode.bits);
     c.integer("normal_bits", 4, 16, s.encode.normal_bits);
     c.integer("color_bits", 1, 8, s.encode.color_bits);
+    c.integer("uv_bits", 0, kMaxScalarBits, s.encode.uv_bits);
     c.boolean("normals", s.encode.keep_normals);
     c.boolean("colors", s.encode.keep_colors);
     c.boolean("scalars", s.encode.keep_scalars);

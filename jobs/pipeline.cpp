@@ -177,9 +177,10 @@ class IngestSink : public MeshSink {
  public:
   // `points`: a point cloud, whose every vertex is tiled by its position, as a triangle (v, v, v) would be.
   // `spill`: nullptr out of core, where the tile pass reads the input again instead (KeptTriangles).
-  IngestSink(const Grid& grid, const AttributeLayout& layout, VertexStore& store, TileHistogram& hist,
-             TriangleSpill* spill, bool points)
-      : grid_(grid), layout_(layout), store_(store), hist_(hist), spill_(spill), points_(points) {}
+  // `input` names the scan in errors.
+  IngestSink(const std::string& input, const Grid& grid, const AttributeLayout& layout, VertexStore& store,
+             TileHistogram& hist, TriangleSpill* spill, bool points)
+      : input_(input), grid_(grid), layout_(layout), store_(store), hist_(hist), spill_(spill), points_(points) {}
   static Vec3d originalOf(const VertexRecord& r) { return {r.original[0], r.original[1], r.original[2]}; }
   Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c, uint8_t,
                   const ScalarChunk& s) override {
@@ -193,6 +194,8 @@ class IngestSink : public MeshSink {
         row_.clear();
         for (const auto& [offset, words] : picks_)
           for (size_t w = 0; w < words; ++w) row_.push_back(s.values[i * in_stride + offset + w]);
+        if (Status snap = snapScalarRow(layout_.scalars, row_.data(), store_.size()); !snap.isOk())
+          return snap.withContext(input_);
         store_.appendScalars(row_);
       }
       VertexRecord r;
@@ -257,6 +260,7 @@ class IngestSink : public MeshSink {
   double area = 0;                // of the kept triangles, original positions
 
  private:
+  const std::string& input_;
   const Grid& grid_;
   const AttributeLayout& layout_;
   VertexStore& store_;
@@ -356,7 +360,11 @@ class ScanEncoder {
       result_.layout.color_channels = survey_.colorChannels();
       result_.layout.color_bits = static_cast<uint8_t>(s_.color_bits);
     }
-    if (s_.keep_scalars && codecCarriesScalars()) result_.layout.scalars = survey_.scalar_channels;
+    if (s_.keep_scalars && codecCarriesScalars()) {
+      result_.layout.scalars = survey_.scalar_channels;
+      if (const auto tc = findTexcoords(result_.layout.scalars); tc && s_.uv_bits > 0)
+        for (size_t ch : {tc->u, tc->v}) result_.layout.scalars[ch].bits = static_cast<uint8_t>(s_.uv_bits);
+    }
     result_.point_cloud = survey_.triangle_count == 0 && survey_.vertex_count > 0;
     SP_ASSIGN_OR_RETURN(const BoundingBox box, gridBox());
     auto grid = makeGrid(box, s_.bits);
@@ -408,7 +416,7 @@ class ScanEncoder {
     store_.emplace(scratchFile("vertices.bin"), in_memory_ ? UINT64_MAX / 2 : storage_budget_ / 4);
     histogram_.emplace(result_.grid.bits, n_items, target_);
     if (in_memory_) spill_.emplace(std::string(), true, n_items);
-    IngestSink ingest(result_.grid, result_.layout, *store_, *histogram_, spill_ ? &*spill_ : nullptr,
+    IngestSink ingest(s_.input, result_.grid, result_.layout, *store_, *histogram_, spill_ ? &*spill_ : nullptr,
                       result_.point_cloud);
     if (survey_.kept()) {
       SP_RETURN_IF_ERROR(replay(survey_.keptMesh(), ingest, ReadOptions().chunk));
@@ -483,6 +491,7 @@ class ScanEncoder {
     SP_ASSIGN_OR_RETURN(file_, AtomicFile::create(s_.output));
     writer_.emplace(*file_, result_.grid, result_.layout);
     if (s_.subset_count) writer_->setSubset(s_.subset_index, s_.subset_count);
+    writer_->setMaterial(result_.read.material_library, result_.read.material);
     SP_RETURN_IF_ERROR(writer_->begin());
     // A point cloud has no surface to sample (jobs/measure.h): it is not measured.
     result_.measured = s_.measure.enabled && !result_.point_cloud;
@@ -803,6 +812,9 @@ Result<EncodeResult> encodeFileOnce(const EncodeSettings& s, ProgressListener* p
     return makeError(ErrorCode::kInvalidArgument, "normal bits must be in [4, 16]");
   if (s.color_bits < 1 || s.color_bits > 8)
     return makeError(ErrorCode::kInvalidArgument, "color bits must be in [1, 8]");
+  if (s.uv_bits < 0 || s.uv_bits > kMaxScalarBits)
+    return makeError(ErrorCode::kInvalidArgument,
+                     "texture coordinate bits must be in [1, " + std::to_string(kMaxScalarBits) + "] (0: lossless)");
   for (const StageSpec& st : s.stages)
     if (!findStage(st.kind)) return makeError(ErrorCode::kInvalidArgument, "unknown stage");
   SP_RETURN_IF_ERROR(checkOutputPath(s.output, {s.input}));  // before reading: `encode X X` must not replace X

@@ -67,6 +67,8 @@ struct EncodeSettings {
   int bits = kDefaultGridBits;
   int normal_bits = kDefaultNormalBits;
   int color_bits = 8;  // levels per color channel: 2^color_bits (8: exact)
+  // Texture coordinates kept as multiples of 2^-uv_bits (1..kMaxScalarBits; ScalarChannel::bits); 0: lossless.
+  int uv_bits = 0;
   bool keep_normals = true;
   bool keep_colors = true;
   // Per-vertex scalar properties (a PLY's confidence, intensity, quality, ...), kept losslessly at their type by

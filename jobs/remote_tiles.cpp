@@ -16,8 +16,8 @@ namespace scanpress {
 namespace {
 
 // Bumped whenever a message's layout changes.
-constexpr uint32_t kWireVersion = 5;  // 2: the layout's color bits; 3: the remesh stage's options; 4: prm's
-// options; 5: scalar channels (the layout's, and each tile's values)
+constexpr uint32_t kWireVersion = 6;  // 2: the layout's color bits; 3: the remesh stage's options; 4: prm's
+// options; 5: scalar channels (the layout's, and each tile's values); 6: each scalar channel's bits
 
 // The wire spells out every field of these structs: a new field must be added to the messages below too (this
 // fails to compile until its size is updated here).
@@ -181,6 +181,9 @@ Status readScan(std::span<const uint8_t> message, EncodeSettings& s, TileScanFac
     c.type = static_cast<ScalarType>(type);
     SP_RETURN_IF_ERROR(getString(r, c.name));
     if (!validScalarName(c.name)) return r.error(ErrorCode::kMalformed, "scalar channel name");
+    SP_RETURN_IF_ERROR(r.u8(c.bits));
+    if (c.bits > kMaxScalarBits || (c.bits && !isFloatScalar(c.type)))
+      return r.error(ErrorCode::kMalformed, "scalar channel bits");
     f.layout.scalars.push_back(std::move(c));
   }
   SP_RETURN_IF_ERROR(toBool(r, f.measured));
@@ -245,6 +248,7 @@ std::vector<uint8_t> scanMessage(const EncodeSettings& s, const TileScanFacts& f
   for (const ScalarChannel& c : f.layout.scalars) {
     w.u8(static_cast<uint8_t>(c.type));
     putString(w, c.name);
+    w.u8(c.bits);
   }
   w.u8(f.measured);
   w.f64(f.diagonal);

@@ -76,7 +76,8 @@ const json kInfoCounts = {
 
 json layoutJson(const AttributeLayout& l) {
   json scalars = json::array();
-  for (const ScalarChannel& c : l.scalars) scalars.push_back({{"name", c.name}, {"type", scalarTypeName(c.type)}});
+  for (const ScalarChannel& c : l.scalars)
+    scalars.push_back({{"name", c.name}, {"type", scalarTypeName(c.type)}, {"bits", c.bits}});
   return {{"normals", l.hasNormals()},
           {"normal_bits", l.normal_bits},
           {"color_channels", l.color_channels},
@@ -131,6 +132,8 @@ nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& 
   j["stages"] = r.stages;
   j["grid"] = gridJson(r.grid);
   j["attributes"] = layoutJson(r.layout);
+  j["material_library"] = r.read.material_library;  // kept (OBJ mtllib; empty: none)
+  j["material"] = r.read.material;
   j["input_vertices"] = r.read.vertices;
   j["input_faces"] = r.read.triangles;
   j["input_polygons_triangulated"] = r.read.polygons;
@@ -338,6 +341,8 @@ std::string containerInfoJson(const ContainerFile& file) {
   j["format_version"] = h.version;
   j["grid"] = gridJson(h.grid);
   j["attributes"] = layoutJson(h.layout);
+  j["material_library"] = h.material_library;
+  j["material"] = h.material;
   j["vertices"] = h.vertices;
   j["faces"] = h.faces;
   j["bytes"] = file.size();
@@ -413,10 +418,14 @@ std::string containerInfoText(const ContainerFile& file) {
       [&] {
     std::string s;
     for (const ScalarChannel& c : h.layout.scalars)
-      s += (s.empty() ? "" : ", ") + c.name + " (" + scalarTypeName(c.type) + ")";
+      s += (s.empty() ? "" : ", ") + c.name + " (" + scalarTypeName(c.type) +
+           (c.bits ? ", multiples of 2^-" + std::to_string(int(c.bits)) : std::string()) + ")";
     return s.empty() ? std::string("no") : s;
-  }() << "\n"
-      << "  tiles:     " << h.tile_count << "\n";
+  }() << "\n";
+  if (!h.material_library.empty() || !h.material.empty())
+    os << "  material:  " << (h.material.empty() ? std::string("(none)") : h.material)
+       << (h.material_library.empty() ? std::string() : " from " + h.material_library) << "\n";
+  os << "  tiles:     " << h.tile_count << "\n";
   for (const auto& t : file.tiles()) {
     os << "    tile " << t.tile_id << ": " << codecName(t.codec) << " v" << t.codec_version << ", " << t.vertices
        << " vertices, " << t.faces << " faces, " << t.chunk_bytes << " bytes";

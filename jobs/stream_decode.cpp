@@ -437,6 +437,7 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
 
   MeshFileLayout layout = welder.layout();
   if (layout.vertices == 0) layout.normals = false, layout.color_channels = 0;  // as the in-memory writers do
+  layout.material_library = settings.material_library, layout.material = settings.material;
   SP_ASSIGN_OR_RETURN(auto writer, MeshFileWriter::create(output, layout, format));
   if (format.indexed()) {
     std::vector<ScratchVertex> chunk;

@@ -52,6 +52,7 @@ struct StreamDecodeSettings {
   std::optional<std::array<double, 6>> crop;  // world box; triangles wholly inside are kept
   uint64_t memory_budget = 0;                 // bytes (at least 16 MiB)
   std::string scratch_parent;                 // empty: the system temp directory
+  std::string material_library, material;     // OBJ output's `mtllib` and `usemtl` (empty: none)
 };
 
 struct StreamDecodeResult {

@@ -263,7 +263,7 @@ TEST(Cli, FullDiskLeavesNothingBehind) {
 
 // An OBJ with texture coordinates, materials and normals (a small quad).
 const char* kTexturedObj =
-    "mtllib quad.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
+    "mtllib quad.mtl\ng quad\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
     "usemtl paint\nf 1/1/1 2/2/1 3/3/1 4/4/1\n";
 
 // Lines of `out` that contain `what`.
@@ -283,18 +283,16 @@ TEST(Cli, DroppedDataIsWarnedReportedAndFailsUnderStrict) {
   ASSERT_EQ(run("encode '" + in + "' '" + dir.file("q.spz") + "' --report '" + dir.file("r.json") + "'", &out), 0)
       << out;
   EXPECT_EQ(linesWith(out, "warning"), 1) << out;
-  // The texture coordinates are kept (scalar channels u and v); the material lines are not.
-  EXPECT_NE(out.find("scanpress: warning: dropped obj mtllib x 1, obj usemtl x 1 "), std::string::npos) << out;
+  // The texture coordinates are kept (scalar channels u and v), and the material lines; the group is not.
+  EXPECT_NE(out.find("scanpress: warning: dropped obj g x 1 "), std::string::npos) << out;
   auto report = nlohmann::json::parse(std::ifstream(dir.file("r.json")));
-  EXPECT_EQ(report["dropped"], nlohmann::json::parse(R"([{"name": "obj mtllib", "count": 1, "reason": "unsupported"},
-      {"name": "obj usemtl", "count": 1, "reason": "unsupported"}])"));
+  EXPECT_EQ(report["dropped"], nlohmann::json::parse(R"([{"name": "obj g", "count": 1, "reason": "unsupported"}])"));
 
   ASSERT_EQ(run("encode '" + in + "' '" + dir.file("q.spz") + "' --quiet", &out), 0) << out;
   EXPECT_EQ(out, "");  // --quiet: nothing, the warning included (the report still lists the drops)
 
   EXPECT_EQ(run("encode '" + in + "' '" + dir.file("s.spz") + "' --strict", &out), 2) << out;
-  EXPECT_NE(out.find("quad.obj: strict: the container would not keep obj mtllib x 1, obj usemtl x 1"), std::string::npos)
-      << out;
+  EXPECT_NE(out.find("quad.obj: strict: the container would not keep obj g x 1"), std::string::npos) << out;
   EXPECT_FALSE(fs::exists(dir.file("s.spz")));
 
   // Nothing unsupported: --strict encodes; --no-normals is listed as requested and warned about by nobody.
@@ -320,9 +318,9 @@ TEST(Cli, BundledScanDropsAreNamed) {
   EXPECT_EQ(out.find("warning"), std::string::npos) << out;
   auto report = nlohmann::json::parse(std::ifstream(dir.file("a.json")));
   EXPECT_TRUE(report["dropped"].empty()) << report["dropped"];
-  EXPECT_EQ(
-      report["attributes"]["scalars"],
-      nlohmann::json::parse(R"([{"name": "confidence", "type": "float"}, {"name": "intensity", "type": "float"}])"));
+  EXPECT_EQ(report["attributes"]["scalars"],
+            nlohmann::json::parse(R"([{"name": "confidence", "type": "float", "bits": 0},
+                                {"name": "intensity", "type": "float", "bits": 0}])"));
   ASSERT_EQ(run("encode '" + kBunny + "' '" + dir.file("b.spz") + "' --codec pm --report '" + dir.file("r.json") + "'",
                 &out),
             0)

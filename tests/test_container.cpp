@@ -129,8 +129,8 @@ TEST(Container, ColorBitsAreKeptAndChecked) {
 TEST(Container, UnknownVersionAndCodecAreTheirOwnErrors) {
   testing::ContainerFixture f = testing::makeContainerFixture(1);
   auto bytes = f.bytes;
-  const uint32_t v3 = 3;
-  patchHeader(bytes, 8, &v3, 4);
+  const uint32_t v4 = 4;
+  patchHeader(bytes, 8, &v4, 4);
   EXPECT_EQ(decodeAll(bytes).code(), ErrorCode::kUnknownVersion);
   // Version 2 (scalar channels) needs its channel table: an 80-byte header is malformed.
   bytes = f.bytes;

@@ -242,7 +242,9 @@ TEST(Writers, PlyAndObjRoundTripThroughReaders) {
   }
   m.color_channels = 3;
   for (bool dbl : {false, true}) {
-    ASSERT_TRUE(writePly(dir.file("o.ply"), m, {dbl}).isOk());
+    WriteOptions options;
+    options.double_positions = dbl;
+    ASSERT_TRUE(writePly(dir.file("o.ply"), m, options).isOk());
     Mesh r = readOk(dir.file("o.ply"));
     EXPECT_EQ(r.positions, m.positions);
     EXPECT_EQ(r.normals, m.normals);
@@ -383,7 +385,12 @@ TEST(Readers, ObjListsTextureCoordinatesMaterialsAndOtherRecords) {
   EXPECT_EQ(m.triangles.size(), 2u);
   // "s off" states nothing; vn 3 is named by no face; vertices 1 and 3 have normal 1, then a corner names 2.
   // Texture coordinates and normals per corner are kept (wedges: vertices 1 and 3 get a second, for normal 2).
-  EXPECT_EQ(droppedText(stats), "obj mtllib x 1, obj o x 1, obj usemtl x 2, obj s x 1, obj vn unused x 1, obj v w x 1");
+  // Two materials: the library is kept, no material.
+  EXPECT_EQ(droppedText(stats),
+            "obj o x 1, obj s x 1, obj usemtl (several materials or faces without one: none is "
+            "kept) x 2, obj vn unused x 1, obj v w x 1");
+  EXPECT_EQ(stats.material_library, "x.mtl");
+  EXPECT_EQ(stats.material, "");
   EXPECT_EQ(m.positions.size(), 6u);
   // Without them (ReadOptions off: a codec that simplifies), `vt` and the second normals are listed.
   {
@@ -395,8 +402,8 @@ TEST(Readers, ObjListsTextureCoordinatesMaterialsAndOtherRecords) {
     auto read = readMesh(p, sink, no_uv);
     ASSERT_TRUE(read.isOk()) << read.status().toString();
     EXPECT_EQ(droppedText(*read),
-              "obj mtllib x 1, obj o x 1, obj vt x 3, obj usemtl x 2, obj s x 1, obj vn unused x 1, "
-              "obj vn per corner x 2, obj v w x 1");
+              "obj o x 1, obj vt x 3, obj s x 1, obj usemtl (several materials or faces without one: none is "
+              "kept) x 2, obj vn unused x 1, obj vn per corner x 2, obj v w x 1");
     EXPECT_TRUE(off.scalar_channels.empty());
   }
 

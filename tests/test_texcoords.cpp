@@ -16,7 +16,9 @@
 #include <tuple>
 #include <vector>
 
+#include "engine/quantize.h"
 #include "jobs/commands.h"
+#include "jobs/container_file.h"
 #include "jobs/mesh_io/mesh_reader.h"
 #include "jobs/mesh_io/mesh_writer.h"
 #include "jobs/mesh_io/texcoords.h"
@@ -143,7 +145,7 @@ TEST(Texcoords, ObjReaderSplitsWedgesAtSeams) {
   EXPECT_EQ(stats.source_vertices, 42u);
   EXPECT_EQ(mesh->positions.size(), 42u + 5 + 7 + 7);
   EXPECT_EQ(stats.vertices, mesh->positions.size());
-  EXPECT_EQ(describeDropped(stats.dropped), "obj mtllib x 1, obj usemtl x 1, obj vt unused x 2");
+  EXPECT_EQ(describeDropped(stats.dropped), "obj vt unused x 2");
   ASSERT_EQ(mesh->triangles.size(), text.f.size());
   for (size_t f = 0; f < text.f.size(); ++f)
     for (int k = 0; k < 3; ++k) {
@@ -341,7 +343,7 @@ TEST(Texcoords, SeamsSurviveEncodeAndDecode) {
     s.memory_budget = c.memory_budget;
     auto enc = encodeFile(s);
     ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-    EXPECT_EQ(describeDropped(enc->read.dropped), "obj mtllib x 1, obj usemtl x 1, obj vt unused x 2");
+    EXPECT_EQ(describeDropped(enc->read.dropped), "obj vt unused x 2");
     ASSERT_TRUE(findTexcoords(enc->layout.scalars).has_value());
     if (c.tile_triangles < 1000) {
       EXPECT_GT(enc->tiles.size(), 4u);
@@ -355,6 +357,139 @@ TEST(Texcoords, SeamsSurviveEncodeAndDecode) {
     const ObjText got = parseObj(d.output);
     EXPECT_EQ(got.v.size(), want.v.size());
     EXPECT_TRUE(cornerFaces(got, want) == cornerFaces(want, want));
+  }
+}
+
+// `--uv-bits`: the same corners come back with their texture coordinates snapped to multiples of 2^-bits (and so
+// within half of one of the file's), through every codec that carries scalars, one tile and many, in memory and
+// out of core; the container is version 3 and says the channels' bits.
+TEST(Texcoords, UvBitsSnapEveryCornerThroughEncodeAndDecode) {
+  TempDir dir;
+  const std::string in = dir.file("sphere.obj");
+  testing::writeBytes(in, uvSphereObj(24, 48));
+  const ObjText file = parseObj(in);
+  for (int bits : {4, 10}) {
+    ObjText want = file;
+    const ScalarChannel channel{"u", ScalarType::kFloat32, uint8_t(bits)};
+    for (auto& t : want.vt)
+      for (float& x : t) {
+        uint32_t w[1] = {std::bit_cast<uint32_t>(x)};
+        ASSERT_TRUE(snapScalar(channel, w));
+        const float snapped = std::bit_cast<float>(w[0]);
+        EXPECT_LE(std::fabs(snapped - x), std::ldexp(1.0, -bits - 1) + 1e-7);
+        x = snapped;
+      }
+    struct Case {
+      const char* codec;
+      uint64_t tile_triangles;
+      uint64_t memory_budget;
+    };
+    for (const Case& c : {Case{"edgebreaker", 1u << 20, 0}, Case{"edgebreaker", 300, 0}, Case{"kdtree", 300, 0},
+                          Case{"octree", 1u << 20, 0}, Case{"store", 300, 0}, Case{"kdtree", 300, uint64_t(4) << 20}}) {
+      SCOPED_TRACE(std::string(c.codec) + ", " + std::to_string(c.tile_triangles) + " triangles per tile" +
+                   (c.memory_budget ? ", out of core" : "") + ", " + std::to_string(bits) + " bits");
+      EncodeSettings s = settingsFor(in, dir.file("s.spz"), c.codec);
+      s.tile_triangles = c.tile_triangles;
+      s.memory_budget = c.memory_budget;
+      s.uv_bits = bits;
+      auto enc = encodeFile(s);
+      ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+      const auto tc = findTexcoords(enc->layout.scalars);
+      ASSERT_TRUE(tc.has_value());
+      EXPECT_EQ(enc->layout.scalars[tc->u].bits, bits);
+      EXPECT_EQ(enc->layout.scalars[tc->v].bits, bits);
+      auto file_header = ContainerFile::open(s.output);
+      ASSERT_TRUE(file_header.isOk());
+      EXPECT_EQ(file_header->header().version, 3u);
+      DecodeSettings d;
+      d.input = s.output;
+      d.output = dir.file("out.obj");
+      auto dec = decodeFile(d);
+      ASSERT_TRUE(dec.isOk()) << dec.status().toString();
+      const ObjText got = parseObj(d.output);
+      EXPECT_EQ(got.v.size(), want.v.size());
+      EXPECT_TRUE(cornerFaces(got, want) == cornerFaces(want, want));
+    }
+  }
+}
+
+// A texture coordinate beyond what --uv-bits can keep (2^(31 - bits) in magnitude) fails the encode with the
+// vertex, channel and value, and leaves no output; without --uv-bits it is kept as it is.
+TEST(Texcoords, UvBitsRefuseCoordinatesBeyondTheirRange) {
+  TempDir dir;
+  const std::string in = dir.file("far.obj");
+  testing::writeBytes(in, "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1000000 0\nvt 0 1\nf 1/1 2/2 3/3\n");
+  EncodeSettings s = settingsFor(in, dir.file("far.spz"), "edgebreaker");
+  s.uv_bits = 12;
+  auto enc = encodeFile(s);
+  ASSERT_FALSE(enc.isOk());
+  EXPECT_EQ(enc.status().code(), ErrorCode::kInvalidArgument);
+  EXPECT_NE(enc.status().message().find("vertex 1: u = 1000000"), std::string::npos) << enc.status().toString();
+  EXPECT_NE(enc.status().message().find("far.obj"), std::string::npos) << enc.status().toString();
+  EXPECT_FALSE(std::filesystem::exists(s.output));
+  s.uv_bits = 0;
+  ASSERT_TRUE(encodeFile(s).isOk());
+  s.uv_bits = kMaxScalarBits + 1;
+  EXPECT_FALSE(encodeFile(s).isOk());
+}
+
+// OBJ materials: the `mtllib` line and a single `usemtl` go through the container (version 3) into decoded OBJ
+// files, in memory and streamed alike; other formats list them dropped. A file naming several materials, or with
+// faces before its first `usemtl`, keeps its libraries but no material, and says so.
+TEST(Materials, MtllibAndOneUsemtlAreKept) {
+  TempDir dir;
+  const std::string in = dir.file("sphere.obj");
+  testing::writeBytes(in, uvSphereObj(12, 24));
+  EncodeSettings s = settingsFor(in, dir.file("m.spz"), "kdtree");
+  s.keep_scalars = false;  // (a streamed decode writes no texture coordinates)
+  s.tile_triangles = 200;
+  auto enc = encodeFile(s);
+  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+  EXPECT_EQ(enc->read.material_library, "sphere.mtl");
+  EXPECT_EQ(enc->read.material, "skin");
+  EXPECT_EQ(describeDropped(enc->read.dropped), "");
+  auto file = ContainerFile::open(s.output);
+  ASSERT_TRUE(file.isOk());
+  EXPECT_EQ(file->header().version, 3u);
+  DecodeSettings d;
+  d.input = s.output;
+  d.output = dir.file("memory.obj");
+  auto dec = decodeFile(d);
+  ASSERT_TRUE(dec.isOk()) << dec.status().toString();
+  EXPECT_FALSE(dec->streamed);
+  EXPECT_TRUE(dec->dropped.empty()) << describeDropped(dec->dropped);
+  const std::string text = testing::readText(d.output);
+  EXPECT_NE(text.find("\nmtllib sphere.mtl\nusemtl skin\nv "), std::string::npos) << text.substr(0, 200);
+  d.output = dir.file("streamed.obj");
+  d.memory_budget = 64 << 10;
+  d.scratch_dir = dir.file("scratch");
+  std::filesystem::create_directories(d.scratch_dir);
+  dec = decodeFile(d);
+  ASSERT_TRUE(dec.isOk()) << dec.status().toString();
+  EXPECT_TRUE(dec->streamed);
+  EXPECT_TRUE(testing::readText(d.output) == text);
+  d.memory_budget = 0;
+  d.output = dir.file("m.ply");
+  dec = decodeFile(d);
+  ASSERT_TRUE(dec.isOk());
+  EXPECT_EQ(describeDropped(dec->dropped), "obj mtllib sphere.mtl x 1, obj usemtl skin x 1");
+
+  const std::string head = "mtllib a.mtl\nmtllib b.mtl a.mtl\nmtllib a.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n";
+  struct Case {
+    std::string faces, material, dropped;
+  };
+  for (const Case& c : {Case{"usemtl red\nf 1 2 3\nusemtl red\nf 2 4 3\n", "red", ""},
+                        Case{"usemtl red\nf 1 2 3\nusemtl blue\nf 2 4 3\n", "",
+                             "obj usemtl (several materials or faces without one: none is kept) x 2"},
+                        Case{"f 1 2 3\nusemtl red\nf 2 4 3\n", "",
+                             "obj usemtl (several materials or faces without one: none is kept) x 1"}}) {
+    SCOPED_TRACE(c.faces);
+    testing::writeBytes(dir.file("q.obj"), head + c.faces);
+    ReadStats stats;
+    ASSERT_TRUE(readMeshFile(dir.file("q.obj"), &stats).isOk());
+    EXPECT_EQ(stats.material_library, "a.mtl b.mtl");
+    EXPECT_EQ(stats.material, c.material);
+    EXPECT_EQ(describeDropped(stats.dropped), c.dropped);
   }
 }
 

@@ -114,7 +114,45 @@ AttributeModels::AttributeModels(const AttributeLayout& layout) {
   if (layout.hasColors()) color.assign(kActivity * 4 * 4, SymbolModel(9));  // |residual| <= 128
   scalar.resize(layout.scalars.size());
   for (size_t c = 0; c < layout.scalars.size(); ++c)
-    scalar[c].cls.assign(kActivity, SymbolModel(u32(scalarBits(layout.scalars[c].type)) + 1));
+    scalar[c].cls.assign(kActivity, SymbolModel(u32(scalarBits(codedType(layout.scalars[c]))) + 1));
+}
+
+bool predictTexcoord(const Vec3u& pv, const Vec3u& pa, const Vec3u& pb, const std::array<int64_t, 2>& ta,
+                     const std::array<int64_t, 2>& tb, int orientation, std::array<double, 2>& out) {
+  double e[3], w[3], ee = 0, we = 0;
+  for (int k = 0; k < 3; ++k) {
+    e[k] = double(pb[k]) - double(pa[k]), w[k] = double(pv[k]) - double(pa[k]);
+    ee += e[k] * e[k], we += w[k] * e[k];
+  }
+  if (ee == 0) return false;
+  const double t = we / ee;
+  double hh = 0;
+  for (int k = 0; k < 3; ++k) {
+    const double r = w[k] - t * e[k];
+    hh += r * r;
+  }
+  const double h = std::sqrt(hh / ee) * orientation;  // the height over a-b, in units of |b - a|
+  const double du = double(tb[0] - ta[0]), dv = double(tb[1] - ta[1]);
+  out[0] = double(ta[0]) + t * du - h * dv;
+  out[1] = double(ta[1]) + t * dv + h * du;
+  return std::isfinite(out[0]) && std::isfinite(out[1]);
+}
+
+bool predictTexcoordAffine(const Vec3u& pv, const Vec3u& pa, const Vec3u& pb, const Vec3u& pc,
+                           const std::array<int64_t, 2>& ta, const std::array<int64_t, 2>& tb,
+                           const std::array<int64_t, 2>& tc, std::array<double, 2>& out) {
+  // pv - pc = x (pa - pc) + y (pb - pc) in least squares (pv projected onto the plane of a, b, c).
+  double e[3], f[3], w[3];
+  for (int k = 0; k < 3; ++k)
+    e[k] = double(pa[k]) - double(pc[k]), f[k] = double(pb[k]) - double(pc[k]), w[k] = double(pv[k]) - double(pc[k]);
+  double ee = 0, ef = 0, ff = 0, we = 0, wf = 0;
+  for (int k = 0; k < 3; ++k)
+    ee += e[k] * e[k], ef += e[k] * f[k], ff += f[k] * f[k], we += w[k] * e[k], wf += w[k] * f[k];
+  const double det = ee * ff - ef * ef;
+  if (!(det > 1e-9 * ee * ff)) return false;  // a, b, c (nearly) collinear
+  const double x = (we * ff - wf * ef) / det, y = (wf * ee - we * ef) / det;
+  for (int k = 0; k < 2; ++k) out[k] = double(tc[k]) + x * double(ta[k] - tc[k]) + y * double(tb[k] - tc[k]);
+  return std::isfinite(out[0]) && std::isfinite(out[1]);
 }
 
 }  // namespace scanpress::hierarchy

@@ -22,6 +22,7 @@
 #pragma once
 
 #include <cmath>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -222,6 +223,33 @@ inline void scalarFromOrdered(ScalarType t, int64_t x, uint32_t* w) {
   }
 }
 
+// What a channel codes: a quantized channel's level (ScalarChannel::bits; quantize.h's scalarLevel), wrapped as an
+// int32, else the value's ordered integer at its type.
+inline ScalarType codedType(const ScalarChannel& c) { return c.bits ? ScalarType::kInt32 : c.type; }
+inline int64_t channelOrdered(const ScalarChannel& c, const uint32_t* w) {
+  return c.bits ? scalarLevel(c, w) : scalarOrdered(c.type, w);
+}
+inline void channelFromOrdered(const ScalarChannel& c, int64_t x, uint32_t* w) {
+  if (c.bits) scalarOfLevel(c, x, w);
+  else scalarFromOrdered(c.type, x, w);
+}
+
+// Texture coordinates (levels of a quantized pair) of vertex v predicted from a triangle (v, a, b), in its winding
+// order, whose a and b are decoded: v's position projected onto the line a-b gives its share t along the edge and
+// its height over it, which the prediction keeps in texture space: ta + t (tb - ta) + height x the edge turned a
+// quarter, to the left for `orientation` +1 (the chart keeps the triangles' winding), to the right for -1 (it
+// mirrors them). False when a and b share a position. (Draco's texture coordinate predictor, with the orientation
+// taken from decoded triangles instead of coded; in attributes.cpp, compiled without floating-point contraction.)
+bool predictTexcoord(const Vec3u& pv, const Vec3u& pa, const Vec3u& pb, const std::array<int64_t, 2>& ta,
+                     const std::array<int64_t, 2>& tb, int orientation, std::array<double, 2>& out);
+// The same from a decoded triangle (a, b, c): v's position in the affine frame of a, b, c (projected onto their
+// plane), carried to texture space by the affine map that takes a, b, c to their coordinates. Exact wherever the
+// texture map is affine over the two triangles (it reduces to the parallelogram rule when v, a, b, c form one);
+// it needs no orientation. False when a, b, c are (nearly) collinear.
+bool predictTexcoordAffine(const Vec3u& pv, const Vec3u& pa, const Vec3u& pb, const Vec3u& pc,
+                           const std::array<int64_t, 2>& ta, const std::array<int64_t, 2>& tb,
+                           const std::array<int64_t, 2>& tc, std::array<double, 2>& out);
+
 // x wrapped into the type's range of ordered integers: [0, 2^b) for unsigned types, [-2^(b-1), 2^(b-1)) otherwise.
 inline int64_t wrapOrdered(ScalarType t, int64_t x) {
   const int b = scalarBits(t);
@@ -261,22 +289,125 @@ int64_t codeScalar(Io& io, AttributeModels::Scalar& m, ScalarType t, int64_t pre
 
 // The scalar channels of the vertices v in [first, n) that are not known(v), in vertex order, each channel on its
 // own: predicted by the rounded mean of the decoded neighbours' values (as codePredictedRange's colors), else the
-// previous vertex's, else 0. `truth` (encoder): values by vertex; `values` holds the known vertices' and gets the
-// coded ones' (stride words per vertex).
+// previous vertex's, else 0. A quantized texture coordinate pair (both channels at the same bits) with the
+// positions `pos` is coded together, vertex by vertex, each of v's triangles (v, a, b) whose a and b are decoded
+// giving a prediction: predictTexcoordAffine from the first decoded triangle across a-b, else predictTexcoord,
+// oriented by the sign of the decoded triangles' texture-space areas at a and b (else of all decoded triangles so
+// far, else +1). The mean of the affine predictions, else of the others; the neighbours' mean when no triangle
+// gives one. Measured (bench/RESULTS.md, "Quantized texture coordinates"): the affine rule is the one that
+// counts; the other alone was worse than the neighbours' mean on a UV sphere. `truth` (encoder): values by
+// vertex; `values` holds the known vertices' and gets the coded ones' (stride words per vertex).
 template <class Io, class FacesOf, class Known>
 void codeScalarRange(Io& io, const AttributeLayout& layout, AttributeModels& models, u32 first, u32 n,
                      const std::vector<Triangle>& tris, const FacesOf& faces_of, const Known& known,
-                     const ScalarValues* truth, ScalarValues& values) {
+                     const ScalarValues* truth, ScalarValues& values, const std::vector<Vec3u>* pos = nullptr) {
   const auto decoded = [&](u32 w, u32 v) { return w < v || known(w); };
   const size_t stride = size_t(layout.scalarStride());
   values.resize(size_t(n) * stride);
   std::vector<u8> activity(n, 0);
+  std::optional<TexcoordChannels> tc = findTexcoords(layout.scalars);
+  if (tc && (!pos || !layout.scalars[tc->u].bits || layout.scalars[tc->u].bits != layout.scalars[tc->v].bits))
+    tc.reset();
+  const auto rounded_mean = [](i128 sum, u32 count) {  // half away from zero, in i128: 64-bit values do not overflow
+    const i128 c = count;
+    return int64_t(sum >= 0 ? (sum + c / 2) / c : -((-sum + c / 2) / c));
+  };
+  if (tc) {
+    const ScalarChannel &cu = layout.scalars[tc->u], &cv = layout.scalars[tc->v];
+    const auto uv = [&](const ScalarValues& vals, u32 v) {
+      return std::array<int64_t, 2>{channelOrdered(cu, vals.data() + v * stride + tc->u_word),
+                                    channelOrdered(cv, vals.data() + v * stride + tc->v_word)};
+    };
+    // Texture-space orientation votes: per vertex, the sum of the signs of its decoded triangles' areas.
+    std::vector<int32_t> votes(n, 0);
+    int64_t all_votes = 0;
+    const auto vote = [&](u32 v) {
+      for (u32 f : faces_of(v)) {
+        const Triangle& t = tris[f];
+        bool complete = true;
+        for (u32 w : t) complete &= w == v || decoded(w, v);
+        if (!complete) continue;
+        const auto p0 = uv(values, t[0]), p1 = uv(values, t[1]), p2 = uv(values, t[2]);
+        const i128 area = i128(p1[0] - p0[0]) * (p2[1] - p0[1]) - i128(p1[1] - p0[1]) * (p2[0] - p0[0]);
+        const int s = area > 0 ? 1 : area < 0 ? -1 : 0;
+        if (s == 0) continue;
+        all_votes += s;
+        for (u32 w : t) votes[w] = std::clamp(votes[w] + s, -(1 << 20), 1 << 20);
+      }
+    };
+    std::vector<u8> activity_v(n, 0);
+    for (u32 v = first; v < n; ++v) {
+      if (known(v)) continue;
+      double psum[2] = {0, 0}, asum[2] = {0, 0};
+      u32 predictions = 0, affine_predictions = 0;
+      i128 nsum[2] = {0, 0};
+      u32 count = 0, active_u = 0, active_v = 0;
+      for (u32 f : faces_of(v)) {
+        const Triangle& t = tris[f];
+        const int k = t[0] == v ? 0 : t[1] == v ? 1 : 2;
+        const u32 a = t[(k + 1) % 3], b = t[(k + 2) % 3];
+        for (u32 w : {a, b})
+          if (w != v && decoded(w, v)) {
+            const auto q = uv(values, w);
+            nsum[0] += q[0], nsum[1] += q[1], active_u += activity[w], active_v += activity_v[w], ++count;
+          }
+        if (a == v || b == v || !decoded(a, v) || !decoded(b, v)) continue;
+        // The decoded triangle across a-b, if any: the affine prediction.
+        bool affine = false;
+        for (u32 g : faces_of(a)) {
+          const Triangle& o = tris[g];
+          if (g == f || (o[0] != b && o[1] != b && o[2] != b)) continue;
+          const u32 c = o[0] != a && o[0] != b ? o[0] : o[1] != a && o[1] != b ? o[1] : o[2];
+          if (c == v || c == a || c == b || !decoded(c, v)) continue;
+          std::array<double, 2> p;
+          if (predictTexcoordAffine((*pos)[v], (*pos)[a], (*pos)[b], (*pos)[c], uv(values, a), uv(values, b),
+                                    uv(values, c), p)) {
+            asum[0] += p[0], asum[1] += p[1], ++affine_predictions;
+            affine = true;
+            break;
+          }
+        }
+        if (affine) continue;
+        const int64_t local = int64_t(votes[a]) + votes[b];
+        const int orientation = local != 0 ? (local > 0 ? 1 : -1) : all_votes < 0 ? -1 : 1;
+        std::array<double, 2> p;
+        if (predictTexcoord((*pos)[v], (*pos)[a], (*pos)[b], uv(values, a), uv(values, b), orientation, p))
+          psum[0] += p[0], psum[1] += p[1], ++predictions;
+      }
+      std::array<int64_t, 2> pred{0, 0};
+      if (affine_predictions) psum[0] = asum[0], psum[1] = asum[1], predictions = affine_predictions;
+      if (predictions) {
+        for (int c = 0; c < 2; ++c)
+          pred[c] = int64_t(std::clamp(std::round(psum[c] / predictions), -double(kMaxScalarLevel),
+                                       double(kMaxScalarLevel)));
+      } else if (count) {
+        pred = {rounded_mean(nsum[0], count), rounded_mean(nsum[1], count)};
+      } else if (v > 0) {
+        pred = uv(values, v - 1);
+      }
+      const std::array<int64_t, 2> actual = truth ? uv(*truth, v) : std::array<int64_t, 2>{0, 0};
+      int cls_u = 0, cls_v = 0;
+      const int64_t x = codeScalar(io, models.scalar[tc->u], ScalarType::kInt32, pred[0], actual[0],
+                                   activityBin(active_u, count), cls_u);
+      const int64_t y = codeScalar(io, models.scalar[tc->v], ScalarType::kInt32, pred[1], actual[1],
+                                   activityBin(active_v, count), cls_v);
+      channelFromOrdered(cu, x, values.data() + v * stride + tc->u_word);
+      channelFromOrdered(cv, y, values.data() + v * stride + tc->v_word);
+      activity[v] = u8(cls_u), activity_v[v] = u8(cls_v);
+      vote(v);
+    }
+  }
   size_t offset = 0;
   for (size_t ch = 0; ch < layout.scalars.size(); ++ch) {
-    const ScalarType t = layout.scalars[ch].type;
+    const ScalarChannel& c = layout.scalars[ch];
+    const size_t words = size_t(scalarTypeWords(c.type));
+    if (tc && (ch == tc->u || ch == tc->v)) {
+      offset += words;
+      continue;
+    }
     AttributeModels::Scalar& m = models.scalar[ch];
     const auto at = [&](const ScalarValues& vals, u32 v) {
-      return scalarOrdered(t, vals.data() + v * stride + offset);
+      return channelOrdered(c, vals.data() + v * stride + offset);
     };
     std::fill(activity.begin(), activity.end(), u8(0));
     for (u32 v = first; v < n; ++v) {
@@ -287,19 +418,15 @@ void codeScalarRange(Io& io, const AttributeLayout& layout, AttributeModels& mod
         for (u32 w : tris[f])
           if (w != v && decoded(w, v)) sum += at(values, w), active += activity[w], ++count;
       int64_t pred = 0;
-      if (count) {
-        // The rounded mean (half away from zero), in i128: 64-bit values do not overflow.
-        const i128 c = count;
-        pred = int64_t(sum >= 0 ? (sum + c / 2) / c : -((-sum + c / 2) / c));
-      } else if (v > 0) {
-        pred = at(values, v - 1);
-      }
+      if (count) pred = rounded_mean(sum, count);
+      else if (v > 0) pred = at(values, v - 1);
       int cls = 0;
-      const int64_t x = codeScalar(io, m, t, pred, truth ? at(*truth, v) : 0, activityBin(active, count), cls);
-      scalarFromOrdered(t, x, values.data() + v * stride + offset);
+      const int64_t x =
+          codeScalar(io, m, codedType(c), pred, truth ? at(*truth, v) : 0, activityBin(active, count), cls);
+      channelFromOrdered(c, x, values.data() + v * stride + offset);
       activity[v] = u8(cls);
     }
-    offset += size_t(scalarTypeWords(t));
+    offset += words;
   }
 }
 
@@ -315,11 +442,13 @@ constexpr uint16_t kCoarseAttributes = 3;
 template <class Io, class FacesOf, class Geometric, class Known>
 void codePredictedRange(Io& io, const AttributeLayout& layout, u32 first, u32 n, const std::vector<Triangle>& tris,
                         const FacesOf& faces_of, const Geometric& geometric, const Known& known, const Points* truth,
-                        std::vector<OctNormal>& normals, std::vector<Rgba8>& colors, ScalarValues* scalars = nullptr) {
+                        std::vector<OctNormal>& normals, std::vector<Rgba8>& colors, ScalarValues* scalars = nullptr,
+                        const std::vector<Vec3u>* pos = nullptr) {
   const auto decoded = [&](u32 w, u32 v) { return w < v || known(w); };
   AttributeModels models(layout);
   if (layout.hasScalars() && scalars)  // (pm passes none: it refuses layouts with scalars)
-    codeScalarRange(io, layout, models, first, n, tris, faces_of, known, truth ? &truth->scalars : nullptr, *scalars);
+    codeScalarRange(io, layout, models, first, n, tris, faces_of, known, truth ? &truth->scalars : nullptr, *scalars,
+                    pos);
   std::vector<u8> activity(n, 0);  // per vertex: its residuals' classes (the context of its later neighbours)
   if (layout.hasNormals()) {
     const int bits = layout.normal_bits, m = (1 << (bits - 1)) - 1;
@@ -407,7 +536,7 @@ void codePredictedAttributes(Io& io, const AttributeLayout& layout, const std::v
   if (layout.hasNormals()) geometric = angleWeightedNormals(pos, tris);
   codePredictedRange(
       io, layout, 0, n, tris, [&](u32 v) { return vf.of(v); }, [&](u32 v) { return geometric[v]; },
-      [&](u32 v) { return known && (*known)[v] != 0; }, truth, normals, colors, &scalars);
+      [&](u32 v) { return known && (*known)[v] != 0; }, truth, normals, colors, &scalars, &pos);
 }
 
 // Version 3 of kdtree and octree: coarse levels show the scan's own attributes. Every vertex of a coarse level
@@ -499,23 +628,23 @@ class CoarseAttributes {
       // Scalars: the rounded mean of the decoded neighbours' representatives', else the parent's representative's.
       size_t offset = 0;
       for (size_t ch = 0; ch < layout_.scalars.size(); ++ch) {
-        const ScalarType t = layout_.scalars[ch].type;
+        const ScalarChannel& c = layout_.scalars[ch];
         i128 sum = 0;
         u32 count_s = 0;
         for (u32 w : neighbours(v))
           if (const u32 r = shown_[w]; r != kNone)
-            sum += scalarOrdered(t, scalars.data() + r * stride + offset), ++count_s;
-        int64_t pred = from != kNone ? scalarOrdered(t, scalars.data() + from * stride + offset) : 0;
+            sum += channelOrdered(c, scalars.data() + r * stride + offset), ++count_s;
+        int64_t pred = from != kNone ? channelOrdered(c, scalars.data() + from * stride + offset) : 0;
         if (count_s) {
           const i128 c = count_s;
           pred = int64_t(sum >= 0 ? (sum + c / 2) / c : -((-sum + c / 2) / c));
         }
         int cls = 0;
-        const int64_t x = codeScalar(io, models_.scalar[ch], t, pred,
-                                     truth ? scalarOrdered(t, truth->scalars.data() + v * stride + offset) : 0, bin,
+        const int64_t x = codeScalar(io, models_.scalar[ch], codedType(c), pred,
+                                     truth ? channelOrdered(c, truth->scalars.data() + v * stride + offset) : 0, bin,
                                      cls);
-        scalarFromOrdered(t, x, scalars.data() + v * stride + offset);
-        offset += size_t(scalarTypeWords(t));
+        channelFromOrdered(c, x, scalars.data() + v * stride + offset);
+        offset += size_t(scalarTypeWords(c.type));
       }
       shown_[v] = v;
       coded_[v] = 1;

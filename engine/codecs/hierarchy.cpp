@@ -47,6 +47,15 @@ Status collectPoints(std::string_view codec, const TileContext& ctx, const Quant
       return makeError(ErrorCode::kInvalidArgument,
                        name + ": color of vertex " + std::to_string(i) + " is not one of " +
                            std::to_string(1 << ctx.layout.color_bits) + " levels per channel (quantizeColor)");
+  // Quantized scalar channels must sit on their levels: the predicted coding codes levels.
+  for (size_t i = 0, offset = 0; i < ctx.layout.scalars.size();
+       offset += size_t(scalarTypeWords(ctx.layout.scalars[i].type)), ++i)
+    if (const ScalarChannel& c = ctx.layout.scalars[i]; c.bits)
+      for (size_t v = 0; v < nv; ++v)
+        if (!onScalarLevel(c, mesh.scalars.data() + v * stride + offset))
+          return makeError(ErrorCode::kInvalidArgument, name + ": " + c.name + " of vertex " + std::to_string(v) +
+                                                            " is not a multiple of 2^-" + std::to_string(int(c.bits)) +
+                                                            " (snapScalar)");
   // Octahedral codes run to 2^bits - 2 (octahedral.h); the predicted coding (attributes.h) codes no other.
   const u32 max_oct = ctx.layout.hasNormals() ? (1u << ctx.layout.normal_bits) - 2 : 0;
   for (size_t i = 0; i < mesh.normals.size(); ++i)

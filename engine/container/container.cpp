@@ -49,21 +49,44 @@ std::vector<uint8_t> chunkHeader(const TileEntry& e, std::span<const uint8_t> pa
 }  // namespace
 
 namespace {
-// v2's table after the fixed header: u8 count; per channel u8 type, u8 name length, the name; CRC-32C of it.
-std::vector<uint8_t> scalarTable(const AttributeLayout& layout) {
+// The lowest version that holds the header: v3 for quantized channels or material names, v2 for scalar channels.
+uint32_t versionFor(const ContainerHeader& h) {
+  const bool quantized =
+      std::any_of(h.layout.scalars.begin(), h.layout.scalars.end(), [](const ScalarChannel& c) { return c.bits; });
+  if (quantized || !h.material_library.empty() || !h.material.empty()) return kContainerVersionMaterials;
+  return h.layout.hasScalars() ? kContainerVersionScalars : kContainerVersion;
+}
+
+// The table after the fixed header (none in v1). v2: u8 count; per channel u8 type, u8 name length, the name.
+// v3: the same with u8 bits after each name, then u16 length and bytes of the material library, then of the
+// material. CRC-32C of it last.
+std::vector<uint8_t> headerTable(const ContainerHeader& h, uint32_t version) {
   std::vector<uint8_t> out;
-  if (!layout.hasScalars()) return out;
+  if (version == kContainerVersion) return out;
   ByteWriter w(out);
-  w.u8(static_cast<uint8_t>(layout.scalars.size()));
-  for (const ScalarChannel& c : layout.scalars) {
+  w.u8(static_cast<uint8_t>(h.layout.scalars.size()));
+  for (const ScalarChannel& c : h.layout.scalars) {
     w.u8(static_cast<uint8_t>(c.type));
     w.u8(static_cast<uint8_t>(c.name.size()));
     for (char ch : c.name) w.u8(static_cast<uint8_t>(ch));
+    if (version >= kContainerVersionMaterials) w.u8(c.bits);
   }
+  if (version >= kContainerVersionMaterials)
+    for (const std::string* s : {&h.material_library, &h.material}) {
+      w.u16(static_cast<uint16_t>(s->size()));
+      for (char ch : *s) w.u8(static_cast<uint8_t>(ch));
+    }
   w.u32(crc32c(out));
   return out;
 }
 }  // namespace
+
+bool validMaterialName(const std::string& name) {
+  if (name.size() > kMaxMaterialBytes) return false;
+  for (char c : name)
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7F) return false;
+  return true;
+}
 
 Status checkScalarChannels(const AttributeLayout& layout) {
   if (layout.scalars.size() > 255) return makeError(ErrorCode::kInvalidArgument, "more than 255 scalar channels");
@@ -73,6 +96,10 @@ Status checkScalarChannels(const AttributeLayout& layout) {
     if (!validScalarName(c.name))
       return makeError(ErrorCode::kInvalidArgument,
                        "scalar channel name '" + c.name + "': 1 to 255 printable ASCII bytes without spaces");
+    if (c.bits > kMaxScalarBits || (c.bits && !isFloatScalar(c.type)))
+      return makeError(ErrorCode::kInvalidArgument, "scalar channel '" + c.name + "': " + std::to_string(c.bits) +
+                                                        " bits (a float channel's 1.." +
+                                                        std::to_string(kMaxScalarBits) + ", or 0)");
   }
   for (size_t i = 0; i < layout.scalars.size(); ++i)
     for (size_t j = 0; j < i; ++j)
@@ -82,12 +109,13 @@ Status checkScalarChannels(const AttributeLayout& layout) {
 }
 
 std::vector<uint8_t> serializeHeader(const ContainerHeader& h) {
-  const std::vector<uint8_t> table = scalarTable(h.layout);
+  const uint32_t version = versionFor(h);
+  const std::vector<uint8_t> table = headerTable(h, version);
   std::vector<uint8_t> out;
   out.reserve(kHeaderSize);
   ByteWriter w(out);
   w.bytes(kHeaderMagic);
-  w.u32(table.empty() ? kContainerVersion : kContainerVersionScalars);
+  w.u32(version);
   w.u32(static_cast<uint32_t>(kHeaderSize + table.size()));
   for (double c : h.grid.origin) w.f64(c);
   w.f64(h.grid.cell);
@@ -115,7 +143,12 @@ Status ContainerWriter::begin() {
     return makeError(ErrorCode::kInvalidArgument, "color bits must be in [1, 8]");
   if (!header_.layout.hasColors()) header_.layout.color_bits = 8;  // byte 51 is 0 without colors
   SP_RETURN_IF_ERROR(checkScalarChannels(header_.layout));
-  header_.version = header_.layout.hasScalars() ? kContainerVersionScalars : kContainerVersion;
+  for (const std::string* s : {&header_.material_library, &header_.material})
+    if (!validMaterialName(*s))
+      return makeError(ErrorCode::kInvalidArgument, "material name of " + std::to_string(s->size()) +
+                                                        " bytes: at most " + std::to_string(kMaxMaterialBytes) +
+                                                        ", without control characters");
+  header_.version = versionFor(header_);
   const auto bytes = serializeHeader(header_);
   header_.header_size = static_cast<uint32_t>(bytes.size());
   SP_RETURN_IF_ERROR(sink_.append(bytes));
@@ -194,19 +227,22 @@ Result<uint32_t> headerSizeOf(std::span<const uint8_t> bytes, const std::string&
   SP_RETURN_IF_ERROR(r.bytes(8, magic));
   uint32_t version = 0, header_size = 0;
   SP_RETURN_IF_ERROR(r.u32(version));
-  if (version != kContainerVersion && version != kContainerVersionScalars)
+  if (version < kContainerVersion || version > kContainerVersionMaterials)
     return makeError(ErrorCode::kUnknownVersion, where + " at byte 8: container format version " +
                                                      std::to_string(version) + " is not known to this build (knows " +
-                                                     std::to_string(kContainerVersion) + " and " +
-                                                     std::to_string(kContainerVersionScalars) + ")");
+                                                     std::to_string(kContainerVersion) + " to " +
+                                                     std::to_string(kContainerVersionMaterials) + ")");
   SP_RETURN_IF_ERROR(r.u32(header_size));
   uint32_t stored_crc = 0;
   std::memcpy(&stored_crc, bytes.data() + kHeaderSize - 4, 4);
   SP_RETURN_IF_ERROR(checkCrc(stored_crc, bytes.first(kHeaderSize - 4),
                               where + " at byte " + std::to_string(kHeaderSize - 4)));
-  // v1: exactly the fixed header; v2: a table of at least one channel (7 bytes) and at most 255.
-  if (version == kContainerVersion ? header_size != kHeaderSize
-                                   : header_size < kHeaderSize + 7 || header_size > kMaxHeaderSize)
+  // v1: exactly the fixed header; v2: a table of at least one channel (7 bytes) and at most 255; v3: a table of
+  // no channel and two empty names (9 bytes) or more.
+  const size_t least = version == kContainerVersion          ? kHeaderSize
+                       : version == kContainerVersionScalars ? kHeaderSize + 7
+                                                             : kHeaderSize + 9;
+  if (version == kContainerVersion ? header_size != kHeaderSize : header_size < least || header_size > kMaxHeaderSize)
     return makeError(ErrorCode::kMalformed, where + " at byte 12: header size " + std::to_string(header_size) +
                                                 " for container format version " + std::to_string(version));
   return header_size;
@@ -259,7 +295,8 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
                                                 std::to_string(h.subset_count));
   if (h.tile_count > kMaxTiles)
     return makeError(ErrorCode::kLimitExceeded, where + " at byte 52: " + std::to_string(h.tile_count) + " tiles");
-  if (h.version == kContainerVersionScalars) {
+  if (h.version >= kContainerVersionScalars) {
+    const bool v3 = h.version >= kContainerVersionMaterials;
     const auto table = bytes.subspan(kHeaderSize, header_size - kHeaderSize);
     uint32_t table_crc = 0;
     std::memcpy(&table_crc, table.data() + table.size() - 4, 4);
@@ -268,7 +305,7 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
     ByteReader t(table.first(table.size() - 4), where + " scalar channels", kHeaderSize);
     uint8_t count = 0;
     SP_RETURN_IF_ERROR(t.u8(count));
-    if (count == 0) return t.error(ErrorCode::kMalformed, "a version 2 header with no scalar channel");
+    if (count == 0 && !v3) return t.error(ErrorCode::kMalformed, "a version 2 header with no scalar channel");
     for (uint8_t i = 0; i < count; ++i) {
       uint8_t type = 0, length = 0;
       SP_RETURN_IF_ERROR(t.u8(type));
@@ -277,8 +314,20 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
       SP_RETURN_IF_ERROR(t.u8(length));
       std::span<const uint8_t> name;
       SP_RETURN_IF_ERROR(t.bytes(length, name));
-      h.layout.scalars.push_back({std::string(name.begin(), name.end()), static_cast<ScalarType>(type)});
+      uint8_t channel_bits = 0;
+      if (v3) SP_RETURN_IF_ERROR(t.u8(channel_bits));
+      h.layout.scalars.push_back({std::string(name.begin(), name.end()), static_cast<ScalarType>(type), channel_bits});
     }
+    if (v3)
+      for (std::string* s : {&h.material_library, &h.material}) {
+        uint16_t length = 0;
+        SP_RETURN_IF_ERROR(t.u16(length));
+        std::span<const uint8_t> text;
+        SP_RETURN_IF_ERROR(t.bytes(length, text));
+        s->assign(text.begin(), text.end());
+        if (!validMaterialName(*s))
+          return t.error(ErrorCode::kMalformed, "material name of " + std::to_string(length) + " bytes");
+      }
     if (t.remaining() != 0) return t.error(ErrorCode::kMalformed, "bytes after the scalar channels");
     if (Status s = checkScalarChannels(h.layout); !s.isOk())
       return makeError(ErrorCode::kMalformed, where + " at byte " + std::to_string(kHeaderSize) + ": " + s.message());
@@ -305,7 +354,7 @@ Result<Footer> parseFooter(std::span<const uint8_t> last, uint64_t file_size, co
   f.version = version;
   SP_RETURN_IF_ERROR(r.u32(stored_crc));
   SP_RETURN_IF_ERROR(checkCrc(stored_crc, last.first(20), where + " at byte " + std::to_string(base + 20)));
-  if (version != kContainerVersion && version != kContainerVersionScalars)
+  if (version < kContainerVersion || version > kContainerVersionMaterials)
     return makeError(ErrorCode::kUnknownVersion, where + " at byte " + std::to_string(base + 16) +
                                                      ": container format version " + std::to_string(version));
   if (f.index_offset < kHeaderSize || f.index_bytes < 12 || f.index_offset > base ||

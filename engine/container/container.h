@@ -1,5 +1,6 @@
-// Container format v1 and v2 (.spz): the byte-level layout is specified in FORMAT.md next to this file. v2 is v1
-// with a scalar-channel table after the fixed header; a container without scalar channels is written as v1.
+// Container format v1, v2 and v3 (.spz): the byte-level layout is specified in FORMAT.md next to this file. v2 is v1
+// with a scalar-channel table after the fixed header; v3's table adds each channel's bits (quantized texture
+// coordinates) and the material names. A writer writes the lowest version that holds its header.
 //
 //   header | tile chunk | tile chunk | ... | tile index | footer (magic last)
 //
@@ -13,6 +14,7 @@
 #include <cstdint>
 #include <optional>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "engine/codecs/codec.h"
@@ -23,16 +25,18 @@
 namespace scanpress {
 
 constexpr uint32_t kContainerVersion = 1;
-constexpr uint32_t kContainerVersionScalars = 2;  // v1 plus the scalar channels' table after the fixed header
-constexpr size_t kHeaderSize = 80;                // the fixed header (the whole header of v1)
-constexpr size_t kMaxHeaderSize = kHeaderSize + 1 + 255 * (2 + 255) + 4;
+constexpr uint32_t kContainerVersionScalars = 2;    // v1 plus the scalar channels' table after the fixed header
+constexpr uint32_t kContainerVersionMaterials = 3;  // v2's table with channel bits and the material names
+constexpr size_t kHeaderSize = 80;                  // the fixed header (the whole header of v1)
+constexpr size_t kMaxMaterialBytes = 1024;          // of each material name
+constexpr size_t kMaxHeaderSize = kHeaderSize + 1 + 255 * (3 + 255) + 2 * (2 + kMaxMaterialBytes) + 4;
 constexpr size_t kFooterSize = 32;
 constexpr size_t kChunkHeaderSize = 36;
 constexpr size_t kIndexEntrySize = 56;
 constexpr uint32_t kMaxTiles = 1u << 24;
 
 struct ContainerHeader {
-  uint32_t version = kContainerVersion;  // v2 when the layout has scalar channels
+  uint32_t version = kContainerVersion;  // the lowest that holds the header (ContainerWriter::begin)
   uint32_t header_size = kHeaderSize;    // where the first chunk starts
   Grid grid;
   AttributeLayout layout;
@@ -42,8 +46,13 @@ struct ContainerHeader {
   // A partial container (`encode --subset i/N`): the tiles t with t % N == i of the whole tiling, for `merge`.
   // 0 and 0: a whole container.
   uint16_t subset_index = 0, subset_count = 0;
+  // OBJ's `mtllib` arguments and its one `usemtl` name (v3; empty: none), written back to decoded OBJ files.
+  std::string material_library, material;
   bool partial() const { return subset_count != 0; }
 };
+
+// A material name the header can hold: at most kMaxMaterialBytes, no control character (UTF-8 is kept).
+bool validMaterialName(const std::string& name);
 
 struct TileEntry {
   uint32_t tile_id = 0;
@@ -106,6 +115,10 @@ class ContainerWriter {
   Status finish();
   // Marks the container as subset `index` of `count` (before finish()).
   void setSubset(uint16_t index, uint16_t count) { header_.subset_index = index, header_.subset_count = count; }
+  // The OBJ material names to keep (before begin()).
+  void setMaterial(std::string library, std::string material) {
+    header_.material_library = std::move(library), header_.material = std::move(material);
+  }
   uint64_t bytesWritten() const { return offset_; }
   const ContainerHeader& header() const { return header_; }
 

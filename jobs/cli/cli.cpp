@@ -90,6 +90,8 @@ options:
   --bpv R             size target: at most R bits per encoded vertex, at the least error
   --normal-bits N     octahedral bits per normal component, 4..16 (default 12)
   --color-bits N      levels per color channel: 2^N, 1..8 (default 8: exact)
+  --uv-bits N         texture coordinates as multiples of 2^-N, 1..24 (a texel of a 2^N texture; default:
+                      lossless, bit for bit)
   --no-normals        drop normals
   --no-colors         drop colors
   --no-scalars        drop per-vertex scalar properties (a PLY's confidence, intensity, quality, ...; kept
@@ -397,10 +399,11 @@ bool budgetOption(const Args& args, uint64_t& budget, std::string& error) {
 int runEncode(int argc, char** argv) {
   Args args;
   std::string error;
-  if (!parseArgs(argc, argv, 2,
-                 {"--codec", "--stages", "--bits", "--normal-bits", "--color-bits", "--report", "--tile-triangles",
-                  "--threads", "--memory-budget", "--scratch-dir", "--samples-per-triangle", "--format", "--max-error",
-                  "--error", "--max-bytes", "--bpv", "--subset", "--grid", "--tau"},
+  if (!parseArgs(argc, argv, 2, {"--codec",      "--stages",        "--bits",        "--normal-bits",
+                                 "--color-bits", "--uv-bits",       "--report",      "--tile-triangles",
+                                 "--threads",    "--memory-budget", "--scratch-dir", "--samples-per-triangle",
+                                 "--format",     "--max-error",     "--error",       "--max-bytes",
+                                 "--bpv",        "--subset",        "--grid",        "--tau"},
                  {"--no-normals", "--no-colors", "--no-scalars", "--allow-degenerate", "--strict", "--measure",
                   "--quiet", "--help"},
                  args, error))
@@ -423,7 +426,8 @@ int runEncode(int argc, char** argv) {
   }
   if (!integerOption(args, "--bits", kMinGridBits, kMaxGridBits, s.bits, error) ||
       !integerOption(args, "--normal-bits", 4, 16, s.normal_bits, error) ||
-      !integerOption(args, "--color-bits", 1, 8, s.color_bits, error))
+      !integerOption(args, "--color-bits", 1, 8, s.color_bits, error) ||
+      !integerOption(args, "--uv-bits", 1, kMaxScalarBits, s.uv_bits, error))
     return usage(error, "encode");
   if (std::string target_error = targetOptions(args, s); !target_error.empty()) return usage(target_error, "encode");
   for (const char* name : {"--grid", "--tau"})

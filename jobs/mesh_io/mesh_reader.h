@@ -74,6 +74,10 @@ struct ReadStats {
   uint64_t polygons = 0;                 // faces with more than 3 corners that were triangulated
   uint64_t source_vertices = 0;          // vertex records in the file (STL: 3 per facet)
   std::vector<DroppedProperty> dropped;  // what the reader read past, in file order (empty: nothing)
+  // OBJ materials: the `mtllib` lines' arguments (space-separated, each library once) and the `usemtl` name when
+  // every face has that one. A file naming several materials keeps none (listed dropped: a material per face is
+  // not kept yet); its libraries are kept.
+  std::string material_library, material;
 };
 
 // A chunk's scalar channels (PLY vertex properties kept at their type, such as confidence or intensity): the

@@ -118,8 +118,10 @@ Status writeTexturedObj(const std::string& path, const Mesh& mesh, const WriteOp
                         const TexcoordChannels& tc) {
   if (mesh.triangles.size() > 0x7FFFFFFF || mesh.positions.size() > 0x7FFFFFFF)
     return makeError(ErrorCode::kLimitExceeded, path + ": mesh too large for an int32-indexed OBJ");
+  MeshFileLayout header;
+  header.material_library = options.material_library, header.material = options.material;
   SP_ASSIGN_OR_RETURN(auto writer,
-                      MeshFileWriter::create(path, MeshFileLayout{}, MeshFileFormat::of(MeshFileFormat::Kind::kObj)));
+                      MeshFileWriter::create(path, header, MeshFileFormat::of(MeshFileFormat::Kind::kObj)));
   const size_t n = mesh.positions.size(), stride = scalarWords(mesh.scalar_channels);
   const bool colors = !mesh.colors.empty(), normals = !mesh.normals.empty();
   struct Key {
@@ -198,6 +200,7 @@ Status writeWith(const std::string& path, const Mesh& mesh, const WriteOptions& 
   layout.color_channels = mesh.colors.empty() ? 0 : (mesh.color_channels == 4 ? 4 : 3);
   layout.double_positions = options.double_positions;
   if (format.kind() == MeshFileFormat::Kind::kPly) layout.scalars = mesh.scalar_channels;
+  layout.material_library = options.material_library, layout.material = options.material;
   const size_t stride = scalarWords(layout.scalars);
   SP_ASSIGN_OR_RETURN(auto writer, MeshFileWriter::create(path, layout, format));
   if (format.indexed())
@@ -248,7 +251,11 @@ void MeshFileFormat::header(const MeshFileLayout& layout, std::string& out) cons
       out += "property list uchar int vertex_indices\nend_header\n";
       return;
     }
-    case Kind::kObj: out += "# written by scanpress\n"; return;
+    case Kind::kObj:
+      out += "# written by scanpress\n";
+      if (!layout.material_library.empty()) out += "mtllib " + layout.material_library + "\n";
+      if (!layout.material.empty()) out += "usemtl " + layout.material + "\n";
+      return;
     case Kind::kStl: {
       // Binary STL: an 80-byte header (which must not start with "solid", or readers take it for ASCII), the
       // count, then per triangle its facet normal, three corners (float) and a zero attribute word.

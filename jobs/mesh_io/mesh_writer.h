@@ -28,6 +28,9 @@ struct WriteOptions {
   // The grid the positions lie on (decoded containers): with compression and at most 16 bits, glTF positions are
   // its integer cells (KHR_mesh_quantization, exact). nullptr: float positions.
   const Grid* grid = nullptr;
+  // OBJ: the `mtllib` arguments and the `usemtl` name to write (empty: none); other formats write neither (the
+  // caller reports them dropped).
+  std::string material_library, material;
 };
 
 Status writePly(const std::string& path, const Mesh& mesh, const WriteOptions& options = {});
@@ -48,6 +51,7 @@ struct MeshFileLayout {
   // (the caller reports them dropped: channelsWritten in texcoords.h). The OBJ writer writes a mesh's texture
   // coordinates itself (writeObj), not through this layout.
   std::vector<ScalarChannel> scalars;
+  std::string material_library, material;  // OBJ's `mtllib` and `usemtl` lines (empty: none)
 };
 
 // The byte form of one indexed format (.ply, .obj, .stl, .off; .zst is the output's business).

@@ -1,7 +1,8 @@
 // Wavefront OBJ reader: `v x y z [w | r g b [a]]`, `vn`, `vt u [v [w]]`, `f` with corners `a`, `a/b`, `a//c`,
-// `a/b/c`, negative (relative) indices, polygons (fan-triangulated). Every other record (g, o, s, usemtl, mtllib, l,
-// p, ...) is skipped and listed in ReadStats::dropped as "obj KEYWORD" with its count ("s off" and "s 0" state
-// nothing and are not listed). A vertex's normal is the `vn` its first face corner names; those arrive at the end
+// `a/b/c`, negative (relative) indices, polygons (fan-triangulated), `mtllib` and one `usemtl` (ReadStats'
+// material names; a file naming several materials keeps none, listed). Every other record (g, o, s, l, p, ...) is
+// skipped and listed in ReadStats::dropped as "obj KEYWORD" with its count ("s off" and "s 0" state nothing and
+// are not listed). A vertex's normal is the `vn` its first face corner names; those arrive at the end
 // (vertexNormals) because OBJ states them only in faces. Also listed: `vn` records no face names ("obj vn
 // unused"), face corners naming another normal than their vertex's first one ("obj vn per corner"), `v` weights
 // other than 1 ("obj v w") and `v` colors after a first `v` without them ("obj v colors").
@@ -23,10 +24,12 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <set>
 #include <string>
 #include <unordered_map>
 #include <vector>
 
+#include "engine/container/container.h"
 #include "jobs/mesh_io/input.h"
 #include "jobs/mesh_io/mesh_reader.h"
 #include "jobs/mesh_io/texcoords.h"
@@ -205,6 +208,10 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
   SkippedRecords skipped;
   std::vector<bool> vn_used;  // per `vn`: named by a face corner
   uint64_t weights = 0, late_colors = 0, corner_normals = 0;
+  // Materials: the library files (each once, in order), the first `usemtl` name, how many name another.
+  std::string libraries, first_material;
+  std::set<std::string> library_names;
+  uint64_t usemtl_records = 0, other_materials = 0, triangles_before_usemtl = 0, mtllib_records = 0;
   for (;;) {
     SP_ASSIGN_OR_RETURN(bool got, in.nextLine(line));
     if (!got) break;
@@ -330,6 +337,21 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
         if (vertex_normal[poly[i]] == UINT32_MAX) vertex_normal[poly[i]] = poly_normals[i];
         else if (std::memcmp(&vn[vertex_normal[poly[i]]], &vn[poly_normals[i]], sizeof(Vec3f)) != 0) ++corner_normals;
       }
+    } else if (word == "mtllib") {
+      ++mtllib_records;
+      for (std::string_view t; tok.next(t) && t[0] != '#';)  // (bounded: past the limit nothing is kept)
+        if (libraries.size() <= kMaxMaterialBytes && library_names.insert(std::string(t)).second) {
+          if (!libraries.empty()) libraries += ' ';
+          libraries.append(t);
+        }
+    } else if (word == "usemtl") {
+      std::string name;  // the rest of the line, single-spaced
+      for (std::string_view t; tok.next(t) && t[0] != '#';) {
+        if (!name.empty()) name += ' ';
+        name.append(t);
+      }
+      if (usemtl_records++ == 0) first_material = name, triangles_before_usemtl = out ? out->triangles() : 0;
+      else if (name != first_material) ++other_materials;
     } else if (word == "s") {
       std::string_view t;
       if (!tok.next(t) || !(t == "off" || t == "0")) skipped.add(word);
@@ -356,7 +378,18 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
   const uint64_t vt_unused = plan && plan->textures
                                  ? static_cast<uint64_t>(std::count(plan->vt_used.begin(), plan->vt_used.end(), false))
                                  : 0;
-  stats.dropped = skipped.take({{"obj vn unused", vn_unused},
+  // One material for every triangle is kept; several (or triangles before the first `usemtl`, which have none) are
+  // not: a material per face is not kept yet.
+  const bool one_material = usemtl_records && other_materials == 0 && triangles_before_usemtl == 0 &&
+                            !first_material.empty() && validMaterialName(first_material);
+  if (one_material) stats.material = first_material;
+  const bool library_kept = validMaterialName(libraries);
+  if (library_kept) stats.material_library = libraries;
+  stats.dropped = skipped.take({{"obj usemtl (several materials or faces without one: none is kept)",
+                                 one_material ? 0 : usemtl_records},
+                                {"obj mtllib (over " + std::to_string(kMaxMaterialBytes) + " bytes)",
+                                 library_kept ? 0 : mtllib_records},
+                                {"obj vn unused", vn_unused},
                                 {"obj vn per corner", corner_normals},
                                 {"obj v w", weights},
                                 {"obj v colors", late_colors},

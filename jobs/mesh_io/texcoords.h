@@ -23,31 +23,7 @@ namespace scanpress {
 inline constexpr const char* kTexcoordU = "u";
 inline constexpr const char* kTexcoordV = "v";
 
-// Indices of the texture coordinate channels, and their first word in a vertex's scalar words.
-struct TexcoordChannels {
-  size_t u = 0, v = 0;
-  size_t u_word = 0, v_word = 0;
-};
-
-// The first pair of float channels named (u, v), (s, t), (texture_u, texture_v) or (texture_s, texture_t).
-inline std::optional<TexcoordChannels> findTexcoords(std::span<const ScalarChannel> channels) {
-  static constexpr std::array<std::array<const char*, 2>, 4> kNames = {
-      {{"u", "v"}, {"s", "t"}, {"texture_u", "texture_v"}, {"texture_s", "texture_t"}}};
-  auto isFloat = [](ScalarType t) { return t == ScalarType::kFloat32 || t == ScalarType::kFloat64; };
-  for (const auto& names : kNames) {
-    TexcoordChannels tc;
-    bool found_u = false, found_v = false;
-    size_t word = 0;
-    for (size_t i = 0; i < channels.size(); ++i) {
-      const ScalarChannel& c = channels[i];
-      if (!found_u && c.name == names[0] && isFloat(c.type)) tc.u = i, tc.u_word = word, found_u = true;
-      if (!found_v && c.name == names[1] && isFloat(c.type)) tc.v = i, tc.v_word = word, found_v = true;
-      word += size_t(scalarTypeWords(c.type));
-    }
-    if (found_u && found_v) return tc;
-  }
-  return std::nullopt;
-}
+// TexcoordChannels and findTexcoords (the pair's names) are in engine/mesh.h: codecs predict the pair.
 
 // The value of float channel `c` whose first word is `words[0]`.
 inline double floatChannelValue(const ScalarChannel& c, const uint32_t* words) {
