@@ -242,8 +242,8 @@ void runTexcoords(const std::string& scan, const std::string& path, const Mesh& 
     geometry["draco -cl 10"] = dracoTexcoordBytes(*q, grid, layout, pair, bits, 0, nullptr);
     double lo = 1e300, hi = -1e300;
     for (size_t i = 0; i < q->positions.size(); ++i)
-      for (size_t word : {pair.u_word, pair.v_word}) {
-        const double x = floatChannelValue(layout.scalars[0], q->scalars.data() + i * stride + word);
+      for (const auto& [ch, word] : {std::pair{pair.u, pair.u_word}, std::pair{pair.v, pair.v_word}}) {
+        const double x = floatChannelValue(layout.scalars[ch], q->scalars.data() + i * stride + word);
         lo = std::min(lo, x), hi = std::max(hi, x);
       }
     const int draco_qt =

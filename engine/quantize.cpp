@@ -68,11 +68,18 @@ double channelValue(const ScalarChannel& c, const uint32_t* w) {
   if (c.type == ScalarType::kFloat64) return std::bit_cast<double>(uint64_t(w[0]) | uint64_t(w[1]) << 32);
   return double(std::bit_cast<float>(w[0]));
 }
+
+// round(value x 2^bits), unclamped (NaN for NaN).
+double rawLevel(const ScalarChannel& c, const uint32_t* words) {
+  return std::round(std::ldexp(channelValue(c, words), c.bits));
+}
+bool levelInRange(double level) { return std::fabs(level) <= double(kMaxScalarLevel); }  // false for NaN
 }  // namespace
 
 int64_t scalarLevel(const ScalarChannel& c, const uint32_t* words) {
-  const double x = std::round(std::ldexp(channelValue(c, words), c.bits));
-  return std::isfinite(x) && std::fabs(x) <= double(kMaxScalarLevel) ? int64_t(x) : kMaxScalarLevel + 1;
+  const double x = rawLevel(c, words);
+  if (std::isnan(x)) return 0;
+  return int64_t(std::clamp(x, -double(kMaxScalarLevel) - 1, double(kMaxScalarLevel)));
 }
 
 void scalarOfLevel(const ScalarChannel& c, int64_t level, uint32_t* words) {
@@ -86,8 +93,8 @@ void scalarOfLevel(const ScalarChannel& c, int64_t level, uint32_t* words) {
 }
 
 bool onScalarLevel(const ScalarChannel& c, const uint32_t* words) {
+  if (!levelInRange(rawLevel(c, words))) return false;
   const int64_t level = scalarLevel(c, words);
-  if (level < -kMaxScalarLevel || level > kMaxScalarLevel) return false;
   uint32_t back[2] = {0, 0};
   scalarOfLevel(c, level, back);
   return back[0] == words[0] && (c.type != ScalarType::kFloat64 || back[1] == words[1]);
@@ -98,9 +105,8 @@ bool snapScalar(const ScalarChannel& c, uint32_t* words) {
   // snap twice, then check that the result is a level's value.
   uint32_t w[2] = {words[0], c.type == ScalarType::kFloat64 ? words[1] : 0};
   for (int pass = 0; pass < 2; ++pass) {
-    const int64_t level = scalarLevel(c, w);
-    if (level < -kMaxScalarLevel || level > kMaxScalarLevel) return false;
-    scalarOfLevel(c, level, w);
+    if (!levelInRange(rawLevel(c, w))) return false;
+    scalarOfLevel(c, scalarLevel(c, w), w);
   }
   if (!onScalarLevel(c, w)) return false;
   words[0] = w[0];
@@ -135,10 +141,10 @@ Status snapScalarRow(std::span<const ScalarChannel> channels, uint32_t* row, uin
       char value[32] = "?";
       if (isFloatScalar(c.type)) std::snprintf(value, sizeof value, "%.9g", channelValue(c, row));
       return makeError(ErrorCode::kInvalidArgument,
-                       "vertex " + std::to_string(vertex) + ": " + c.name + " = " + std::string(value) +
-                           " cannot be kept at " + std::to_string(int(c.bits)) + " bits (a finite value below 2^" +
-                           std::to_string(31 - int(c.bits)) + " in magnitude); encode without --uv-bits to keep it " +
-                           "as it is");
+                       "vertex " + std::to_string(vertex) + " (counting texture seams' wedges): " + c.name + " = " +
+                           std::string(value) + " cannot be kept at " + std::to_string(int(c.bits)) +
+                           " bits (a finite value below 2^" + std::to_string(31 - int(c.bits)) +
+                           " in magnitude); encode without --uv-bits to keep it " + "as it is");
     }
     row += scalarTypeWords(c.type);
   }

@@ -74,8 +74,9 @@ inline Rgba8 quantizeColor(const Rgba8& c, const AttributeLayout& layout) {
 }
 
 // A quantized float channel (ScalarChannel::bits = b > 0): its values are multiples of 2^-b, and codecs code the
-// multiple, the value's level. scalarLevel(c, w) = round(value x 2^b) (half away from zero) of the value at `w`;
-// scalarOfLevel writes the value of a level. snapScalar replaces the value at `w` with the nearest level's; false,
+// multiple, the value's level. scalarLevel(c, w) = round(value x 2^b) (half away from zero) of the value at `w`,
+// clamped to the int32 range (NaN: 0; only a hostile payload decodes to such values); scalarOfLevel writes the
+// value of a level. snapScalar replaces the value at `w` with the nearest level's; false,
 // leaving it, when the value is not finite or its level is beyond +-kMaxScalarLevel. Snapped values are exactly
 // their level's (scalarOfLevel(c, scalarLevel(c, w)) gives w's bits back), so coding the level is lossless.
 inline constexpr int64_t kMaxScalarLevel = (int64_t{1} << 31) - 1;

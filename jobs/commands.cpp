@@ -203,7 +203,7 @@ Result<MergeResult> mergeContainers(const std::vector<std::string>& parts, const
   std::sort(tiles.begin(), tiles.end(), [](auto& a, auto& b) { return a.first->tile_id < b.first->tile_id; });
   SP_ASSIGN_OR_RETURN(auto out, AtomicFile::create(output));
   ContainerWriter writer(*out, first.grid, first.layout);
-  writer.setMaterial(first.material_library, first.material);
+  SP_RETURN_IF_ERROR(writer.setMaterial(first.material_library, first.material));
   SP_RETURN_IF_ERROR(writer.begin());
   std::vector<uint8_t> chunk;
   for (const auto& [e, f] : tiles) {

@@ -335,7 +335,7 @@ TEST(Texcoords, SeamsSurviveEncodeAndDecode) {
     uint64_t memory_budget;
   };
   for (const Case& c : {Case{"edgebreaker", 1u << 20, 0}, Case{"edgebreaker", 300, 0}, Case{"kdtree", 300, 0},
-                        Case{"octree", 1u << 20, 0}, Case{"store", 300, 0}, Case{"kdtree", 300, uint64_t(4) << 20}}) {
+                        Case{"octree", 1u << 20, 0}, Case{"store", 300, 0}, Case{"kdtree", 300, uint64_t(96) << 10}}) {
     SCOPED_TRACE(std::string(c.codec) + ", " + std::to_string(c.tile_triangles) + " triangles per tile" +
                  (c.memory_budget ? ", out of core" : ""));
     EncodeSettings s = settingsFor(in, dir.file("s.spz"), c.codec);
@@ -344,6 +344,7 @@ TEST(Texcoords, SeamsSurviveEncodeAndDecode) {
     auto enc = encodeFile(s);
     ASSERT_TRUE(enc.isOk()) << enc.status().toString();
     EXPECT_EQ(describeDropped(enc->read.dropped), "obj vt unused x 2");
+    EXPECT_EQ(c.memory_budget != 0, enc->out_of_core);
     ASSERT_TRUE(findTexcoords(enc->layout.scalars).has_value());
     if (c.tile_triangles < 1000) {
       EXPECT_GT(enc->tiles.size(), 4u);
@@ -384,8 +385,9 @@ TEST(Texcoords, UvBitsSnapEveryCornerThroughEncodeAndDecode) {
       uint64_t tile_triangles;
       uint64_t memory_budget;
     };
-    for (const Case& c : {Case{"edgebreaker", 1u << 20, 0}, Case{"edgebreaker", 300, 0}, Case{"kdtree", 300, 0},
-                          Case{"octree", 1u << 20, 0}, Case{"store", 300, 0}, Case{"kdtree", 300, uint64_t(4) << 20}}) {
+    for (const Case& c :
+         {Case{"edgebreaker", 1u << 20, 0}, Case{"edgebreaker", 300, 0}, Case{"kdtree", 300, 0},
+          Case{"octree", 1u << 20, 0}, Case{"store", 300, 0}, Case{"kdtree", 300, uint64_t(96) << 10}}) {
       SCOPED_TRACE(std::string(c.codec) + ", " + std::to_string(c.tile_triangles) + " triangles per tile" +
                    (c.memory_budget ? ", out of core" : "") + ", " + std::to_string(bits) + " bits");
       EncodeSettings s = settingsFor(in, dir.file("s.spz"), c.codec);
@@ -394,6 +396,7 @@ TEST(Texcoords, UvBitsSnapEveryCornerThroughEncodeAndDecode) {
       s.uv_bits = bits;
       auto enc = encodeFile(s);
       ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+      EXPECT_EQ(c.memory_budget != 0, enc->out_of_core);
       const auto tc = findTexcoords(enc->layout.scalars);
       ASSERT_TRUE(tc.has_value());
       EXPECT_EQ(enc->layout.scalars[tc->u].bits, bits);
@@ -424,7 +427,10 @@ TEST(Texcoords, UvBitsRefuseCoordinatesBeyondTheirRange) {
   auto enc = encodeFile(s);
   ASSERT_FALSE(enc.isOk());
   EXPECT_EQ(enc.status().code(), ErrorCode::kInvalidArgument);
-  EXPECT_NE(enc.status().message().find("vertex 1: u = 1000000"), std::string::npos) << enc.status().toString();
+  EXPECT_NE(
+      enc.status().message().find("vertex 1 (counting texture seams' wedges): u = 1000000 cannot be kept at 12 bits"),
+      std::string::npos)
+      << enc.status().toString();
   EXPECT_NE(enc.status().message().find("far.obj"), std::string::npos) << enc.status().toString();
   EXPECT_FALSE(std::filesystem::exists(s.output));
   s.uv_bits = 0;
@@ -491,6 +497,15 @@ TEST(Materials, MtllibAndOneUsemtlAreKept) {
     EXPECT_EQ(stats.material, c.material);
     EXPECT_EQ(describeDropped(stats.dropped), c.dropped);
   }
+  // Names that are not UTF-8 (Latin-1 here) are listed, not kept: the reports are JSON.
+  testing::writeBytes(dir.file("latin.obj"), "mtllib caf\xE9.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl Ma\xDF\nf 1 2 3\n");
+  ReadStats stats;
+  ASSERT_TRUE(readMeshFile(dir.file("latin.obj"), &stats).isOk());
+  EXPECT_EQ(stats.material_library, "");
+  EXPECT_EQ(stats.material, "");
+  EXPECT_EQ(describeDropped(stats.dropped),
+            "obj usemtl (over 1024 bytes, control characters or not UTF-8: not kept) x 1, obj mtllib (over 1024 "
+            "bytes, control characters or not UTF-8: not kept) x 1");
 }
 
 // pm simplifies (it would open the seams): the vertices are read as they are and `vt` is listed dropped; --no-scalars

@@ -297,6 +297,8 @@ int64_t codeScalar(Io& io, AttributeModels::Scalar& m, ScalarType t, int64_t pre
 // gives one. Measured (bench/RESULTS.md, "Quantized texture coordinates"): the affine rule is the one that
 // counts; the other alone was worse than the neighbours' mean on a UV sphere. `truth` (encoder): values by
 // vertex; `values` holds the known vertices' and gets the coded ones' (stride words per vertex).
+inline constexpr size_t kAcross = 16;
+
 template <class Io, class FacesOf, class Known>
 void codeScalarRange(Io& io, const AttributeLayout& layout, AttributeModels& models, u32 first, u32 n,
                      const std::vector<Triangle>& tris, const FacesOf& faces_of, const Known& known,
@@ -318,6 +320,10 @@ void codeScalarRange(Io& io, const AttributeLayout& layout, AttributeModels& mod
       return std::array<int64_t, 2>{channelOrdered(cu, vals.data() + v * stride + tc->u_word),
                                     channelOrdered(cv, vals.data() + v * stride + tc->v_word)};
     };
+    // The decoded vertices' levels (those of vertices before `first` and known ones now, the others as coded).
+    std::vector<std::array<int64_t, 2>> level(n);
+    for (u32 w = 0; w < n; ++w)
+      if (w < first || known(w)) level[w] = uv(values, w);
     // Texture-space orientation votes: per vertex, the sum of the signs of its decoded triangles' areas.
     std::vector<int32_t> votes(n, 0);
     int64_t all_votes = 0;
@@ -327,7 +333,7 @@ void codeScalarRange(Io& io, const AttributeLayout& layout, AttributeModels& mod
         bool complete = true;
         for (u32 w : t) complete &= w == v || decoded(w, v);
         if (!complete) continue;
-        const auto p0 = uv(values, t[0]), p1 = uv(values, t[1]), p2 = uv(values, t[2]);
+        const auto &p0 = level[t[0]], &p1 = level[t[1]], &p2 = level[t[2]];
         const i128 area = i128(p1[0] - p0[0]) * (p2[1] - p0[1]) - i128(p1[1] - p0[1]) * (p2[0] - p0[0]);
         const int s = area > 0 ? 1 : area < 0 ? -1 : 0;
         if (s == 0) continue;
@@ -348,20 +354,23 @@ void codeScalarRange(Io& io, const AttributeLayout& layout, AttributeModels& mod
         const u32 a = t[(k + 1) % 3], b = t[(k + 2) % 3];
         for (u32 w : {a, b})
           if (w != v && decoded(w, v)) {
-            const auto q = uv(values, w);
+            const auto& q = level[w];
             nsum[0] += q[0], nsum[1] += q[1], active_u += activity[w], active_v += activity_v[w], ++count;
           }
         if (a == v || b == v || !decoded(a, v) || !decoded(b, v)) continue;
-        // The decoded triangle across a-b, if any: the affine prediction.
+        // The decoded triangle across a-b, if any: the affine prediction. Sought among the first kAcross entries
+        // of the shorter of a's and b's triangle lists (a's on a tie; both ascend by triangle), so that a hub vertex
+        // (a fan's centre) costs no more than any other.
         bool affine = false;
-        for (u32 g : faces_of(a)) {
+        const auto fa = faces_of(a), fb = faces_of(b);
+        const auto across = fa.size() <= fb.size() ? fa : fb;
+        for (u32 g : across.first(std::min<size_t>(across.size(), kAcross))) {
           const Triangle& o = tris[g];
-          if (g == f || (o[0] != b && o[1] != b && o[2] != b)) continue;
+          if (g == f || (o[0] != a && o[1] != a && o[2] != a) || (o[0] != b && o[1] != b && o[2] != b)) continue;
           const u32 c = o[0] != a && o[0] != b ? o[0] : o[1] != a && o[1] != b ? o[1] : o[2];
           if (c == v || c == a || c == b || !decoded(c, v)) continue;
           std::array<double, 2> p;
-          if (predictTexcoordAffine((*pos)[v], (*pos)[a], (*pos)[b], (*pos)[c], uv(values, a), uv(values, b),
-                                    uv(values, c), p)) {
+          if (predictTexcoordAffine((*pos)[v], (*pos)[a], (*pos)[b], (*pos)[c], level[a], level[b], level[c], p)) {
             asum[0] += p[0], asum[1] += p[1], ++affine_predictions;
             affine = true;
             break;
@@ -371,7 +380,7 @@ void codeScalarRange(Io& io, const AttributeLayout& layout, AttributeModels& mod
         const int64_t local = int64_t(votes[a]) + votes[b];
         const int orientation = local != 0 ? (local > 0 ? 1 : -1) : all_votes < 0 ? -1 : 1;
         std::array<double, 2> p;
-        if (predictTexcoord((*pos)[v], (*pos)[a], (*pos)[b], uv(values, a), uv(values, b), orientation, p))
+        if (predictTexcoord((*pos)[v], (*pos)[a], (*pos)[b], level[a], level[b], orientation, p))
           psum[0] += p[0], psum[1] += p[1], ++predictions;
       }
       std::array<int64_t, 2> pred{0, 0};
@@ -383,7 +392,7 @@ void codeScalarRange(Io& io, const AttributeLayout& layout, AttributeModels& mod
       } else if (count) {
         pred = {rounded_mean(nsum[0], count), rounded_mean(nsum[1], count)};
       } else if (v > 0) {
-        pred = uv(values, v - 1);
+        pred = level[v - 1];
       }
       const std::array<int64_t, 2> actual = truth ? uv(*truth, v) : std::array<int64_t, 2>{0, 0};
       int cls_u = 0, cls_v = 0;
@@ -393,6 +402,7 @@ void codeScalarRange(Io& io, const AttributeLayout& layout, AttributeModels& mod
                                    activityBin(active_v, count), cls_v);
       channelFromOrdered(cu, x, values.data() + v * stride + tc->u_word);
       channelFromOrdered(cv, y, values.data() + v * stride + tc->v_word);
+      level[v] = uv(values, v);  // (the value's level: the coded one, except where a hostile level wrapped)
       activity[v] = u8(cls_u), activity_v[v] = u8(cls_v);
       vote(v);
     }

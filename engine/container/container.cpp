@@ -83,8 +83,24 @@ std::vector<uint8_t> headerTable(const ContainerHeader& h, uint32_t version) {
 
 bool validMaterialName(const std::string& name) {
   if (name.size() > kMaxMaterialBytes) return false;
-  for (char c : name)
-    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7F) return false;
+  // Well-formed UTF-8 (no overlong forms, surrogates or code points above U+10FFFF) without control characters.
+  for (size_t i = 0; i < name.size();) {
+    const auto b = [&](size_t k) { return static_cast<unsigned char>(name[k]); };
+    const unsigned char c = b(i);
+    if (c < 0x80) {
+      if (c < 0x20 || c == 0x7F) return false;
+      ++i;
+      continue;
+    }
+    const size_t n = c >= 0xC2 && c <= 0xDF ? 2 : c >= 0xE0 && c <= 0xEF ? 3 : c >= 0xF0 && c <= 0xF4 ? 4 : 0;
+    if (n == 0 || i + n > name.size()) return false;
+    for (size_t k = 1; k < n; ++k)
+      if ((b(i + k) & 0xC0) != 0x80) return false;
+    if ((c == 0xE0 && b(i + 1) < 0xA0) || (c == 0xED && b(i + 1) > 0x9F) || (c == 0xF0 && b(i + 1) < 0x90) ||
+        (c == 0xF4 && b(i + 1) > 0x8F))
+      return false;
+    i += n;
+  }
   return true;
 }
 
@@ -147,10 +163,11 @@ Status ContainerWriter::begin() {
     if (!validMaterialName(*s))
       return makeError(ErrorCode::kInvalidArgument, "material name of " + std::to_string(s->size()) +
                                                         " bytes: at most " + std::to_string(kMaxMaterialBytes) +
-                                                        ", without control characters");
+                                                        " of UTF-8 without control characters");
   header_.version = versionFor(header_);
   const auto bytes = serializeHeader(header_);
   header_.header_size = static_cast<uint32_t>(bytes.size());
+  begun_ = true;
   SP_RETURN_IF_ERROR(sink_.append(bytes));
   offset_ = bytes.size();
   return Status::ok();

@@ -51,7 +51,7 @@ struct ContainerHeader {
   bool partial() const { return subset_count != 0; }
 };
 
-// A material name the header can hold: at most kMaxMaterialBytes, no control character (UTF-8 is kept).
+// A material name the header can hold: at most kMaxMaterialBytes of well-formed UTF-8 without control characters.
 bool validMaterialName(const std::string& name);
 
 struct TileEntry {
@@ -115,9 +115,12 @@ class ContainerWriter {
   Status finish();
   // Marks the container as subset `index` of `count` (before finish()).
   void setSubset(uint16_t index, uint16_t count) { header_.subset_index = index, header_.subset_count = count; }
-  // The OBJ material names to keep (before begin()).
-  void setMaterial(std::string library, std::string material) {
+  // The OBJ material names to keep: before begin() (finish() rewrites the header in place, so its size is fixed
+  // then); kInternal after.
+  Status setMaterial(std::string library, std::string material) {
+    if (begun_) return makeError(ErrorCode::kInternal, "the container's material names are set after its header");
     header_.material_library = std::move(library), header_.material = std::move(material);
+    return Status::ok();
   }
   uint64_t bytesWritten() const { return offset_; }
   const ContainerHeader& header() const { return header_; }
@@ -127,6 +130,7 @@ class ContainerWriter {
   ContainerHeader header_;
   std::vector<TileEntry> entries_;
   uint64_t offset_ = 0;
+  bool begun_ = false;
 };
 
 std::vector<uint8_t> serializeHeader(const ContainerHeader& header);

@@ -380,15 +380,18 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
                                  : 0;
   // One material for every triangle is kept; several (or triangles before the first `usemtl`, which have none) are
   // not: a material per face is not kept yet.
-  const bool one_material = usemtl_records && other_materials == 0 && triangles_before_usemtl == 0 &&
-                            !first_material.empty() && validMaterialName(first_material);
-  if (one_material) stats.material = first_material;
+  const bool one_material = usemtl_records && other_materials == 0 && triangles_before_usemtl == 0;
+  const bool material_valid = !first_material.empty() && validMaterialName(first_material);
+  if (one_material && material_valid) stats.material = first_material;
   const bool library_kept = validMaterialName(libraries);
   if (library_kept) stats.material_library = libraries;
+  const std::string unfit = " (over " + std::to_string(kMaxMaterialBytes) +
+                            " bytes, control characters or not UTF-8: not kept)";
   stats.dropped = skipped.take({{"obj usemtl (several materials or faces without one: none is kept)",
                                  one_material ? 0 : usemtl_records},
-                                {"obj mtllib (over " + std::to_string(kMaxMaterialBytes) + " bytes)",
-                                 library_kept ? 0 : mtllib_records},
+                                {"obj usemtl" + (first_material.empty() ? std::string(" (no name)") : unfit),
+                                 one_material && !material_valid ? usemtl_records : 0},
+                                {"obj mtllib" + unfit, library_kept ? 0 : mtllib_records},
                                 {"obj vn unused", vn_unused},
                                 {"obj vn per corner", corner_normals},
                                 {"obj v w", weights},
