@@ -39,6 +39,23 @@ struct Config {
   bool colors;
 };
 
+// Draco's decoding of `buffer` (nullptr on failure).
+std::unique_ptr<draco::Mesh> dracoDecode(const draco::EncoderBuffer& buffer) {
+  draco::DecoderBuffer in;
+  in.Init(buffer.data(), buffer.size());
+  draco::Decoder dec;
+  auto r = dec.DecodeMeshFromBuffer(&in);
+  if (!r.ok()) return nullptr;
+  return std::move(r).value();
+}
+
+// The points of `q` by quantized position: Draco reorders points, so its decoded ones are matched by position.
+std::multimap<Vec3u, uint32_t> pointsAt(const QuantizedMesh& q) {
+  std::multimap<Vec3u, uint32_t> at;
+  for (uint32_t i = 0; i < uint32_t(q.positions.size()); ++i) at.emplace(q.positions[i], i);
+  return at;
+}
+
 size_t dracoBytes(const QuantizedMesh& q, const Grid& grid, const AttributeLayout& layout, int bits,
                   double* max_angle_deg, bool* colors_exact) {
   draco::Mesh dm;
@@ -77,15 +94,10 @@ size_t dracoBytes(const QuantizedMesh& q, const Grid& grid, const AttributeLayou
   draco::EncoderBuffer buffer;
   if (!enc.EncodeMeshToBuffer(dm, &buffer).ok()) return 0;
   if (max_angle_deg || colors_exact) {
-    draco::DecoderBuffer in;
-    in.Init(buffer.data(), buffer.size());
-    draco::Decoder dec;
-    auto r = dec.DecodeMeshFromBuffer(&in);
-    if (!r.ok()) return 0;
-    const auto& out = *r.value();
-    // Draco reorders points: match them to the input by quantized position (first unused input point there).
-    std::multimap<Vec3u, uint32_t> at;
-    for (uint32_t i = 0; i < n; ++i) at.emplace(q.positions[i], i);
+    const auto decoded = dracoDecode(buffer);
+    if (!decoded) return 0;
+    const auto& out = *decoded;
+    const std::multimap<Vec3u, uint32_t> at = pointsAt(q);
     const draco::PointAttribute* pa = out.GetNamedAttribute(draco::GeometryAttribute::POSITION);
     const draco::PointAttribute* na = out.GetNamedAttribute(draco::GeometryAttribute::NORMAL);
     const draco::PointAttribute* ca = out.GetNamedAttribute(draco::GeometryAttribute::COLOR);
@@ -171,14 +183,10 @@ size_t dracoTexcoordBytes(const QuantizedMesh& q, const Grid& grid, const Attrib
   draco::EncoderBuffer buffer;
   if (!enc.EncodeMeshToBuffer(dm, &buffer).ok()) return 0;
   if (max_error && uv_att >= 0) {
-    draco::DecoderBuffer in;
-    in.Init(buffer.data(), buffer.size());
-    draco::Decoder dec;
-    auto r = dec.DecodeMeshFromBuffer(&in);
-    if (!r.ok()) return 0;
-    const auto& out = *r.value();
-    std::multimap<Vec3u, uint32_t> at;
-    for (uint32_t i = 0; i < n; ++i) at.emplace(q.positions[i], i);
+    const auto decoded = dracoDecode(buffer);
+    if (!decoded) return 0;
+    const auto& out = *decoded;
+    const std::multimap<Vec3u, uint32_t> at = pointsAt(q);
     const draco::PointAttribute* pa = out.GetNamedAttribute(draco::GeometryAttribute::POSITION);
     const draco::PointAttribute* ta = out.GetNamedAttribute(draco::GeometryAttribute::TEX_COORD);
     if (!pa || !ta) return 0;

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
+#include <tuple>
 
 #include "jobs/container_file.h"
 #include "jobs/file_io.h"
@@ -177,7 +179,8 @@ Result<MergeResult> mergeContainers(const std::vector<std::string>& parts, const
                                                         std::to_string(h.subset_count) + ", not of " +
                                                         std::to_string(n) + " as " + parts[0]);
     if (h.grid.bits != first.grid.bits || h.grid.cell != first.grid.cell || h.grid.origin != first.grid.origin ||
-        h.layout != first.layout || h.material_library != first.material_library || h.material != first.material)
+        h.layout != first.layout || h.material_library != first.material_library || h.material != first.material ||
+        h.texture_file != first.texture_file)
       return makeError(ErrorCode::kInvalidArgument, f.path() + ": another grid or attribute layout than " + parts[0] +
                                                         ": parts of different scans or settings");
     if (by_index[h.subset_index])
@@ -203,7 +206,7 @@ Result<MergeResult> mergeContainers(const std::vector<std::string>& parts, const
   std::sort(tiles.begin(), tiles.end(), [](auto& a, auto& b) { return a.first->tile_id < b.first->tile_id; });
   SP_ASSIGN_OR_RETURN(auto out, AtomicFile::create(output));
   ContainerWriter writer(*out, first.grid, first.layout);
-  SP_RETURN_IF_ERROR(writer.setMaterial(first.material_library, first.material));
+  SP_RETURN_IF_ERROR(writer.setMaterial(first.material_library, first.material, first.texture_file));
   SP_RETURN_IF_ERROR(writer.begin());
   std::vector<uint8_t> chunk;
   for (const auto& [e, f] : tiles) {
@@ -317,11 +320,14 @@ void noteDroppedScalars(const ContainerHeader& header, const std::string& output
                                                     : channelsWritten(output, header.layout.scalars, result.faces > 0);
   for (size_t i = 0; i < header.layout.scalars.size(); ++i)
     if (!written[i]) result.dropped.push_back({"vertex." + header.layout.scalars[i].name, result.vertices});
+  // Only OBJ has a place for the material lines, only PLY for the texture file comment.
   const auto format = MeshFileFormat::forPath(output);
-  if (!format.isOk() || format->kind() != MeshFileFormat::Kind::kObj)  // only OBJ has a place for them
-    for (const auto& [name, value] :
-         {std::pair{"obj mtllib", &header.material_library}, {"obj usemtl", &header.material}})
-      if (!value->empty()) result.dropped.push_back({std::string(name) + " " + *value, 1});
+  const auto kind = format.isOk() ? std::optional(format->kind()) : std::nullopt;
+  for (const auto& [name, value, home] :
+       {std::tuple{"obj mtllib", &header.material_library, MeshFileFormat::Kind::kObj},
+        {"obj usemtl", &header.material, MeshFileFormat::Kind::kObj},
+        {"ply comment TextureFile", &header.texture_file, MeshFileFormat::Kind::kPly}})
+    if (!value->empty() && kind != home) result.dropped.push_back({std::string(name) + " " + *value, 1});
 }
 
 Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
@@ -362,6 +368,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     stream.memory_budget = settings.memory_budget;
     stream.scratch_parent = settings.scratch_dir;
     stream.material_library = header.material_library, stream.material = header.material;
+    stream.texture_file = header.texture_file;
     SP_ASSIGN_OR_RETURN(StreamDecodeResult streamed, streamDecode(file, chosen, settings.output, stream));
     result.vertices = streamed.vertices;
     result.faces = streamed.faces;
@@ -374,6 +381,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   write.gltf_compression = settings.gltf_compression;
   write.grid = &header.grid;
   write.material_library = header.material_library, write.material = header.material;
+  write.texture_file = header.texture_file;
   if (settings.gltf_tile_nodes) {  // one node per tile, each decoded on its own (border vertices in both)
     std::vector<Mesh> meshes;
     std::vector<std::string> names;

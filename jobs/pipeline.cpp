@@ -491,7 +491,8 @@ class ScanEncoder {
     SP_ASSIGN_OR_RETURN(file_, AtomicFile::create(s_.output));
     writer_.emplace(*file_, result_.grid, result_.layout);
     if (s_.subset_count) writer_->setSubset(s_.subset_index, s_.subset_count);
-    SP_RETURN_IF_ERROR(writer_->setMaterial(result_.read.material_library, result_.read.material));
+    SP_RETURN_IF_ERROR(writer_->setMaterial(result_.read.material_library, result_.read.material,
+                                            result_.read.texture_file));
     SP_RETURN_IF_ERROR(writer_->begin());
     // A point cloud has no surface to sample (jobs/measure.h): it is not measured.
     result_.measured = s_.measure.enabled && !result_.point_cloud;

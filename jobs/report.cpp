@@ -134,6 +134,7 @@ nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& 
   j["attributes"] = layoutJson(r.layout);
   j["material_library"] = r.read.material_library;  // kept (OBJ mtllib; empty: none)
   j["material"] = r.read.material;
+  j["texture_file"] = r.read.texture_file;  // kept (PLY comment TextureFile; empty: none)
   j["input_vertices"] = r.read.vertices;
   j["input_faces"] = r.read.triangles;
   j["input_polygons_triangulated"] = r.read.polygons;
@@ -343,6 +344,7 @@ std::string containerInfoJson(const ContainerFile& file) {
   j["attributes"] = layoutJson(h.layout);
   j["material_library"] = h.material_library;
   j["material"] = h.material;
+  j["texture_file"] = h.texture_file;
   j["vertices"] = h.vertices;
   j["faces"] = h.faces;
   j["bytes"] = file.size();
@@ -425,6 +427,7 @@ std::string containerInfoText(const ContainerFile& file) {
   if (!h.material_library.empty() || !h.material.empty())
     os << "  material:  " << (h.material.empty() ? std::string("(none)") : h.material)
        << (h.material_library.empty() ? std::string() : " from " + h.material_library) << "\n";
+  if (!h.texture_file.empty()) os << "  texture:   " << h.texture_file << "\n";
   os << "  tiles:     " << h.tile_count << "\n";
   for (const auto& t : file.tiles()) {
     os << "    tile " << t.tile_id << ": " << codecName(t.codec) << " v" << t.codec_version << ", " << t.vertices

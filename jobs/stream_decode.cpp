@@ -438,6 +438,7 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
   MeshFileLayout layout = welder.layout();
   if (layout.vertices == 0) layout.normals = false, layout.color_channels = 0;  // as the in-memory writers do
   layout.material_library = settings.material_library, layout.material = settings.material;
+  layout.texture_file = settings.texture_file;
   SP_ASSIGN_OR_RETURN(auto writer, MeshFileWriter::create(output, layout, format));
   if (format.indexed()) {
     std::vector<ScratchVertex> chunk;

@@ -53,6 +53,7 @@ struct StreamDecodeSettings {
   uint64_t memory_budget = 0;                 // bytes (at least 16 MiB)
   std::string scratch_parent;                 // empty: the system temp directory
   std::string material_library, material;     // OBJ output's `mtllib` and `usemtl` (empty: none)
+  std::string texture_file;                   // PLY output's `comment TextureFile` (empty: none)
 };
 
 struct StreamDecodeResult {

@@ -381,6 +381,41 @@ TEST(ScalarChannels, ContainerWritesVersion2OnlyWithChannels) {
   }
 }
 
+// Every byte of `file`'s header table (after the fixed header, before the table's checksum) set to each of `values`
+// and to its own value plus and minus one, the table's checksum repaired so that the parser itself must refuse what
+// does not parse. Every refusal names the file; `accepted` sees each header that parses, whose tiles then decode
+// or fail cleanly. Returns (refused, tried).
+template <class Accepted>
+std::pair<size_t, size_t> mutateHeaderTable(const std::vector<uint8_t>& file, const std::vector<int>& values,
+                                            const Accepted& accepted) {
+  const auto pc = parseContainer(file, "mem");
+  EXPECT_TRUE(pc.isOk());
+  if (!pc.isOk()) return {0, 0};
+  const size_t hs = pc->header.header_size;
+  size_t refused = 0, tried = 0;
+  for (size_t at = kHeaderSize; at + 4 < hs; ++at) {
+    for (const int v : values) {
+      std::vector<uint8_t> b = file;
+      b[at] = uint8_t(v == 256 ? file[at] + 1 : v == -1 ? file[at] - 1 : v);
+      const uint32_t crc = crc32c(std::span(b).subspan(kHeaderSize, hs - kHeaderSize - 4));
+      std::memcpy(b.data() + hs - 4, &crc, 4);
+      auto r = parseContainer(b, "mem");
+      ++tried;
+      if (!r.isOk()) {
+        ++refused;
+        EXPECT_NE(r.status().message().find("mem"), std::string::npos);
+        continue;
+      }
+      accepted(r->header);
+      for (const TileEntry& e : r->tiles) {
+        auto payload = parseTileChunk(std::span(b).subspan(e.offset, e.chunk_bytes), e, "mem");
+        if (payload.isOk()) (void)decodeTilePayload(r->header, e, *payload, "mem");
+      }
+    }
+  }
+  return {refused, tried};
+}
+
 // Hostile channel tables, checksums repaired so that the parser itself must refuse them: every byte of the table
 // and the header size set to every value near the truth; no crash, no acceptance of a table that does not parse.
 TEST(ScalarChannels, HostileChannelTablesFailCleanly) {
@@ -401,27 +436,8 @@ TEST(ScalarChannels, HostileChannelTablesFailCleanly) {
       std::memcpy(b.data() + size - 4, &crc, 4);
     }
   };
-  size_t refused = 0, tried = 0;
-  for (size_t at = kHeaderSize; at + 4 < hs; ++at)
-    for (const int v : std::vector<int>{0, 1, 8, 9, 32, 255, int((*file)[at]) + 1, int((*file)[at]) - 1}) {
-      std::vector<uint8_t> b = *file;
-      b[at] = uint8_t(v);
-      repair(b, uint32_t(hs));
-      auto r = parseContainer(b, "mem");
-      ++tried;
-      if (!r.isOk()) {
-        ++refused;
-        EXPECT_NE(r.status().message().find("mem"), std::string::npos);
-        continue;
-      }
-      // Accepted: a valid table (a renamed channel or a changed type): every tile still decodes or fails cleanly.
-      for (const TileEntry& e : r->tiles) {
-        auto payload = parseTileChunk(std::span(b).subspan(e.offset, e.chunk_bytes), e, "mem");
-        if (payload.isOk()) {
-          (void)decodeTilePayload(r->header, e, *payload, "mem");
-        }
-      }
-    }
+  // Accepted: a valid table (a renamed channel or a changed type), whose tiles decode or fail cleanly.
+  const auto [refused, tried] = mutateHeaderTable(*file, {0, 1, 8, 9, 32, 255, 256, -1}, [](const ContainerHeader&) {});
   for (uint32_t size : {uint32_t(kHeaderSize), uint32_t(kHeaderSize + 6), uint32_t(hs - 1), uint32_t(hs + 1),
                         uint32_t(kMaxHeaderSize + 1), 0xFFFFFFFFu}) {
     std::vector<uint8_t> b = *file;
@@ -502,17 +518,21 @@ TEST(UvBits, SnapScalarIsRoundingToMultiplesOfItsStep) {
     for (int bits : {1, 5, 12, 16, 24}) {
       const ScalarChannel c{"u", type, uint8_t(bits)};
       const double step = std::ldexp(1.0, -bits), limit = std::ldexp(1.0, 31 - bits);
-      for (int i = 0; i < 20000; ++i) {
-        // Values of every magnitude up to the limit, of both signs.
-        const double magnitude = std::ldexp(double(rng() % 1000000) / 1e6, int(rng() % 40) - 10);
-        const double x = (rng() & 1 ? -1 : 1) * std::min(magnitude, limit * 0.999);
-        uint32_t w[2] = {0, 0};
+      // The words of x at the channel's type.
+      const auto store = [&](double x, uint32_t(&w)[2]) {
         if (type == ScalarType::kFloat32) {
           w[0] = floatBits(float(x));
         } else {
           const uint64_t b = std::bit_cast<uint64_t>(x);
           w[0] = uint32_t(b), w[1] = uint32_t(b >> 32);
         }
+      };
+      for (int i = 0; i < 20000; ++i) {
+        // Values of every magnitude up to the limit, of both signs.
+        const double magnitude = std::ldexp(double(rng() % 1000000) / 1e6, int(rng() % 40) - 10);
+        const double x = (rng() & 1 ? -1 : 1) * std::min(magnitude, limit * 0.999);
+        uint32_t w[2] = {0, 0};
+        store(x, w);
         const double value = type == ScalarType::kFloat32 ? double(std::bit_cast<float>(w[0])) : x;
         ASSERT_TRUE(snapScalar(c, w)) << value << " at " << bits << " bits";
         const double snapped = type == ScalarType::kFloat32
@@ -534,12 +554,7 @@ TEST(UvBits, SnapScalarIsRoundingToMultiplesOfItsStep) {
       for (double bad : {limit * 1.01, -limit * 1.01, std::numeric_limits<double>::infinity(),
                          std::numeric_limits<double>::quiet_NaN()}) {
         uint32_t w[2] = {0, 0};
-        if (type == ScalarType::kFloat32) {
-          w[0] = floatBits(float(bad));
-        } else {
-          const uint64_t b = std::bit_cast<uint64_t>(bad);
-          w[0] = uint32_t(b), w[1] = uint32_t(b >> 32);
-        }
+        store(bad, w);
         const uint32_t before = w[0];
         EXPECT_FALSE(snapScalar(c, w)) << bad;
         EXPECT_EQ(w[0], before);
@@ -734,7 +749,8 @@ TEST(UvBits, ContainerVersion3HoldsBitsAndMaterials) {
   EXPECT_EQ(pc->header.layout, layout);
   EXPECT_EQ(pc->header.material_library, library);
   EXPECT_EQ(pc->header.material, material);
-  EXPECT_EQ(pc->header.header_size, kHeaderSize + 1 + 3 * 3 + 3 + 4 + library.size() + material.size() + 4);
+  EXPECT_EQ(pc->header.header_size, kHeaderSize + 1 + 3 * 3 + 3 + 6 + library.size() + material.size() + 4);
+  EXPECT_TRUE(pc->header.texture_file.empty());
   // Materials alone, without any channel: version 3 with an empty table.
   QuantizedMesh plain = q;
   plain.scalars.clear();
@@ -795,33 +811,17 @@ TEST(UvBits, HostileVersion3TablesFailCleanly) {
   }
   auto pc = parseContainer(file, "mem");
   ASSERT_TRUE(pc.isOk()) << pc.status().toString();
-  const size_t hs = pc->header.header_size;
-  size_t refused = 0, tried = 0;
-  for (size_t at = kHeaderSize; at + 4 < hs; ++at)
-    for (const int v : std::vector<int>{0, 1, 7, 24, 25, 31, 255, int(file[at]) + 1, int(file[at]) - 1}) {
-      std::vector<uint8_t> b = file;
-      b[at] = uint8_t(v);
-      const uint32_t crc = crc32c(std::span(b).subspan(kHeaderSize, hs - kHeaderSize - 4));
-      std::memcpy(b.data() + hs - 4, &crc, 4);
-      auto r = parseContainer(b, "mem");
-      ++tried;
-      if (!r.isOk()) {
-        ++refused;
-        EXPECT_NE(r.status().message().find("mem"), std::string::npos);
-        continue;
-      }
-      for (const ScalarChannel& c : r->header.layout.scalars) {
-        EXPECT_LE(c.bits, kMaxScalarBits);
-        if (c.bits) {
-          EXPECT_TRUE(isFloatScalar(c.type));
-        }
-      }
-      EXPECT_TRUE(validMaterialName(r->header.material_library) && validMaterialName(r->header.material));
-      for (const TileEntry& e : r->tiles) {
-        auto payload = parseTileChunk(std::span(b).subspan(e.offset, e.chunk_bytes), e, "mem");
-        if (payload.isOk()) (void)decodeTilePayload(r->header, e, *payload, "mem");
+  const auto [refused, tried] = mutateHeaderTable(file, {0, 1, 7, 24, 25, 31, 255, 256, -1},
+                                                  [](const ContainerHeader& h) {
+    for (const ScalarChannel& c : h.layout.scalars) {
+      EXPECT_LE(c.bits, kMaxScalarBits);
+      if (c.bits) {
+        EXPECT_TRUE(isFloatScalar(c.type));
       }
     }
+    EXPECT_TRUE(validMaterialName(h.material_library) && validMaterialName(h.material) &&
+                validMaterialName(h.texture_file));
+  });
   EXPECT_GT(refused, tried / 4);
   // A version 2 reader's view: the same table read as version 2 does not parse.
   std::vector<uint8_t> b = file;

@@ -321,6 +321,41 @@ EncodeSettings settingsFor(const std::string& in, const std::string& out, const 
   return s;
 }
 
+// The ways of encoding that carry texture coordinates: every codec that carries scalars, one tile and many, in
+// memory and out of core.
+struct RunCase {
+  const char* codec;
+  uint64_t tile_triangles;
+  uint64_t memory_budget;
+  std::string name() const {
+    return std::string(codec) + ", " + std::to_string(tile_triangles) + " triangles per tile" +
+           (memory_budget ? ", out of core" : "");
+  }
+  EncodeSettings settings(const std::string& in, const std::string& out) const {
+    EncodeSettings s = settingsFor(in, out, codec);
+    s.tile_triangles = tile_triangles;
+    s.memory_budget = memory_budget;
+    return s;
+  }
+};
+const RunCase kRunCases[] = {
+    {"edgebreaker", 1u << 20, 0}, {"edgebreaker", 300, 0}, {"kdtree", 300, 0},
+    {"octree", 1u << 20, 0},      {"store", 300, 0},       {"kdtree", 300, uint64_t(96) << 10}};
+
+// Decodes `spz` to `obj` and checks its faces corner by corner against `want`'s, with as many `v` lines.
+DecodeResult expectDecodedCorners(const std::string& spz, const std::string& obj, const ObjText& want) {
+  DecodeSettings d;
+  d.input = spz;
+  d.output = obj;
+  auto dec = decodeFile(d);
+  EXPECT_TRUE(dec.isOk()) << dec.status().toString();
+  if (!dec.isOk()) return {};
+  const ObjText got = parseObj(d.output);
+  EXPECT_EQ(got.v.size(), want.v.size());
+  EXPECT_TRUE(cornerFaces(got, want) == cornerFaces(want, want));
+  return *dec;
+}
+
 // Through encode and decode, every codec that carries scalars, one tile and many (welded across tiles), in memory
 // and out of core: the decoded OBJ's faces are the input's, corner by corner (positions to the grid, texture
 // coordinates bit for bit), with as many `v` lines as the input.
@@ -329,18 +364,9 @@ TEST(Texcoords, SeamsSurviveEncodeAndDecode) {
   const std::string in = dir.file("sphere.obj");
   testing::writeBytes(in, uvSphereObj(24, 48));
   const ObjText want = parseObj(in);
-  struct Case {
-    const char* codec;
-    uint64_t tile_triangles;
-    uint64_t memory_budget;
-  };
-  for (const Case& c : {Case{"edgebreaker", 1u << 20, 0}, Case{"edgebreaker", 300, 0}, Case{"kdtree", 300, 0},
-                        Case{"octree", 1u << 20, 0}, Case{"store", 300, 0}, Case{"kdtree", 300, uint64_t(96) << 10}}) {
-    SCOPED_TRACE(std::string(c.codec) + ", " + std::to_string(c.tile_triangles) + " triangles per tile" +
-                 (c.memory_budget ? ", out of core" : ""));
-    EncodeSettings s = settingsFor(in, dir.file("s.spz"), c.codec);
-    s.tile_triangles = c.tile_triangles;
-    s.memory_budget = c.memory_budget;
+  for (const RunCase& c : kRunCases) {
+    SCOPED_TRACE(c.name());
+    const EncodeSettings s = c.settings(in, dir.file("s.spz"));
     auto enc = encodeFile(s);
     ASSERT_TRUE(enc.isOk()) << enc.status().toString();
     EXPECT_EQ(describeDropped(enc->read.dropped), "obj vt unused x 2");
@@ -349,15 +375,8 @@ TEST(Texcoords, SeamsSurviveEncodeAndDecode) {
     if (c.tile_triangles < 1000) {
       EXPECT_GT(enc->tiles.size(), 4u);
     }
-    DecodeSettings d;
-    d.input = s.output;
-    d.output = dir.file("out.obj");
-    auto dec = decodeFile(d);
-    ASSERT_TRUE(dec.isOk()) << dec.status().toString();
-    EXPECT_TRUE(dec->dropped.empty()) << describeDropped(dec->dropped);
-    const ObjText got = parseObj(d.output);
-    EXPECT_EQ(got.v.size(), want.v.size());
-    EXPECT_TRUE(cornerFaces(got, want) == cornerFaces(want, want));
+    const DecodeResult dec = expectDecodedCorners(s.output, dir.file("out.obj"), want);
+    EXPECT_TRUE(dec.dropped.empty()) << describeDropped(dec.dropped);
   }
 }
 
@@ -380,19 +399,9 @@ TEST(Texcoords, UvBitsSnapEveryCornerThroughEncodeAndDecode) {
         EXPECT_LE(std::fabs(snapped - x), std::ldexp(1.0, -bits - 1) + 1e-7);
         x = snapped;
       }
-    struct Case {
-      const char* codec;
-      uint64_t tile_triangles;
-      uint64_t memory_budget;
-    };
-    for (const Case& c :
-         {Case{"edgebreaker", 1u << 20, 0}, Case{"edgebreaker", 300, 0}, Case{"kdtree", 300, 0},
-          Case{"octree", 1u << 20, 0}, Case{"store", 300, 0}, Case{"kdtree", 300, uint64_t(96) << 10}}) {
-      SCOPED_TRACE(std::string(c.codec) + ", " + std::to_string(c.tile_triangles) + " triangles per tile" +
-                   (c.memory_budget ? ", out of core" : "") + ", " + std::to_string(bits) + " bits");
-      EncodeSettings s = settingsFor(in, dir.file("s.spz"), c.codec);
-      s.tile_triangles = c.tile_triangles;
-      s.memory_budget = c.memory_budget;
+    for (const RunCase& c : kRunCases) {
+      SCOPED_TRACE(c.name() + ", " + std::to_string(bits) + " bits");
+      EncodeSettings s = c.settings(in, dir.file("s.spz"));
       s.uv_bits = bits;
       auto enc = encodeFile(s);
       ASSERT_TRUE(enc.isOk()) << enc.status().toString();
@@ -404,14 +413,7 @@ TEST(Texcoords, UvBitsSnapEveryCornerThroughEncodeAndDecode) {
       auto file_header = ContainerFile::open(s.output);
       ASSERT_TRUE(file_header.isOk());
       EXPECT_EQ(file_header->header().version, 3u);
-      DecodeSettings d;
-      d.input = s.output;
-      d.output = dir.file("out.obj");
-      auto dec = decodeFile(d);
-      ASSERT_TRUE(dec.isOk()) << dec.status().toString();
-      const ObjText got = parseObj(d.output);
-      EXPECT_EQ(got.v.size(), want.v.size());
-      EXPECT_TRUE(cornerFaces(got, want) == cornerFaces(want, want));
+      expectDecodedCorners(s.output, dir.file("out.obj"), want);
     }
   }
 }
@@ -441,7 +443,8 @@ TEST(Texcoords, UvBitsRefuseCoordinatesBeyondTheirRange) {
 
 // OBJ materials: the `mtllib` line and a single `usemtl` go through the container (version 3) into decoded OBJ
 // files, in memory and streamed alike; other formats list them dropped. A file naming several materials, or with
-// faces before its first `usemtl`, keeps its libraries but no material, and says so.
+// faces before its first `usemtl`, keeps its libraries but no material, and says so. A PLY's `comment TextureFile`
+// goes into decoded PLY files likewise.
 TEST(Materials, MtllibAndOneUsemtlAreKept) {
   TempDir dir;
   const std::string in = dir.file("sphere.obj");
@@ -496,6 +499,39 @@ TEST(Materials, MtllibAndOneUsemtlAreKept) {
     EXPECT_EQ(stats.material_library, "a.mtl b.mtl");
     EXPECT_EQ(stats.material, c.material);
     EXPECT_EQ(describeDropped(stats.dropped), c.dropped);
+  }
+  // PLY's `comment TextureFile`: kept and written back to PLY output; listed dropped for OBJ output, and when a
+  // header names several.
+  {
+    auto sphere = readMeshFile(in);
+    ASSERT_TRUE(sphere.isOk());
+    ASSERT_TRUE(writePly(dir.file("t.ply"), *sphere).isOk());
+    std::string ply = testing::readText(dir.file("t.ply"));
+    const std::string with = "comment written by scanpress\ncomment TextureFile bark 2.jpg\n";
+    ply.replace(ply.find("comment written by scanpress\n"), 29, with);
+    testing::writeBytes(dir.file("t.ply"), ply);
+    EncodeSettings t = settingsFor(dir.file("t.ply"), dir.file("t.spz"), "edgebreaker");
+    auto e = encodeFile(t);
+    ASSERT_TRUE(e.isOk()) << e.status().toString();
+    EXPECT_EQ(e->read.texture_file, "bark 2.jpg");
+    EXPECT_TRUE(e->read.dropped.empty()) << describeDropped(e->read.dropped);
+    DecodeSettings td;
+    td.input = t.output;
+    td.output = dir.file("back.ply");
+    auto back = decodeFile(td);
+    ASSERT_TRUE(back.isOk()) << back.status().toString();
+    EXPECT_TRUE(back->dropped.empty()) << describeDropped(back->dropped);
+    EXPECT_NE(testing::readText(td.output).find(with), std::string::npos);
+    td.output = dir.file("back.obj");
+    back = decodeFile(td);
+    ASSERT_TRUE(back.isOk());
+    EXPECT_EQ(describeDropped(back->dropped), "ply comment TextureFile bark 2.jpg x 1");
+    ply.replace(ply.find(with), with.size(), with + "comment TextureFile leaf.jpg\n");
+    testing::writeBytes(dir.file("t.ply"), ply);
+    ReadStats stats;
+    ASSERT_TRUE(readMeshFile(dir.file("t.ply"), &stats).isOk());
+    EXPECT_EQ(stats.texture_file, "");
+    EXPECT_EQ(describeDropped(stats.dropped), "comment TextureFile (several textures: none is kept) x 2");
   }
   // Names that are not UTF-8 (Latin-1 here) are listed, not kept: the reports are JSON.
   testing::writeBytes(dir.file("latin.obj"), "mtllib caf\xE9.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl Ma\xDF\nf 1 2 3\n");

@@ -53,13 +53,14 @@ namespace {
 uint32_t versionFor(const ContainerHeader& h) {
   const bool quantized =
       std::any_of(h.layout.scalars.begin(), h.layout.scalars.end(), [](const ScalarChannel& c) { return c.bits; });
-  if (quantized || !h.material_library.empty() || !h.material.empty()) return kContainerVersionMaterials;
+  if (quantized || !h.material_library.empty() || !h.material.empty() || !h.texture_file.empty())
+    return kContainerVersionMaterials;
   return h.layout.hasScalars() ? kContainerVersionScalars : kContainerVersion;
 }
 
 // The table after the fixed header (none in v1). v2: u8 count; per channel u8 type, u8 name length, the name.
-// v3: the same with u8 bits after each name, then u16 length and bytes of the material library, then of the
-// material. CRC-32C of it last.
+// v3: the same with u8 bits after each name, then u16 length and bytes of the material library, of the material and
+// of the texture file. CRC-32C of it last.
 std::vector<uint8_t> headerTable(const ContainerHeader& h, uint32_t version) {
   std::vector<uint8_t> out;
   if (version == kContainerVersion) return out;
@@ -72,7 +73,7 @@ std::vector<uint8_t> headerTable(const ContainerHeader& h, uint32_t version) {
     if (version >= kContainerVersionMaterials) w.u8(c.bits);
   }
   if (version >= kContainerVersionMaterials)
-    for (const std::string* s : {&h.material_library, &h.material}) {
+    for (const std::string* s : {&h.material_library, &h.material, &h.texture_file}) {
       w.u16(static_cast<uint16_t>(s->size()));
       for (char ch : *s) w.u8(static_cast<uint8_t>(ch));
     }
@@ -159,7 +160,7 @@ Status ContainerWriter::begin() {
     return makeError(ErrorCode::kInvalidArgument, "color bits must be in [1, 8]");
   if (!header_.layout.hasColors()) header_.layout.color_bits = 8;  // byte 51 is 0 without colors
   SP_RETURN_IF_ERROR(checkScalarChannels(header_.layout));
-  for (const std::string* s : {&header_.material_library, &header_.material})
+  for (const std::string* s : {&header_.material_library, &header_.material, &header_.texture_file})
     if (!validMaterialName(*s))
       return makeError(ErrorCode::kInvalidArgument, "material name of " + std::to_string(s->size()) +
                                                         " bytes: at most " + std::to_string(kMaxMaterialBytes) +
@@ -255,10 +256,10 @@ Result<uint32_t> headerSizeOf(std::span<const uint8_t> bytes, const std::string&
   SP_RETURN_IF_ERROR(checkCrc(stored_crc, bytes.first(kHeaderSize - 4),
                               where + " at byte " + std::to_string(kHeaderSize - 4)));
   // v1: exactly the fixed header; v2: a table of at least one channel (7 bytes) and at most 255; v3: a table of
-  // no channel and two empty names (9 bytes) or more.
+  // no channel and three empty names (11 bytes) or more.
   const size_t least = version == kContainerVersion          ? kHeaderSize
                        : version == kContainerVersionScalars ? kHeaderSize + 7
-                                                             : kHeaderSize + 9;
+                                                             : kHeaderSize + 11;
   if (version == kContainerVersion ? header_size != kHeaderSize : header_size < least || header_size > kMaxHeaderSize)
     return makeError(ErrorCode::kMalformed, where + " at byte 12: header size " + std::to_string(header_size) +
                                                 " for container format version " + std::to_string(version));
@@ -336,7 +337,7 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
       h.layout.scalars.push_back({std::string(name.begin(), name.end()), static_cast<ScalarType>(type), channel_bits});
     }
     if (v3)
-      for (std::string* s : {&h.material_library, &h.material}) {
+      for (std::string* s : {&h.material_library, &h.material, &h.texture_file}) {
         uint16_t length = 0;
         SP_RETURN_IF_ERROR(t.u16(length));
         std::span<const uint8_t> text;

@@ -29,7 +29,7 @@ constexpr uint32_t kContainerVersionScalars = 2;    // v1 plus the scalar channe
 constexpr uint32_t kContainerVersionMaterials = 3;  // v2's table with channel bits and the material names
 constexpr size_t kHeaderSize = 80;                  // the fixed header (the whole header of v1)
 constexpr size_t kMaxMaterialBytes = 1024;          // of each material name
-constexpr size_t kMaxHeaderSize = kHeaderSize + 1 + 255 * (3 + 255) + 2 * (2 + kMaxMaterialBytes) + 4;
+constexpr size_t kMaxHeaderSize = kHeaderSize + 1 + 255 * (3 + 255) + 3 * (2 + kMaxMaterialBytes) + 4;
 constexpr size_t kFooterSize = 32;
 constexpr size_t kChunkHeaderSize = 36;
 constexpr size_t kIndexEntrySize = 56;
@@ -46,8 +46,9 @@ struct ContainerHeader {
   // A partial container (`encode --subset i/N`): the tiles t with t % N == i of the whole tiling, for `merge`.
   // 0 and 0: a whole container.
   uint16_t subset_index = 0, subset_count = 0;
-  // OBJ's `mtllib` arguments and its one `usemtl` name (v3; empty: none), written back to decoded OBJ files.
-  std::string material_library, material;
+  // OBJ's `mtllib` arguments and its one `usemtl` name, written back to decoded OBJ files; PLY's `comment
+  // TextureFile` name, written back to decoded PLY files (v3; empty: none).
+  std::string material_library, material, texture_file;
   bool partial() const { return subset_count != 0; }
 };
 
@@ -115,11 +116,12 @@ class ContainerWriter {
   Status finish();
   // Marks the container as subset `index` of `count` (before finish()).
   void setSubset(uint16_t index, uint16_t count) { header_.subset_index = index, header_.subset_count = count; }
-  // The OBJ material names to keep: before begin() (finish() rewrites the header in place, so its size is fixed
-  // then); kInternal after.
-  Status setMaterial(std::string library, std::string material) {
+  // The material names to keep (ContainerHeader's): before begin() (finish() rewrites the header in place, so its
+  // size is fixed then); kInternal after.
+  Status setMaterial(std::string library, std::string material, std::string texture_file = {}) {
     if (begun_) return makeError(ErrorCode::kInternal, "the container's material names are set after its header");
     header_.material_library = std::move(library), header_.material = std::move(material);
+    header_.texture_file = std::move(texture_file);
     return Status::ok();
   }
   uint64_t bytesWritten() const { return offset_; }

@@ -78,6 +78,8 @@ struct ReadStats {
   // every face has that one. A file naming several materials keeps none (listed dropped: a material per face is
   // not kept yet); its libraries are kept.
   std::string material_library, material;
+  // PLY: the `comment TextureFile` name (MeshLab's and Metashape's texture image), when the header names one.
+  std::string texture_file;
 };
 
 // A chunk's scalar channels (PLY vertex properties kept at their type, such as confidence or intensity): the

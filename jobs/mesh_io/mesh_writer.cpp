@@ -201,6 +201,7 @@ Status writeWith(const std::string& path, const Mesh& mesh, const WriteOptions& 
   layout.double_positions = options.double_positions;
   if (format.kind() == MeshFileFormat::Kind::kPly) layout.scalars = mesh.scalar_channels;
   layout.material_library = options.material_library, layout.material = options.material;
+  layout.texture_file = options.texture_file;
   const size_t stride = scalarWords(layout.scalars);
   SP_ASSIGN_OR_RETURN(auto writer, MeshFileWriter::create(path, layout, format));
   if (format.indexed())
@@ -239,6 +240,7 @@ void MeshFileFormat::header(const MeshFileLayout& layout, std::string& out) cons
   switch (kind_) {
     case Kind::kPly: {
       out += "ply\nformat binary_little_endian 1.0\ncomment written by scanpress\n";
+      if (!layout.texture_file.empty()) out += "comment TextureFile " + layout.texture_file + "\n";
       out += "element vertex " + std::to_string(layout.vertices) + "\n";
       const char* t = layout.double_positions ? "double" : "float";
       for (const char* axis : {"x", "y", "z"}) out += std::string("property ") + t + " " + axis + "\n";

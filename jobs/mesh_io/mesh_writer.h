@@ -28,9 +28,9 @@ struct WriteOptions {
   // The grid the positions lie on (decoded containers): with compression and at most 16 bits, glTF positions are
   // its integer cells (KHR_mesh_quantization, exact). nullptr: float positions.
   const Grid* grid = nullptr;
-  // OBJ: the `mtllib` arguments and the `usemtl` name to write (empty: none); other formats write neither (the
-  // caller reports them dropped).
-  std::string material_library, material;
+  // OBJ: the `mtllib` arguments and the `usemtl` name to write; PLY: the `comment TextureFile` name (empty:
+  // none). Other formats write none of them (the caller reports them dropped).
+  std::string material_library, material, texture_file;
 };
 
 Status writePly(const std::string& path, const Mesh& mesh, const WriteOptions& options = {});
@@ -52,6 +52,7 @@ struct MeshFileLayout {
   // coordinates itself (writeObj), not through this layout.
   std::vector<ScalarChannel> scalars;
   std::string material_library, material;  // OBJ's `mtllib` and `usemtl` lines (empty: none)
+  std::string texture_file;                // PLY's `comment TextureFile` line (empty: none)
 };
 
 // The byte form of one indexed format (.ply, .obj, .stl, .off; .zst is the output's business).

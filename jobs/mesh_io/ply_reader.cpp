@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/container/container.h"
 #include "jobs/mesh_io/input.h"
 #include "jobs/mesh_io/mesh_reader.h"
 #include "jobs/mesh_io/texcoords.h"
@@ -186,6 +187,15 @@ class PlyParser {
     if (plan_ && next_wedge_ != plan_->wedges.size())
       return makeError(ErrorCode::kIo, in_.name() + ": the file changed between its two reads");
     listDropped();
+    // One texture image is kept; several (a texture per face, `texnumber`) or a name the container cannot hold are
+    // listed.
+    if (texture_files_ && other_textures_ == 0 && !texture_file_.empty() && validMaterialName(texture_file_))
+      stats_.texture_file = texture_file_;
+    else if (texture_files_)
+      stats_.dropped.push_back({other_textures_ ? "comment TextureFile (several textures: none is kept)"
+                                                : "comment TextureFile (over 1024 bytes, control characters or not "
+                                                  "UTF-8: not kept)",
+                                texture_files_});
     stats_.vertices = out.vertices();
     stats_.source_vertices = vertex_count_;
     stats_.triangles = out.triangles();
@@ -225,7 +235,22 @@ class PlyParser {
       Tokenizer tok(line);
       std::string_view word;
       if (!tok.next(word)) continue;
-      if (word == "comment" || word == "obj_info") continue;
+      if (word == "comment") {
+        // `comment TextureFile NAME` (MeshLab's, Metashape's): the image the texture coordinates index.
+        std::string_view key;
+        if (tok.next(key) && key == "TextureFile") {
+          std::string name;
+          for (std::string_view t; tok.next(t);) {
+            if (!name.empty()) name += ' ';
+            name.append(t);
+          }
+          if (texture_files_ == 0) texture_file_ = std::move(name);
+          else if (name != texture_file_) ++other_textures_;
+          ++texture_files_;
+        }
+        continue;
+      }
+      if (word == "obj_info") continue;
       if (word == "end_header") break;
       if (word == "format") {
         std::string_view enc, ver;
@@ -769,6 +794,8 @@ class PlyParser {
   size_t scalar_count_ = 0;  // vertex properties kept as scalar channels
   size_t stride_ = 0;        // their words per vertex
   ReadStats stats_;
+  std::string texture_file_;  // the first `comment TextureFile`'s name
+  uint64_t texture_files_ = 0, other_textures_ = 0;
   std::string_view line_;
   Tokenizer tokens_{std::string_view()};
   std::vector<uint8_t> list_bytes_;
