@@ -101,6 +101,22 @@ inline std::optional<TexcoordChannels> findTexcoords(std::span<const ScalarChann
   return std::nullopt;
 }
 
+// Lossless normals (`encode --lossless-normals`): three float32 channels nx, ny, nz, the normals' bits, in a layout
+// without octahedral normals; dequantizeMesh gives them back as the mesh's normals.
+inline const std::array<ScalarChannel, 3> kLosslessNormalChannels = {
+    {{"nx", ScalarType::kFloat32}, {"ny", ScalarType::kFloat32}, {"nz", ScalarType::kFloat32}}};
+// The word offset of the lossless normal channels (consecutive, in order, lossless), if the channels have them.
+inline std::optional<size_t> losslessNormalsWord(std::span<const ScalarChannel> channels) {
+  size_t word = 0;
+  for (size_t i = 0; i + 3 <= channels.size(); ++i) {
+    if (channels[i] == kLosslessNormalChannels[0] && channels[i + 1] == kLosslessNormalChannels[1] &&
+        channels[i + 2] == kLosslessNormalChannels[2])
+      return word;
+    word += size_t(scalarTypeWords(channels[i].type));
+  }
+  return std::nullopt;
+}
+
 // Which per-vertex attributes a scan carries, and at what precision they are stored.
 struct AttributeLayout {
   uint8_t normal_bits = 0;     // 0: no normals; else octahedral bits per component (4..16)

@@ -218,6 +218,29 @@ Mesh dequantizeMesh(const QuantizedMesh& mesh, const Grid& grid, const Attribute
   out.scalar_channels = layout.scalars;
   out.scalars = mesh.scalars;
   out.triangles = mesh.triangles;
+  // Lossless normals: the channels nx, ny, nz become the mesh's normals, bit for bit.
+  const size_t stride = scalarWords(layout.scalars);
+  if (const auto word = losslessNormalsWord(layout.scalars);
+      word && !layout.hasNormals() && mesh.scalars.size() == mesh.positions.size() * stride) {
+    const size_t n = mesh.positions.size();
+    out.normals.resize(n);
+    ScalarValues rest;
+    rest.reserve(n * (stride - 3));
+    for (size_t v = 0; v < n; ++v) {
+      const uint32_t* row = mesh.scalars.data() + v * stride;
+      for (int k = 0; k < 3; ++k) out.normals[v][size_t(k)] = std::bit_cast<float>(row[*word + size_t(k)]);
+      rest.insert(rest.end(), row, row + *word);
+      rest.insert(rest.end(), row + *word + 3, row + stride);
+    }
+    out.scalars = std::move(rest);
+    for (size_t i = 0, w = 0; i < out.scalar_channels.size();
+         w += size_t(scalarTypeWords(out.scalar_channels[i++].type)))
+      if (w == *word) {
+        out.scalar_channels.erase(out.scalar_channels.begin() + ptrdiff_t(i),
+                                  out.scalar_channels.begin() + ptrdiff_t(i) + 3);
+        break;
+      }
+  }
   return out;
 }
 

@@ -103,7 +103,8 @@ Result<std::vector<std::pair<size_t, size_t>>> pickScalarChannels(std::span<cons
 Result<QuantizedMesh> quantizeMesh(const Mesh& mesh, const Grid& grid, const AttributeLayout& layout,
                                    QuantizeStats* stats);
 
-// Back to a float mesh: positions at cell centers, normals decoded from octahedral coordinates.
+// Back to a float mesh: positions at cell centers, normals decoded from octahedral coordinates, or lossless ones
+// (kLosslessNormalChannels) lifted out of the scalar channels.
 Mesh dequantizeMesh(const QuantizedMesh& mesh, const Grid& grid, const AttributeLayout& layout);
 
 }  // namespace scanpress

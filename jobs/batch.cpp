@@ -261,6 +261,7 @@ std::string settingsFingerprint(const EncodeSettings& s) {
                     "|normal_bits=" + std::to_string(s.normal_bits) + "|normals=" + std::to_string(s.keep_normals) +
                     (s.color_bits != 8 ? "|color_bits=" + std::to_string(s.color_bits) : std::string()) +
                     (s.uv_bits != 0 ? "|uv_bits=" + std::to_string(s.uv_bits) : std::string()) +
+                    (s.lossless_normals ? "|lossless_normals=1" : std::string()) +
                     "|colors=" + std::to_string(s.keep_colors) + "|scalars=" + std::to_string(s.keep_scalars) +
                     "|tile=" + std::to_string(effectiveTileTarget(s)) +
                     "|input=" + fs::absolute(s.input).lexically_normal().string();

@@ -256,6 +256,7 @@ std::vector<std::string> knownConfigKeys() {
           "/codec/color_bits",
           "/codec/uv_bits",
           "/codec/normals",
+          "/codec/lossless_normals",
           "/codec/colors",
           "/codec/scalars",
           "/codec/allow_degenerate",
@@ -353,6 +354,7 @@ Result<JobSettings> parseJobConfig(const std::string& text, const std::string& c
     c.integer("color_bits", 1, 8, s.encode.color_bits);
     c.integer("uv_bits", 0, kMaxScalarBits, s.encode.uv_bits);
     c.boolean("normals", s.encode.keep_normals);
+    c.boolean("lossless_normals", s.encode.lossless_normals);
     c.boolean("colors", s.encode.keep_colors);
     c.boolean("scalars", s.encode.keep_scalars);
     c.boolean("allow_degenerate", s.encode.allow_degenerate);

@@ -180,7 +180,14 @@ class IngestSink : public MeshSink {
   // `input` names the scan in errors.
   IngestSink(const std::string& input, const Grid& grid, const AttributeLayout& layout, VertexStore& store,
              TileHistogram& hist, TriangleSpill* spill, bool points)
-      : input_(input), grid_(grid), layout_(layout), store_(store), hist_(hist), spill_(spill), points_(points) {}
+      : input_(input),
+        grid_(grid),
+        layout_(layout),
+        store_(store),
+        hist_(hist),
+        spill_(spill),
+        points_(points),
+        normal_word_(layout.hasNormals() ? std::nullopt : losslessNormalsWord(layout.scalars)) {}
   static Vec3d originalOf(const VertexRecord& r) { return {r.original[0], r.original[1], r.original[2]}; }
   Status vertices(std::span<const Vec3d> p, std::span<const Vec3f> n, std::span<const Rgba8> c, uint8_t,
                   const ScalarChunk& s) override {
@@ -194,6 +201,12 @@ class IngestSink : public MeshSink {
         row_.clear();
         for (const auto& [offset, words] : picks_)
           for (size_t w = 0; w < words; ++w) row_.push_back(s.values[i * in_stride + offset + w]);
+        if (normal_word_) {  // lossless normals (OBJ's arrive later, through vertexNormals)
+          const Vec3f normal = n.empty() ? Vec3f{0, 0, 0} : n[i];
+          row_.insert(row_.begin() + ptrdiff_t(*normal_word_),
+                      {std::bit_cast<uint32_t>(normal[0]), std::bit_cast<uint32_t>(normal[1]),
+                       std::bit_cast<uint32_t>(normal[2])});
+        }
         if (Status snap = snapScalarRow(layout_.scalars, row_.data(), store_.size()); !snap.isOk())
           return snap.withContext(input_);
         store_.appendScalars(row_);
@@ -236,6 +249,16 @@ class IngestSink : public MeshSink {
     return Status::ok();
   }
   Status vertexNormals(uint64_t first, std::span<const Vec3f> n) override {
+    if (normal_word_) {
+      const size_t stride = size_t(layout_.scalarStride());
+      for (size_t i = 0; i < n.size(); ++i)
+        if (!std::isnan(n[i][0])) {
+          const uint32_t words[3] = {std::bit_cast<uint32_t>(n[i][0]), std::bit_cast<uint32_t>(n[i][1]),
+                                     std::bit_cast<uint32_t>(n[i][2])};
+          SP_RETURN_IF_ERROR(store_.setScalars(first + i, stride, *normal_word_, words));
+        }
+      return Status::ok();
+    }
     if (!layout_.hasNormals()) return Status::ok();
     for (size_t i = 0; i < n.size(); ++i)
       if (!std::isnan(n[i][0]))
@@ -246,7 +269,10 @@ class IngestSink : public MeshSink {
   // Where each of the layout's scalar channels sits in the reader's rows (by name and type): the survey found
   // them all, so a miss means the file changed between the reads.
   Status pickScalars(std::span<const ScalarChannel> channels) {
-    auto picks = pickScalarChannels(channels, layout_.scalars);
+    // (The lossless normals' channels are the reader's normals, not its channels.)
+    const std::span<const ScalarChannel> wanted(layout_.scalars.data(),
+                                                layout_.scalars.size() - (normal_word_ ? 3 : 0));
+    auto picks = pickScalarChannels(channels, wanted);
     if (!picks.isOk())
       return makeError(ErrorCode::kIo, "the file changed between the reads: " + picks.status().message());
     picks_ = std::move(picks).value();
@@ -268,6 +294,7 @@ class IngestSink : public MeshSink {
   TriangleSpill* spill_;
   bool points_;
   std::vector<std::pair<size_t, size_t>> picks_;  // (word offset in the reader's row, words) per layout channel
+  std::optional<size_t> normal_word_;             // lossless normals: their first word in a row
   std::vector<uint32_t> row_;
 };
 
@@ -355,7 +382,15 @@ class ScanEncoder {
   Status survey() {
     stage("reading");
     SP_ASSIGN_OR_RETURN(result_.read, readInput(survey_));
-    if (s_.keep_normals && survey_.has_normals) result_.layout.normal_bits = static_cast<uint8_t>(s_.normal_bits);
+    const bool lossless_normals = s_.keep_normals && survey_.has_normals && s_.lossless_normals;
+    if (lossless_normals && !codecCarriesScalars())
+      return makeError(ErrorCode::kInvalidArgument,
+                       s_.input +
+                           ": --lossless-normals needs a codec that carries scalar channels (store, kdtree, "
+                           "octree, edgebreaker), not " +
+                           s_.codec);
+    if (s_.keep_normals && survey_.has_normals && !lossless_normals)
+      result_.layout.normal_bits = static_cast<uint8_t>(s_.normal_bits);
     if (s_.keep_colors && survey_.colorChannels()) {
       result_.layout.color_channels = survey_.colorChannels();
       result_.layout.color_bits = static_cast<uint8_t>(s_.color_bits);
@@ -364,6 +399,15 @@ class ScanEncoder {
       result_.layout.scalars = survey_.scalar_channels;
       if (const auto tc = findTexcoords(result_.layout.scalars); tc && s_.uv_bits > 0)
         for (size_t ch : {tc->u, tc->v}) result_.layout.scalars[ch].bits = static_cast<uint8_t>(s_.uv_bits);
+    }
+    if (lossless_normals) {
+      for (const ScalarChannel& c : result_.layout.scalars)
+        for (const ScalarChannel& n : kLosslessNormalChannels)
+          if (c.name == n.name)
+            return makeError(ErrorCode::kInvalidArgument,
+                             s_.input + ": --lossless-normals: the scan has a channel named " + c.name + " already");
+      result_.layout.scalars.insert(result_.layout.scalars.end(), kLosslessNormalChannels.begin(),
+                                    kLosslessNormalChannels.end());
     }
     result_.point_cloud = survey_.triangle_count == 0 && survey_.vertex_count > 0;
     SP_ASSIGN_OR_RETURN(const BoundingBox box, gridBox());

@@ -70,6 +70,9 @@ struct EncodeSettings {
   // Texture coordinates kept as multiples of 2^-uv_bits (1..kMaxScalarBits; ScalarChannel::bits); 0: lossless.
   int uv_bits = 0;
   bool keep_normals = true;
+  // Normals bit for bit, as float channels nx, ny, nz (kLosslessNormalChannels) instead of octahedral codes: for the
+  // codecs that carry scalar channels.
+  bool lossless_normals = false;
   bool keep_colors = true;
   // Per-vertex scalar properties (a PLY's confidence, intensity, quality, ...), kept losslessly at their type by
   // the codecs that carry them (store, kdtree, octree, edgebreaker); pm and prm drop them, and the report says so.

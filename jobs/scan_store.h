@@ -63,6 +63,13 @@ class VertexStore : public VertexSource {
   Status setNormal(uint64_t i, const OctNormal& n);
   // The next vertex's scalar values (its record is appended after them). Held in memory, 4 bytes per value.
   void appendScalars(std::span<const uint32_t> row) { scalars_.insert(scalars_.end(), row.begin(), row.end()); }
+  // Overwrites words [offset, offset + words.size()) of vertex i's row of `stride` words (appended before).
+  Status setScalars(uint64_t i, size_t stride, size_t offset, std::span<const uint32_t> words) {
+    if ((i + 1) * stride > scalars_.size() || offset + words.size() > stride)
+      return makeError(ErrorCode::kInternal, "scalar values set past the vertices read");
+    std::copy(words.begin(), words.end(), scalars_.begin() + ptrdiff_t(i * stride + offset));
+    return Status::ok();
+  }
   // Ends filling: writes dirty blocks if anything was ever spilled, then frees the cache.
   Status finalize();
   // Records for sorted, unique ids (thread-safe after finalize).

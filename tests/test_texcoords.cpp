@@ -8,7 +8,9 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <set>
 #include <sstream>
@@ -670,8 +672,9 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
   EXPECT_GT(wedges, m.positions.size() + 500) << "fandisk's sharp edges split over 500 vertices";
   EXPECT_TRUE(stats.dropped.empty()) << describeDropped(stats.dropped);
 
-  // Each decoded corner's normal against the file's: within 0.2 degrees (12-bit octahedral normals: about 0.06).
-  auto checkCorners = [&](const std::string& path) {
+  // Each decoded corner's normal against the file's: within 0.2 degrees (12-bit octahedral normals: about 0.06);
+  // `exact` (lossless normals): bit for bit.
+  auto checkCorners = [&](const std::string& path, bool exact) {
     auto out = readMeshFile(path);
     ASSERT_TRUE(out.isOk());
     ASSERT_EQ(out->triangles.size(), m.triangles.size());
@@ -699,7 +702,7 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
     };
     std::map<std::array<uint32_t, 3>, size_t> face_of;
     for (size_t f = 0; f < m.triangles.size(); ++f) face_of[rotated(m.triangles[f])] = f;
-    size_t matched = 0, creased = 0;
+    size_t matched = 0, creased = 0, inexact = 0;
     double worst = 0;
     for (const Triangle& t : out->triangles) {
       const std::array<uint32_t, 3> ids{nearest(out->positions[t[0]]), nearest(out->positions[t[1]]),
@@ -712,6 +715,7 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
         const int j = int(std::find(ft.begin(), ft.end(), ids[size_t(k)]) - ft.begin());
         const Vec3f& got = out->normals[t[size_t(k)]];
         const std::array<float, 3>& want = corner_normal[3 * it->second + size_t(j)];
+        inexact += std::memcmp(got.data(), want.data(), sizeof got) != 0;
         const double dot = double(got[0]) * want[0] + double(got[1]) * want[1] + double(got[2]) * want[2];
         worst = std::max(worst, std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / M_PI);
         creased += distinct[ids[size_t(k)]].size() > 1;
@@ -720,6 +724,9 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
     EXPECT_EQ(matched, m.triangles.size()) << "triangles matched to the file's by their corners";
     EXPECT_GT(creased, 1000u);
     EXPECT_LT(worst, 0.2) << "degrees";
+    if (exact) {
+      EXPECT_EQ(inexact, 0u) << "corners whose normal is not the file's bit for bit";
+    }
   };
   for (const auto& [codec, tile_triangles] :
        {std::pair{"kdtree", uint64_t(1) << 20}, std::pair{"octree", uint64_t(2000)},
@@ -735,7 +742,28 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
     d.input = s.output;
     d.output = dir.file("f.ply");
     ASSERT_TRUE(decodeFile(d).isOk());
-    checkCorners(d.output);
+    checkCorners(d.output, false);
+  }
+  // --lossless-normals: every corner's normal bit for bit, in PLY and OBJ output, one tile and many.
+  for (const auto& [codec, tile_triangles] :
+       {std::pair{"kdtree", uint64_t(1) << 20}, std::pair{"edgebreaker", uint64_t(2000)}}) {
+    SCOPED_TRACE(std::string(codec) + ", " + std::to_string(tile_triangles) + " triangles per tile, lossless");
+    EncodeSettings s = settingsFor(in, dir.file("l.spz"), codec);
+    s.tile_triangles = tile_triangles;
+    s.lossless_normals = true;
+    auto enc = encodeFile(s);
+    ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+    EXPECT_FALSE(enc->layout.hasNormals());
+    EXPECT_TRUE(losslessNormalsWord(enc->layout.scalars).has_value());
+    for (const char* ext : {".ply", ".obj"}) {
+      DecodeSettings d;
+      d.input = s.output;
+      d.output = dir.file(std::string("l") + ext);
+      auto dec = decodeFile(d);
+      ASSERT_TRUE(dec.isOk()) << dec.status().toString();
+      EXPECT_TRUE(dec->dropped.empty()) << describeDropped(dec->dropped);
+      checkCorners(d.output, true);
+    }
   }
   // pm: a normal per vertex (its first corner's), the others listed.
   EncodeSettings s = settingsFor(in, dir.file("p.spz"), "pm");
@@ -745,6 +773,84 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
   EXPECT_NE(describeDropped(enc->read.dropped).find("obj vn per corner (codec pm keeps a normal per vertex)"),
             std::string::npos)
       << describeDropped(enc->read.dropped);
+  // pm carries no scalar channels, so no lossless normals: refused, nothing written.
+  s.lossless_normals = true;
+  s.output = dir.file("q.spz");
+  enc = encodeFile(s);
+  ASSERT_FALSE(enc.isOk());
+  EXPECT_NE(enc.status().message().find("--lossless-normals needs a codec that carries scalar channels"),
+            std::string::npos)
+      << enc.status().toString();
+  EXPECT_FALSE(std::filesystem::exists(s.output));
+}
+
+// Lossless normals of a PLY, of the finite float bit patterns a scanner may write (non-unit, zero, negative zero,
+// subnormal, huge; the reader refuses NaN and infinities), through every codec that carries scalars, one tile and
+// many: decoded PLY normals are the file's bit for bit (matched by grid position and the other attributes), with
+// the scan's own scalar channels beside them, and --no-scalars keeps them; STL output lists them dropped.
+TEST(LosslessNormals, EveryBitPatternComesBack) {
+  TempDir dir;
+  testing::writeBytes(dir.file("s.obj"), uvSphereObj(16, 32));
+  auto base = readMeshFile(dir.file("s.obj"), nullptr, ReadOptions::asInFile());
+  ASSERT_TRUE(base.isOk());
+  Mesh m = *base;
+  m.scalar_channels = {{"confidence", ScalarType::kUint8}};
+  m.scalars.clear();
+  const float specials[] = {0.0f, -0.0f, 1e-42f, -3e38f, std::numeric_limits<float>::max(), 7.25f};
+  m.normals.resize(m.positions.size());
+  for (size_t v = 0; v < m.positions.size(); ++v) {
+    const Vec3d& p = m.positions[v];
+    m.normals[v] = {float(p[0] * 1.0000001), float(p[1]), float(p[2] + 1e-7 * double(v))};
+    if (v % 11 == 5) m.normals[v][v % 3] = specials[(v / 11) % std::size(specials)];
+    m.scalars.push_back(uint32_t(v % 200));
+  }
+  const std::string in = dir.file("n.ply");
+  ASSERT_TRUE(writePly(in, m).isOk());
+  // Vertices by grid cell and confidence (unique here), with their normals' bits.
+  const auto keyed = [](const Mesh& mesh, const Grid& grid) {
+    std::map<std::pair<Vec3u, uint32_t>, std::array<uint32_t, 3>> out;
+    for (size_t v = 0; v < mesh.positions.size(); ++v)
+      out[{grid.quantize(mesh.positions[v]), mesh.scalars.empty() ? 0 : mesh.scalars[v]}] = {
+          std::bit_cast<uint32_t>(mesh.normals[v][0]), std::bit_cast<uint32_t>(mesh.normals[v][1]),
+          std::bit_cast<uint32_t>(mesh.normals[v][2])};
+    return out;
+  };
+  for (const RunCase& c : kRunCases) {
+    SCOPED_TRACE(c.name());
+    EncodeSettings s = c.settings(in, dir.file("n.spz"));
+    s.lossless_normals = true;
+    auto enc = encodeFile(s);
+    ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+    EXPECT_EQ(c.memory_budget != 0, enc->out_of_core);
+    DecodeSettings d;
+    d.input = s.output;
+    d.output = dir.file("back.ply");
+    auto dec = decodeFile(d);
+    ASSERT_TRUE(dec.isOk()) << dec.status().toString();
+    auto back = readMeshFile(d.output);
+    ASSERT_TRUE(back.isOk());
+    EXPECT_EQ(back->scalar_channels, m.scalar_channels);
+    EXPECT_TRUE(keyed(*back, enc->grid) == keyed(m, enc->grid));
+  }
+  EncodeSettings s = kRunCases[0].settings(in, dir.file("bare.spz"));
+  s.lossless_normals = true;
+  s.keep_scalars = false;
+  auto enc = encodeFile(s);
+  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+  DecodeSettings d;
+  d.input = s.output;
+  d.output = dir.file("bare.ply");
+  ASSERT_TRUE(decodeFile(d).isOk());
+  auto bare = readMeshFile(d.output);
+  ASSERT_TRUE(bare.isOk());
+  EXPECT_TRUE(bare->scalar_channels.empty());
+  Mesh without = m;
+  without.scalars.clear();
+  EXPECT_TRUE(keyed(*bare, enc->grid) == keyed(without, enc->grid));
+  d.output = dir.file("bare.stl");
+  auto stl = decodeFile(d);
+  ASSERT_TRUE(stl.isOk());
+  EXPECT_NE(describeDropped(stl->dropped).find("vertex.nx"), std::string::npos) << describeDropped(stl->dropped);
 }
 
 }  // namespace

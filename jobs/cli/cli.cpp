@@ -93,6 +93,8 @@ options:
   --uv-bits N         texture coordinates as multiples of 2^-N, 1..24 (a texel of a 2^N texture; default:
                       lossless, bit for bit)
   --no-normals        drop normals
+  --lossless-normals  keep normals bit for bit (three float channels nx, ny, nz) instead of octahedral codes;
+                      store, kdtree, octree and edgebreaker
   --no-colors         drop colors
   --no-scalars        drop per-vertex scalar properties (a PLY's confidence, intensity, quality, ...; kept
                       losslessly at their type by store, kdtree, octree and edgebreaker; pm and prm drop them
@@ -404,8 +406,8 @@ int runEncode(int argc, char** argv) {
                                  "--threads",    "--memory-budget", "--scratch-dir", "--samples-per-triangle",
                                  "--format",     "--max-error",     "--error",       "--max-bytes",
                                  "--bpv",        "--subset",        "--grid",        "--tau"},
-                 {"--no-normals", "--no-colors", "--no-scalars", "--allow-degenerate", "--strict", "--measure",
-                  "--quiet", "--help"},
+                 {"--no-normals", "--lossless-normals", "--no-colors", "--no-scalars", "--allow-degenerate",
+                  "--strict", "--measure", "--quiet", "--help"},
                  args, error))
     return usage(error, "encode");
   if (args.has("--help")) {
@@ -436,6 +438,7 @@ int runEncode(int argc, char** argv) {
       !numberOption(args, "--tau", 1e-3, 0.577, s.codec_options.prm.tau, error))
     return usage(error, "encode");
   s.keep_normals = !args.has("--no-normals");
+  s.lossless_normals = args.has("--lossless-normals");
   s.keep_colors = !args.has("--no-colors");
   s.keep_scalars = !args.has("--no-scalars");
   s.allow_degenerate = args.has("--allow-degenerate");

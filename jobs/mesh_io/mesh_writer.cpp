@@ -220,9 +220,15 @@ std::vector<bool> channelsWritten(const std::string& path, std::span<const Scala
   std::vector<bool> written(channels.size(), false);
   const auto f = MeshFileFormat::forPath(path);
   if (f.isOk() && f->kind() == MeshFileFormat::Kind::kPly) return std::vector<bool>(channels.size(), true);
-  if ((f.isOk() && f->kind() == MeshFileFormat::Kind::kObj && triangles) || endsWith(path, ".glb") ||
-      endsWith(path, ".gltf"))
+  const bool obj = f.isOk() && f->kind() == MeshFileFormat::Kind::kObj;
+  const bool gltf = endsWith(path, ".glb") || endsWith(path, ".gltf");
+  if ((obj && triangles) || gltf)
     if (const auto tc = findTexcoords(channels)) written[tc->u] = written[tc->v] = true;
+  // Lossless normals are written as the mesh's normals (dequantizeMesh lifts them out of the channels).
+  if (obj || gltf)
+    if (const auto word = losslessNormalsWord(channels))
+      for (size_t i = 0, w = 0; i < channels.size(); w += size_t(scalarTypeWords(channels[i++].type)))
+        if (w >= *word && w < *word + 3) written[i] = true;
   return written;
 }
 
