@@ -354,8 +354,9 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     if (writes_scalars)
       return makeError(ErrorCode::kUnsupported,
                        settings.input +
-                           ": the container has scalar channels (or texture coordinates), which decoding under a "
-                           "memory budget (tile batch by tile batch) does not write yet: raise --memory-budget, or "
+                           ": the container has scalar channels (or texture coordinates, or lossless normals), which "
+                           "decoding under a memory budget (tile batch by tile batch) does not write yet: raise "
+                           "--memory-budget, or "
                            "decode to a format without them (.stl and .off drop them)");
     if (gltf)
       return makeError(ErrorCode::kLimitExceeded,

@@ -387,8 +387,11 @@ class ScanEncoder {
       return makeError(ErrorCode::kInvalidArgument,
                        s_.input +
                            ": --lossless-normals needs a codec that carries scalar channels (store, kdtree, "
-                           "octree, edgebreaker), not " +
-                           s_.codec);
+                           "octree, edgebreaker) and no remesh stage: " +
+                           scalarsDroppedBy() + " carries none");
+    if (lossless_normals && result_.read.double_normals)
+      return makeError(ErrorCode::kInvalidArgument,
+                       s_.input + ": --lossless-normals keeps float normals bit for bit; this PLY's are double");
     if (s_.keep_normals && survey_.has_normals && !lossless_normals)
       result_.layout.normal_bits = static_cast<uint8_t>(s_.normal_bits);
     if (s_.keep_colors && survey_.colorChannels()) {
@@ -400,12 +403,21 @@ class ScanEncoder {
       if (const auto tc = findTexcoords(result_.layout.scalars); tc && s_.uv_bits > 0)
         for (size_t ch : {tc->u, tc->v}) result_.layout.scalars[ch].bits = static_cast<uint8_t>(s_.uv_bits);
     }
+    // A PLY's texture image is kept with the texture coordinates it belongs to.
+    if (!result_.read.texture_file.empty() && !findTexcoords(result_.layout.scalars)) {
+      result_.read.dropped.push_back({"ply comment TextureFile (its texture coordinates are not kept)", 1});
+      result_.read.texture_file.clear();
+    }
     if (lossless_normals) {
       for (const ScalarChannel& c : result_.layout.scalars)
         for (const ScalarChannel& n : kLosslessNormalChannels)
           if (c.name == n.name)
             return makeError(ErrorCode::kInvalidArgument,
                              s_.input + ": --lossless-normals: the scan has a channel named " + c.name + " already");
+      if (result_.layout.scalars.size() + 3 > 255)
+        return makeError(ErrorCode::kLimitExceeded, s_.input + ": --lossless-normals: the scan's " +
+                                                        std::to_string(result_.layout.scalars.size()) +
+                                                        " scalar channels and the normals' three exceed 255");
       result_.layout.scalars.insert(result_.layout.scalars.end(), kLosslessNormalChannels.begin(),
                                     kLosslessNormalChannels.end());
     }

@@ -78,8 +78,10 @@ json layoutJson(const AttributeLayout& l) {
   json scalars = json::array();
   for (const ScalarChannel& c : l.scalars)
     scalars.push_back({{"name", c.name}, {"type", scalarTypeName(c.type)}, {"bits", c.bits}});
-  return {{"normals", l.hasNormals()},
+  const bool lossless_normals = !l.hasNormals() && losslessNormalsWord(l.scalars).has_value();
+  return {{"normals", l.hasNormals() || lossless_normals},
           {"normal_bits", l.normal_bits},
+          {"lossless_normals", lossless_normals},  // float32 channels nx, ny, nz (listed in scalars)
           {"color_channels", l.color_channels},
           {"color_bits", l.hasColors() ? l.color_bits : 0},
           {"scalars", std::move(scalars)}};
@@ -409,7 +411,10 @@ std::string containerInfoText(const ContainerFile& file) {
      << "  faces:     " << h.faces << "\n"
      << "  bytes:     " << file.size() << " (" << (h.vertices ? 8.0 * file.size() / h.vertices : 0.0)
      << " bpv over the vertices above; an encode report's bpv divides by the distinct vertices)\n"
-     << "  normals:   " << (h.layout.hasNormals() ? std::to_string(h.layout.normal_bits) + "-bit octahedral" : "no")
+     << "  normals:   "
+     << (h.layout.hasNormals()                   ? std::to_string(h.layout.normal_bits) + "-bit octahedral"
+         : losslessNormalsWord(h.layout.scalars) ? std::string("lossless (float channels nx, ny, nz)")
+                                                 : std::string("no"))
      << "\n"
      << "  colors:    "
      << (h.layout.hasColors() ? std::to_string(h.layout.color_channels) + " channels of " +

@@ -387,6 +387,8 @@ Result<EncodeResult> encodeToTargetAuto(const EncodeSettings& settings, Progress
   };
   std::vector<TargetAttempt> attempts;
   for (const char* codec : {"pm", "edgebreaker"}) {
+    // pm carries no scalar channels, so no lossless normals: edgebreaker alone competes.
+    if (settings.lossless_normals && std::string_view(codec) == "pm") continue;
     EncodeSettings c = settings;
     c.codec = codec;
     if (settings.target.kind != TargetKind::kMaxError) c.measure.enabled = true;

@@ -25,6 +25,7 @@
 #include "jobs/mesh_io/mesh_writer.h"
 #include "jobs/mesh_io/texcoords.h"
 #include "jobs/pipeline.h"
+#include "jobs/report.h"
 #include "jobs_util.h"
 
 namespace scanpress {
@@ -528,6 +529,21 @@ TEST(Materials, MtllibAndOneUsemtlAreKept) {
     back = decodeFile(td);
     ASSERT_TRUE(back.isOk());
     EXPECT_EQ(describeDropped(back->dropped), "ply comment TextureFile bark 2.jpg x 1");
+    // pm keeps no texture coordinates, so not their image either; a nameless comment is no texture.
+    t.codec = "pm";
+    e = encodeFile(t);
+    ASSERT_TRUE(e.isOk()) << e.status().toString();
+    EXPECT_NE(describeDropped(e->read.dropped).find("ply comment TextureFile (its texture coordinates are not kept) x 1"),
+              std::string::npos)
+        << describeDropped(e->read.dropped);
+    EXPECT_EQ(ContainerFile::open(t.output)->header().texture_file, "");
+    std::string blank = ply;
+    blank.replace(blank.find(with), with.size(), "comment written by scanpress\ncomment TextureFile  \t\n");
+    testing::writeBytes(dir.file("blank.ply"), blank);
+    ReadStats blank_stats;
+    ASSERT_TRUE(readMeshFile(dir.file("blank.ply"), &blank_stats).isOk());
+    EXPECT_EQ(blank_stats.texture_file, "");
+    EXPECT_TRUE(blank_stats.dropped.empty()) << describeDropped(blank_stats.dropped);
     ply.replace(ply.find(with), with.size(), with + "comment TextureFile leaf.jpg\n");
     testing::writeBytes(dir.file("t.ply"), ply);
     ReadStats stats;
@@ -851,6 +867,33 @@ TEST(LosslessNormals, EveryBitPatternComesBack) {
   auto stl = decodeFile(d);
   ASSERT_TRUE(stl.isOk());
   EXPECT_NE(describeDropped(stl->dropped).find("vertex.nx"), std::string::npos) << describeDropped(stl->dropped);
+  // The container says so: normals, lossless.
+  auto file = ContainerFile::open(s.output);
+  ASSERT_TRUE(file.isOk());
+  EXPECT_EQ(nlohmann::json::parse(containerInfoJson(*file))["attributes"]["lossless_normals"], true);
+
+  // --codec auto under a target: pm cannot keep them, so edgebreaker alone competes.
+  EncodeSettings a = kRunCases[0].settings(in, dir.file("auto.spz"));
+  a.codec = "auto";
+  a.lossless_normals = true;
+  a.target.kind = TargetKind::kMaxError;
+  a.target.metric = ErrorMetric::kRms;
+  a.target.max_error = 1e-3;
+  auto chosen = encodeFile(a);
+  ASSERT_TRUE(chosen.isOk()) << chosen.status().toString();
+  EXPECT_EQ(chosen->codec, "edgebreaker");
+
+  // A PLY whose normals are double: refused (they would be rounded to float).
+  testing::writeBytes(dir.file("double.ply"),
+                      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                      "property float z\nproperty double nx\nproperty double ny\nproperty double nz\n"
+                      "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                      "0 0 0 0 0 0.1000000000000001\n1 0 0 0 0 1\n0 1 0 0 0 1\n3 0 1 2\n");
+  s = kRunCases[0].settings(dir.file("double.ply"), dir.file("double.spz"));
+  s.lossless_normals = true;
+  enc = encodeFile(s);
+  ASSERT_FALSE(enc.isOk());
+  EXPECT_NE(enc.status().message().find("this PLY's are double"), std::string::npos) << enc.status().toString();
 }
 
 }  // namespace

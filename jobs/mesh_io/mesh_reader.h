@@ -80,6 +80,8 @@ struct ReadStats {
   std::string material_library, material;
   // PLY: the `comment TextureFile` name (MeshLab's and Metashape's texture image), when the header names one.
   std::string texture_file;
+  // PLY: normals stored as double (delivered as float: --lossless-normals refuses them).
+  bool double_normals = false;
 };
 
 // A chunk's scalar channels (PLY vertex properties kept at their type, such as confidence or intensity): the

@@ -158,6 +158,8 @@ class PlyParser {
     for (const auto& p : vertex->props) {
       if (p.role == Role::kX || p.role == Role::kY || p.role == Role::kZ) ++xyz;
       if (p.role == Role::kNx) has_normals = true;
+      if ((p.role == Role::kNx || p.role == Role::kNy || p.role == Role::kNz) && p.type == PlyType::kFloat64)
+        stats_.double_normals = true;
       if (p.role == Role::kRed) channels = std::max<uint8_t>(channels, 3);
       if (p.role == Role::kAlpha) channels = 4;
     }
@@ -239,12 +241,13 @@ class PlyParser {
         // `comment TextureFile NAME` (MeshLab's, Metashape's): the image the texture coordinates index.
         std::string_view key;
         if (tok.next(key) && key == "TextureFile") {
-          std::string name;
-          for (std::string_view t; tok.next(t);) {
-            if (!name.empty()) name += ' ';
-            name.append(t);
-          }
-          if (texture_files_ == 0) texture_file_ = std::move(name);
+          std::string_view rest = tok.rest();  // the name as written, spaces inside kept
+          const auto blank = [](char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v'; };
+          while (!rest.empty() && blank(rest.front())) rest.remove_prefix(1);
+          while (!rest.empty() && blank(rest.back())) rest.remove_suffix(1);
+          if (rest.empty()) continue;
+          const std::string name(rest);
+          if (texture_files_ == 0) texture_file_ = name;
           else if (name != texture_file_) ++other_textures_;
           ++texture_files_;
         }
