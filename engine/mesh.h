@@ -6,6 +6,7 @@
 #pragma once
 
 #include <array>
+#include <bit>
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -74,6 +75,12 @@ inline size_t scalarWords(std::span<const ScalarChannel> channels) {
 // The values of a mesh's scalar channels, vertex after vertex: each value's bit pattern, zero-extended to 32 bits
 // (float64: low word, then high word). `stride` words per vertex (the channels' scalarTypeWords).
 using ScalarValues = std::vector<uint32_t>;
+
+// The value of float channel `c` whose first word is `words[0]`.
+inline double floatChannelValue(const ScalarChannel& c, const uint32_t* words) {
+  if (c.type == ScalarType::kFloat64) return std::bit_cast<double>(uint64_t(words[0]) | uint64_t(words[1]) << 32);
+  return double(std::bit_cast<float>(words[0]));
+}
 
 // Texture coordinates (issue 22) are a pair of float channels: indices of the pair, and their first word in a
 // vertex's scalar words.

@@ -64,14 +64,9 @@ BoundingBox usedBoundingBox(const Mesh& mesh) {
 }
 
 namespace {
-double channelValue(const ScalarChannel& c, const uint32_t* w) {
-  if (c.type == ScalarType::kFloat64) return std::bit_cast<double>(uint64_t(w[0]) | uint64_t(w[1]) << 32);
-  return double(std::bit_cast<float>(w[0]));
-}
-
 // round(value x 2^bits), unclamped (NaN for NaN).
 double rawLevel(const ScalarChannel& c, const uint32_t* words) {
-  return std::round(std::ldexp(channelValue(c, words), c.bits));
+  return std::round(std::ldexp(floatChannelValue(c, words), c.bits));
 }
 bool levelInRange(double level) { return std::fabs(level) <= double(kMaxScalarLevel); }  // false for NaN
 }  // namespace
@@ -139,7 +134,7 @@ Status snapScalarRow(std::span<const ScalarChannel> channels, uint32_t* row, uin
   for (const ScalarChannel& c : channels) {
     if (c.bits && !snapScalar(c, row)) {
       char value[32] = "?";
-      if (isFloatScalar(c.type)) std::snprintf(value, sizeof value, "%.9g", channelValue(c, row));
+      if (isFloatScalar(c.type)) std::snprintf(value, sizeof value, "%.9g", floatChannelValue(c, row));
       return makeError(ErrorCode::kInvalidArgument,
                        "vertex " + std::to_string(vertex) + " (counting texture seams' wedges): " + c.name + " = " +
                            std::string(value) + " cannot be kept at " + std::to_string(int(c.bits)) +

@@ -23,13 +23,8 @@ namespace scanpress {
 inline constexpr const char* kTexcoordU = "u";
 inline constexpr const char* kTexcoordV = "v";
 
-// TexcoordChannels and findTexcoords (the pair's names) are in engine/mesh.h: codecs predict the pair.
-
-// The value of float channel `c` whose first word is `words[0]`.
-inline double floatChannelValue(const ScalarChannel& c, const uint32_t* words) {
-  if (c.type == ScalarType::kFloat64) return std::bit_cast<double>(uint64_t(words[0]) | uint64_t(words[1]) << 32);
-  return double(std::bit_cast<float>(words[0]));
-}
+// TexcoordChannels, findTexcoords (the pair's names) and floatChannelValue are in engine/mesh.h: codecs predict the
+// pair, and quantization snaps it.
 
 // Whether a mesh file at `path` writes each of `channels`: all of them for PLY, the texture coordinates for OBJ (of a
 // mesh with triangles: `vt` are named by faces) and glTF (.glb, .gltf), none for STL and OFF. What is not written is
