@@ -26,7 +26,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string readAll(const fs::path& p) { return testing::readText(p.string()); }
+std::string readWhole(const fs::path& p) { return testing::readText(p.string()); }
 
 // Starts `scanpress run JOB --quiet` in its own process group (so that a kill reaches whatever it starts),
 // output discarded.
@@ -102,7 +102,7 @@ TEST(Durability, KilledAndResumedBatchMatchesAnUninterruptedRun) {
     for (const auto& ref_path : ref_containers) {
       const fs::path p = dir / "out" / ref_path.filename();
       ASSERT_TRUE(fs::exists(p)) << when << ": " << p;
-      EXPECT_TRUE(readAll(p) == readAll(ref_path)) << when << ": " << p << " differs from the uninterrupted run's";
+      EXPECT_TRUE(readWhole(p) == readWhole(ref_path)) << when << ": " << p << " differs from the uninterrupted run's";
     }
   };
   int killed_mid_run = 0, completed = 0, temps_seen = 0, finals_checked = 0;

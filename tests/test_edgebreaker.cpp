@@ -20,7 +20,7 @@ const CodecInfo& codec() { return *findCodec(CodecId::kEdgebreaker); }
 
 // Encodes, decodes and compares corners (positions and attributes of every triangle, with orientation and
 // multiplicity) with the input's.
-void expectRoundTrip(const TileContext& ctx, const QuantizedMesh& q) {
+void expectEdgebreakerRoundTrip(const TileContext& ctx, const QuantizedMesh& q) {
   auto enc = encodeMesh(codec(), ctx, q);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
   EXPECT_TRUE(codec().floor.admits(ctx.layout, enc->decoded.vertices, enc->decoded.faces, enc->payload.size()));
@@ -56,8 +56,8 @@ QuantizedMesh torus(uint32_t n, uint32_t m, int genus_copies = 1) {
 
 TEST(Edgebreaker, HandlesAndManyComponents) {
   const TileContext ctx{12, {}};
-  expectRoundTrip(ctx, torus(24, 12));
-  expectRoundTrip(ctx, torus(7, 5, 3));
+  expectEdgebreakerRoundTrip(ctx, torus(24, 12));
+  expectEdgebreakerRoundTrip(ctx, torus(7, 5, 3));
   // 200 separate tetrahedra and single triangles.
   QuantizedMesh many;
   for (uint32_t c = 0; c < 200; ++c) {
@@ -71,7 +71,7 @@ TEST(Edgebreaker, HandlesAndManyComponents) {
       many.triangles.push_back({b + 2, b, b + 3});
     }
   }
-  expectRoundTrip(ctx, many);
+  expectEdgebreakerRoundTrip(ctx, many);
 }
 
 TEST(Edgebreaker, NonOrientableAndNonManifold) {
@@ -93,7 +93,7 @@ TEST(Edgebreaker, NonOrientableAndNonManifold) {
     mobius.triangles.push_back({a, c, b});
     mobius.triangles.push_back({b, c, d});
   }
-  expectRoundTrip(ctx, mobius);
+  expectEdgebreakerRoundTrip(ctx, mobius);
 
   // Fins: extra triangles on edges of a closed sphere (three and four triangles on one edge). The cut leaves
   // two edges between the same pair of vertices.
@@ -110,7 +110,7 @@ TEST(Edgebreaker, NonOrientableAndNonManifold) {
   fin.positions.push_back({4000, 200, 100});
   fin.triangles.push_back({t0[0], t0[1], tip});
   fin.triangles.push_back({t0[1], t0[0], tip + 1});
-  expectRoundTrip(ctx, fin);
+  expectEdgebreakerRoundTrip(ctx, fin);
 
   // Two cones touching at their apex; two tetrahedra sharing only an edge.
   QuantizedMesh cones;
@@ -123,11 +123,11 @@ TEST(Edgebreaker, NonOrientableAndNonManifold) {
     }
   for (uint32_t s = 0; s < 2; ++s)
     for (uint32_t i = 0; i < 12; ++i) cones.triangles.push_back({0, 1 + 12 * s + i, 1 + 12 * s + (i + 1) % 12});
-  expectRoundTrip(ctx, cones);
+  expectEdgebreakerRoundTrip(ctx, cones);
   QuantizedMesh tets;
   tets.positions = {{0, 0, 0}, {100, 0, 0}, {50, 90, 0}, {50, 30, 80}, {50, 30, 4000}};
   tets.triangles = {{0, 1, 2}, {0, 3, 1}, {1, 3, 2}, {2, 3, 0}, {0, 1, 4}, {1, 2, 4}, {2, 0, 4}};
-  expectRoundTrip(ctx, tets);
+  expectEdgebreakerRoundTrip(ctx, tets);
 }
 
 TEST(Edgebreaker, BoundariesAndHoles) {
@@ -146,7 +146,7 @@ TEST(Edgebreaker, BoundariesAndHoles) {
       grid.triangles.push_back({a, a + n, a + n + 1});
       grid.triangles.push_back({a, a + n + 1, a + 1});
     }
-  expectRoundTrip(ctx, grid);
+  expectEdgebreakerRoundTrip(ctx, grid);
 }
 
 // Payload header: varint points, varint triangles, varint cut-mesh faces, then the range-coded stream.

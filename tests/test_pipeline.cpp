@@ -119,7 +119,7 @@ TEST(Pipeline, CoarseLevelsWeldByPosition) {
 // some tiles are at (or above) their root cube, whose one vertex derives its attributes: only that vertex does, the
 // other tiles' keep their own.
 // A sphere whose normals are its directions and whose colors vary from vertex to vertex.
-Mesh attributedSphere(int subdivisions) {
+Mesh attributedSphereMesh(int subdivisions) {
   Mesh sphere = icosphere(subdivisions);
   for (size_t i = 0; i < sphere.positions.size(); ++i) {
     const Vec3d& p = sphere.positions[i];
@@ -161,7 +161,7 @@ std::pair<size_t, size_t> foreignAndFar(const QuantizedMesh& m, const AttributeP
 
 TEST(Pipeline, CoarseLevelsOfManyTilesShowTheScansOwnAttributes) {
   testing::TempDir dir;
-  const Mesh sphere = attributedSphere(5);
+  const Mesh sphere = attributedSphereMesh(5);
   const std::string input = dir.file("sphere.ply");
   ASSERT_TRUE(writeMeshFile(input, sphere, WriteOptions{}).isOk());
   for (const char* codec : {"kdtree", "octree"}) {
@@ -217,7 +217,7 @@ TEST(Pipeline, CoarseLevelsOfManyTilesShowTheScansOwnAttributes) {
 // at each position exactly the scan's there.
 TEST(Pipeline, PmLevelsOfManyTilesShowTheScansOwnAttributes) {
   testing::TempDir dir;
-  const Mesh sphere = attributedSphere(5);
+  const Mesh sphere = attributedSphereMesh(5);
   const std::string input = dir.file("sphere.ply");
   ASSERT_TRUE(writeMeshFile(input, sphere, WriteOptions{}).isOk());
   EncodeSettings s;

@@ -253,7 +253,7 @@ TEST(Pm, UglyMeshesRoundTrip) {
 // A sphere with normals (its own directions, jittered) and 8-bit RGBA colors that name their vertex (so a decoded
 // color says which input vertex it came from), plus a twin of every 7th vertex at its position with other
 // attributes, its color naming it too (pm welds by position: the first vertex's attributes stay).
-QuantizedMesh attributedSphere(const AttributeLayout& layout, int subdivisions) {
+QuantizedMesh attributedPmSphere(const AttributeLayout& layout, int subdivisions) {
   Mesh s = icosphere(subdivisions);
   std::mt19937 rng(5);
   std::normal_distribution<float> jitter(0.f, 0.05f);
@@ -300,7 +300,7 @@ TEST(Pm, EveryLevelShowsTheTilesOwnAttributes) {
     SCOPED_TRACE(::testing::Message() << int(layout.normal_bits) << " " << int(layout.color_channels) << " "
                                       << int(layout.color_bits));
     const TileContext ctx{12, layout};
-    const QuantizedMesh tile = attributedSphere(layout, 4);
+    const QuantizedMesh tile = attributedPmSphere(layout, 4);
     const auto first = firstAttributes(tile, layout);
     for (const double ratio : {1.0, 0.2}) {
       SCOPED_TRACE(ratio);
@@ -374,7 +374,7 @@ TEST(Pm, EveryLevelShowsTheTilesOwnAttributes) {
 TEST(Pm, Version2DerivesAttributes) {
   const AttributeLayout layout{10, 3};
   const TileContext ctx{12, layout};
-  const QuantizedMesh tile = attributedSphere(AttributeLayout{}, 3);
+  const QuantizedMesh tile = attributedPmSphere(AttributeLayout{}, 3);
   const Encoded enc = encodeTile(TileContext{12, {}}, tile, {});  // without attributes: v3's bytes are v2's
   auto d = pm().decode(ctx, 2, enc.tile.payload, limitsOf(enc.tile.decoded));
   ASSERT_TRUE(d.isOk()) << d.status().toString();
@@ -387,7 +387,7 @@ TEST(Pm, Version2DerivesAttributes) {
 TEST(Pm, EveryTruncationFailsCleanlyOrDecodesALevel) {
   for (const AttributeLayout& layout : {AttributeLayout{}, AttributeLayout{10, 4}}) {
     const TileContext ctx{12, layout};
-    const QuantizedMesh sphere = attributedSphere(layout, 2);
+    const QuantizedMesh sphere = attributedPmSphere(layout, 2);
     const Encoded enc = encodeTile(ctx, sphere, {});
     ASSERT_GE(enc.levels.size(), 3u);
     const auto& bytes = enc.tile.payload;
@@ -411,7 +411,7 @@ TEST(Pm, EveryTruncationFailsCleanlyOrDecodesALevel) {
 TEST(Pm, CorruptPayloadsFailCleanlyOrStayWithinLimits) {
   for (const AttributeLayout& layout : {AttributeLayout{}, AttributeLayout{10, 4}}) {
     const TileContext ctx{12, layout};
-    const QuantizedMesh sphere = attributedSphere(layout, 3);
+    const QuantizedMesh sphere = attributedPmSphere(layout, 3);
     const Encoded enc = encodeTile(ctx, sphere, {});
     const DecodeLimits limits = limitsOf(enc.tile.decoded);
     std::mt19937 rng(7);

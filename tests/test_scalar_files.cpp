@@ -39,7 +39,7 @@ std::vector<std::pair<Vec3u, std::vector<uint32_t>>> cellRows(const Mesh& m, con
   return out;
 }
 
-EncodeSettings settingsFor(const std::string& out, const std::string& codec) {
+EncodeSettings scalarSettingsFor(const std::string& out, const std::string& codec) {
   return testing::encodeSettings(kBunny, out, codec);
 }
 
@@ -58,7 +58,7 @@ TEST(ScalarFiles, BunnyConfidenceAndIntensityComeBackBitForBit) {
                         Case{"store", 6000, 0}, Case{"edgebreaker", 6000, uint64_t(6) << 20}}) {
     SCOPED_TRACE(std::string(c.codec) + ", " + std::to_string(c.tile_triangles) + " triangles per tile" +
                  (c.memory_budget ? ", out of core" : ""));
-    EncodeSettings s = settingsFor(dir.file("b.spz"), c.codec);
+    EncodeSettings s = scalarSettingsFor(dir.file("b.spz"), c.codec);
     s.tile_triangles = c.tile_triangles;
     s.memory_budget = c.memory_budget;
     auto enc = encodeFile(s);
@@ -91,7 +91,7 @@ TEST(ScalarFiles, BunnyConfidenceAndIntensityComeBackBitForBit) {
 // request and writes a version 1 container; decoding to a format without scalars lists them.
 TEST(ScalarFiles, WhatIsDroppedIsSaid) {
   TempDir dir;
-  EncodeSettings pm = settingsFor(dir.file("pm.spz"), "pm");
+  EncodeSettings pm = scalarSettingsFor(dir.file("pm.spz"), "pm");
   auto r = encodeFile(pm);
   ASSERT_TRUE(r.isOk()) << r.status().toString();
   EXPECT_TRUE(r->layout.scalars.empty());
@@ -103,7 +103,7 @@ TEST(ScalarFiles, WhatIsDroppedIsSaid) {
   ASSERT_FALSE(strict.isOk());
   EXPECT_NE(strict.status().message().find("vertex.confidence"), std::string::npos) << strict.status().toString();
 
-  EncodeSettings none = settingsFor(dir.file("none.spz"), "kdtree");
+  EncodeSettings none = scalarSettingsFor(dir.file("none.spz"), "kdtree");
   none.keep_scalars = false;
   r = encodeFile(none);
   ASSERT_TRUE(r.isOk());
@@ -113,7 +113,7 @@ TEST(ScalarFiles, WhatIsDroppedIsSaid) {
   ASSERT_TRUE(file.isOk());
   EXPECT_EQ(file->header().version, kContainerVersion);
 
-  EncodeSettings kept = settingsFor(dir.file("kept.spz"), "kdtree");
+  EncodeSettings kept = scalarSettingsFor(dir.file("kept.spz"), "kdtree");
   ASSERT_TRUE(encodeFile(kept).isOk());
   DecodeSettings d;
   d.input = kept.output;
@@ -135,7 +135,7 @@ TEST(ScalarFiles, WhatIsDroppedIsSaid) {
 // them; the weld's keys never point into a freed tile (this runs under ASan in CI).
 TEST(ScalarFiles, StreamedDecodeOfManyTilesWithScalars) {
   TempDir dir;
-  EncodeSettings s = settingsFor(dir.file("t.spz"), "kdtree");
+  EncodeSettings s = scalarSettingsFor(dir.file("t.spz"), "kdtree");
   s.tile_triangles = 4000;
   auto enc = encodeFile(s);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
@@ -161,7 +161,7 @@ TEST(ScalarFiles, StreamedDecodeOfManyTilesWithScalars) {
 // --codec auto under a target with --strict: pm would drop the scalars, so edgebreaker alone competes.
 TEST(ScalarFiles, AutoUnderStrictKeepsTheScalars) {
   TempDir dir;
-  EncodeSettings s = settingsFor(dir.file("auto.spz"), "auto");
+  EncodeSettings s = scalarSettingsFor(dir.file("auto.spz"), "auto");
   s.strict = true;
   s.target.kind = TargetKind::kMaxError;
   s.target.metric = ErrorMetric::kRms;

@@ -27,7 +27,7 @@ namespace fs = std::filesystem;
 
 // A sphere with normals and colors, some vertices doubled (a twin at the same position with the same attributes,
 // used by one triangle) and two stray vertices: what welding must keep apart or together exactly as in memory.
-Mesh attributedSphere() {
+Mesh streamedSphere() {
   Mesh m = icosphere(5);
   for (const Vec3d& p : m.positions) {
     m.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
@@ -80,7 +80,7 @@ class StreamDecode : public ::testing::Test {
   static void SetUpTestSuite() {
     dir_ = new testing::TempDir;
     fs::create_directories(dir_->file("scratch"));
-    ASSERT_TRUE(writePly(dir_->file("sphere.ply"), attributedSphere()).isOk());
+    ASSERT_TRUE(writePly(dir_->file("sphere.ply"), streamedSphere()).isOk());
     for (const char* codec : {"kdtree", "octree", "pm", "edgebreaker", "store"}) {
       std::string out;
       ASSERT_EQ(testing::runScanpress("encode '" + dir_->file("sphere.ply") + "' '" + container(codec) +

@@ -318,7 +318,7 @@ TEST(Texcoords, PlyFaceTexcoordListsAreWedges) {
   EXPECT_EQ(own_u->scalar_channels, (std::vector<ScalarChannel>{{"u", ScalarType::kUint8}}));
 }
 
-EncodeSettings settingsFor(const std::string& in, const std::string& out, const std::string& codec) {
+EncodeSettings uvSettingsFor(const std::string& in, const std::string& out, const std::string& codec) {
   EncodeSettings s = testing::encodeSettings(in, out, codec);
   s.bits = 20;
   return s;
@@ -335,7 +335,7 @@ struct RunCase {
            (memory_budget ? ", out of core" : "");
   }
   EncodeSettings settings(const std::string& in, const std::string& out) const {
-    EncodeSettings s = settingsFor(in, out, codec);
+    EncodeSettings s = uvSettingsFor(in, out, codec);
     s.tile_triangles = tile_triangles;
     s.memory_budget = memory_budget;
     return s;
@@ -427,7 +427,7 @@ TEST(Texcoords, UvBitsRefuseCoordinatesBeyondTheirRange) {
   TempDir dir;
   const std::string in = dir.file("far.obj");
   testing::writeBytes(in, "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1000000 0\nvt 0 1\nf 1/1 2/2 3/3\n");
-  EncodeSettings s = settingsFor(in, dir.file("far.spz"), "edgebreaker");
+  EncodeSettings s = uvSettingsFor(in, dir.file("far.spz"), "edgebreaker");
   s.uv_bits = 12;
   auto enc = encodeFile(s);
   ASSERT_FALSE(enc.isOk());
@@ -452,7 +452,7 @@ TEST(Materials, MtllibAndOneUsemtlAreKept) {
   TempDir dir;
   const std::string in = dir.file("sphere.obj");
   testing::writeBytes(in, uvSphereObj(12, 24));
-  EncodeSettings s = settingsFor(in, dir.file("m.spz"), "kdtree");
+  EncodeSettings s = uvSettingsFor(in, dir.file("m.spz"), "kdtree");
   s.keep_scalars = false;  // (a streamed decode writes no texture coordinates)
   s.tile_triangles = 200;
   auto enc = encodeFile(s);
@@ -513,7 +513,7 @@ TEST(Materials, MtllibAndOneUsemtlAreKept) {
     const std::string with = "comment written by scanpress\ncomment TextureFile bark 2.jpg\n";
     ply.replace(ply.find("comment written by scanpress\n"), 29, with);
     testing::writeBytes(dir.file("t.ply"), ply);
-    EncodeSettings t = settingsFor(dir.file("t.ply"), dir.file("t.spz"), "edgebreaker");
+    EncodeSettings t = uvSettingsFor(dir.file("t.ply"), dir.file("t.spz"), "edgebreaker");
     auto e = encodeFile(t);
     ASSERT_TRUE(e.isOk()) << e.status().toString();
     EXPECT_EQ(e->read.texture_file, "bark 2.jpg");
@@ -568,7 +568,7 @@ TEST(Texcoords, DroppedBySimplifyingCodecsAndWrittenFromPly) {
   const std::string in = dir.file("sphere.obj");
   testing::writeBytes(in, uvSphereObj(12, 24));
   for (const bool pm : {true, false}) {
-    EncodeSettings s = settingsFor(in, dir.file("p.spz"), pm ? "pm" : "kdtree");
+    EncodeSettings s = uvSettingsFor(in, dir.file("p.spz"), pm ? "pm" : "kdtree");
     s.keep_scalars = pm;
     auto enc = encodeFile(s);
     ASSERT_TRUE(enc.isOk()) << enc.status().toString();
@@ -592,7 +592,7 @@ TEST(Texcoords, DroppedBySimplifyingCodecsAndWrittenFromPly) {
   m.scalars = words;
   const std::string ply = dir.file("s.ply");
   ASSERT_TRUE(writePly(ply, m).isOk());
-  EncodeSettings s = settingsFor(ply, dir.file("q.spz"), "edgebreaker");
+  EncodeSettings s = uvSettingsFor(ply, dir.file("q.spz"), "edgebreaker");
   ASSERT_TRUE(encodeFile(s).isOk());
   DecodeSettings d;
   d.input = s.output;
@@ -747,7 +747,7 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
        {std::pair{"kdtree", uint64_t(1) << 20}, std::pair{"octree", uint64_t(2000)},
         std::pair{"edgebreaker", uint64_t(2000)}}) {
     SCOPED_TRACE(std::string(codec) + ", " + std::to_string(tile_triangles) + " triangles per tile");
-    EncodeSettings s = settingsFor(in, dir.file("f.spz"), codec);
+    EncodeSettings s = uvSettingsFor(in, dir.file("f.spz"), codec);
     s.tile_triangles = tile_triangles;
     s.normal_bits = 12;
     auto enc = encodeFile(s);
@@ -763,7 +763,7 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
   for (const auto& [codec, tile_triangles] :
        {std::pair{"kdtree", uint64_t(1) << 20}, std::pair{"edgebreaker", uint64_t(2000)}}) {
     SCOPED_TRACE(std::string(codec) + ", " + std::to_string(tile_triangles) + " triangles per tile, lossless");
-    EncodeSettings s = settingsFor(in, dir.file("l.spz"), codec);
+    EncodeSettings s = uvSettingsFor(in, dir.file("l.spz"), codec);
     s.tile_triangles = tile_triangles;
     s.lossless_normals = true;
     auto enc = encodeFile(s);
@@ -781,7 +781,7 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
     }
   }
   // pm: a normal per vertex (its first corner's), the others listed.
-  EncodeSettings s = settingsFor(in, dir.file("p.spz"), "pm");
+  EncodeSettings s = uvSettingsFor(in, dir.file("p.spz"), "pm");
   auto enc = encodeFile(s);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
   EXPECT_EQ(enc->read.vertices, m.positions.size());

@@ -483,7 +483,7 @@ Result<std::span<const uint8_t>> parseTileChunk(std::span<const uint8_t> chunk, 
   return payload;
 }
 
-DecodeLimits limitsOf(const TileEntry& e) { return DecodeLimits{e.vertices, e.faces}; }
+DecodeLimits entryLimits(const TileEntry& e) { return DecodeLimits{e.vertices, e.faces}; }
 
 namespace {
 
@@ -502,7 +502,7 @@ Result<std::vector<CodecLevel>> tilePayloadLevels(const ContainerHeader& header,
   const std::string where = what + ": tile " + std::to_string(e.tile_id);
   SP_ASSIGN_OR_RETURN(const CodecInfo* codec, codecOf(e, where));
   if (!codec->levels) return std::vector<CodecLevel>{};
-  auto levels = codec->levels(TileContext{header.grid.bits, header.layout}, e.codec_version, payload, limitsOf(e));
+  auto levels = codec->levels(TileContext{header.grid.bits, header.layout}, e.codec_version, payload, entryLimits(e));
   if (!levels.isOk()) return levels.status().withContext(where);
   return levels;
 }
@@ -513,7 +513,7 @@ Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const Til
   const std::string where = what + ": tile " + std::to_string(e.tile_id);
   SP_ASSIGN_OR_RETURN(const CodecInfo* codec, codecOf(e, where));
   const TileContext ctx{header.grid.bits, header.layout};
-  const DecodeLimits limits = limitsOf(e);
+  const DecodeLimits limits = entryLimits(e);
   bool partial = false, coarse_own = false;
   if (level) {
     if (!codec->decode_level)
