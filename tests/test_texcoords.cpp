@@ -895,5 +895,49 @@ TEST(LosslessNormals, EveryBitPatternComesBack) {
   EXPECT_NE(enc.status().message().find("this PLY's are double"), std::string::npos) << enc.status().toString();
 }
 
+// Levels and welds that derive attributes from their triangles (kdtree's and octree's root level; tiles welded by
+// position at a coarse level) give lossless normals a unit normal, as they give octahedral ones, never a zero one:
+// every decoded normal at every level is finite and of unit length, one tile and many.
+TEST(LosslessNormals, DerivedLevelsGetUnitNormals) {
+  TempDir dir;
+  testing::writeBytes(dir.file("s.obj"), uvSphereObj(24, 48));
+  auto base = readMeshFile(dir.file("s.obj"), nullptr, ReadOptions::asInFile());
+  ASSERT_TRUE(base.isOk());
+  Mesh m = *base;
+  m.normals.clear();
+  for (const Vec3d& p : m.positions) m.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
+  const std::string in = dir.file("n.ply");
+  ASSERT_TRUE(writePly(in, m).isOk());
+  for (const char* codec : {"kdtree", "octree"})
+    for (uint64_t tile_triangles : {uint64_t(1) << 20, uint64_t(300)}) {
+      SCOPED_TRACE(std::string(codec) + ", " + std::to_string(tile_triangles) + " triangles per tile");
+      EncodeSettings s = kRunCases[0].settings(in, dir.file("n.spz"));
+      s.codec = codec;
+      s.tile_triangles = tile_triangles;
+      s.lossless_normals = true;
+      auto enc = encodeFile(s);
+      ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+      ASSERT_EQ(enc->tiles.size() > 1, tile_triangles < 1000);
+      for (uint32_t level = 0; level <= uint32_t(enc->grid.bits); level += 2) {
+        SCOPED_TRACE("level " + std::to_string(level));
+        DecodeSettings d;
+        d.input = s.output;
+        d.output = dir.file("back.ply");
+        d.level = level;
+        auto dec = decodeFile(d);
+        ASSERT_TRUE(dec.isOk()) << dec.status().toString();
+        auto back = readMeshFile(d.output);
+        ASSERT_TRUE(back.isOk()) << back.status().toString();
+        ASSERT_EQ(back->normals.size(), back->positions.size());
+        ASSERT_FALSE(back->positions.empty());
+        for (size_t v = 0; v < back->normals.size(); ++v) {
+          const Vec3f& n = back->normals[v];
+          const double len = std::sqrt(double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2]);
+          ASSERT_NEAR(len, 1.0, 1e-5) << "vertex " << v << " of " << back->normals.size();
+        }
+      }
+    }
+}
+
 }  // namespace
 }  // namespace scanpress

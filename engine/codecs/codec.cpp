@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
+#include <optional>
 #include <string>
 
 #include "engine/octahedral.h"
@@ -164,13 +166,18 @@ void deriveAttributes(QuantizedMesh& m, const AttributeLayout& layout, std::span
   m.normals.clear();
   m.colors.clear();
   m.scalars.clear();
-  if (layout.hasNormals()) {
-    std::vector<Vec3d> acc(m.positions.size(), Vec3d{0, 0, 0});
+  // Lossless normals (float channels nx, ny, nz) are derived as octahedral ones are, not left zero.
+  const std::optional<size_t> float_normals = layout.hasNormals() ? std::nullopt : losslessNormalsWord(layout.scalars);
+  std::vector<Vec3d> acc;
+  if (layout.hasNormals() || float_normals) {
+    acc.assign(m.positions.size(), Vec3d{0, 0, 0});
     for (const auto& t : m.triangles) {
       const Vec3d nrm = triangleCross(m.positions, t);
       for (uint32_t v : t)
         for (int a = 0; a < 3; ++a) acc[v][a] += nrm[a];
     }
+  }
+  if (layout.hasNormals()) {
     m.normals.reserve(acc.size());
     for (const auto& a : acc)
       m.normals.push_back(encodeOctahedral(Vec3f{float(a[0]), float(a[1]), float(a[2])}, layout.normal_bits));
@@ -178,6 +185,14 @@ void deriveAttributes(QuantizedMesh& m, const AttributeLayout& layout, std::span
   if (layout.hasColors()) m.colors.assign(m.positions.size(), Rgba8{128, 128, 128, 255});
   const size_t stride = size_t(layout.scalarStride());
   m.scalars.assign(m.positions.size() * stride, 0);  // zero: 0 or +0.0 at every type
+  if (float_normals)
+    for (size_t v = 0; v < acc.size(); ++v) {
+      // The unit normal; a vertex on no triangle gets +z, as the octahedral code of a zero sum decodes to.
+      const Vec3d& a = acc[v];
+      const double len = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+      const Vec3d n = len > 0 && std::isfinite(len) ? Vec3d{a[0] / len, a[1] / len, a[2] / len} : Vec3d{0, 0, 1};
+      for (size_t k = 0; k < 3; ++k) m.scalars[v * stride + *float_normals + k] = std::bit_cast<uint32_t>(float(n[k]));
+    }
   for (size_t v = 0; v < keep.size() && v < m.positions.size(); ++v)
     if (keep[v]) {
       if (v < old_normals.size() && !m.normals.empty()) m.normals[v] = old_normals[v];
