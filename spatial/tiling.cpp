@@ -7,6 +7,11 @@
 #include <unordered_map>
 #include <unordered_set>
 
+// libopenvdb instantiates the Int32 grid and its tree (virtual functions and all): declared extern here, they are not
+// instantiated again in this file, which took most of its compile time.
+extern template class openvdb::Grid<openvdb::Int32Tree>;
+extern template class openvdb::tree::Tree<openvdb::Int32Tree::RootNodeType>;
+
 namespace scanpress {
 namespace {
 
