@@ -108,8 +108,8 @@ Result<std::vector<uint64_t>> levelBytes(const ContainerFile& file, const std::v
 // Decodes the chosen tiles (at `level` when given) and welds them. Tiles decoded at a coarse level weld by position
 // (their vertices' attributes differ between tiles along a seam): a welded vertex keeps its first tile's attributes
 // when that tile has its own (kdtree and octree from version 3), else gets them derived from the welded mesh.
-// `drop_scalars`: the tiles' scalar channels are cleared before they are welded (an output that writes none: the
-// same vertices as the streamed decode, which never welds by them), and the result has none.
+// `drop_scalars`: the tiles' scalar channels are cleared before they are welded (an output that writes none; the
+// streamed decode does the same then), and the result has none.
 Result<QuantizedMesh> decodeChosen(const ContainerFile& file, const std::vector<const TileEntry*>& chosen,
                                    std::optional<uint32_t> level, bool drop_scalars = false) {
   // Tiles decode independently: in parallel, then welded in index order (deterministic).
@@ -313,11 +313,10 @@ Result<DecodedMesh> decodeToMesh(const DecodeSettings& settings) {
 }
 
 // The container's scalar channels that the output's format has no place for (all but PLY's; OBJ and glTF keep the
-// texture coordinates: texcoords.h), or that a streamed decode does not write: listed (with the vertices written),
-// never silent.
+// texture coordinates and lossless normals: texcoords.h): listed (with the vertices written), never silent. A
+// streamed decode writes what the in-memory one does.
 void noteDroppedScalars(const ContainerHeader& header, const std::string& output, DecodeResult& result) {
-  const std::vector<bool> written = result.streamed ? std::vector<bool>(header.layout.scalars.size(), false)
-                                                    : channelsWritten(output, header.layout.scalars, result.faces > 0);
+  const std::vector<bool> written = channelsWritten(output, header.layout.scalars, result.faces > 0);
   for (size_t i = 0; i < header.layout.scalars.size(); ++i)
     if (!written[i]) result.dropped.push_back({"vertex." + header.layout.scalars[i].name, result.vertices});
   // Only OBJ has a place for the material lines, only PLY for the texture file comment.
@@ -346,18 +345,23 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
                                                       "(.glb, .gltf)");
   result.tiles = static_cast<uint32_t>(chosen.size());
   // Whether the output format writes any of the container's scalar channels (PLY all, OBJ and glTF texture
-  // coordinates): a streamed decode, which writes none, is refused then; otherwise tiles weld without them.
+  // coordinates, lossless normals as normals): tiles weld by them then, and without them otherwise.
   const std::vector<bool> written = channelsWritten(settings.output, header.layout.scalars);
   const bool writes_scalars = std::find(written.begin(), written.end(), true) != written.end();
   const uint64_t in_memory = inMemoryDecodeBytes(chosen, size_t(header.layout.scalarStride()));
   if (settings.memory_budget > 0 && in_memory > settings.memory_budget) {
-    if (writes_scalars)
+    uint64_t faces = 0;
+    for (const TileEntry* e : chosen) faces += e->faces;
+    const auto format = MeshFileFormat::forPath(settings.output);
+    const bool obj = format.isOk() && format->kind() == MeshFileFormat::Kind::kObj;
+    if (obj && faces > 0 && findTexcoords(header.layout.scalars))
       return makeError(ErrorCode::kUnsupported,
-                       settings.input +
-                           ": the container has scalar channels (or texture coordinates, or lossless normals), which "
-                           "decoding under a memory budget (tile batch by tile batch) does not write yet: raise "
-                           "--memory-budget, or "
-                           "decode to a format without them (.stl and .off drop them)");
+                       settings.output +
+                           ": OBJ output with texture coordinates is built in memory (the wedges at texture seams "
+                           "share their `v` lines), about " +
+                           std::to_string(in_memory >> 20) + " MiB here, over the memory budget of " +
+                           std::to_string(settings.memory_budget >> 20) +
+                           " MiB: raise --memory-budget, or decode to .ply (it streams them)");
     if (gltf)
       return makeError(ErrorCode::kLimitExceeded,
                        settings.output + ": glTF output is built in memory, about " + std::to_string(in_memory >> 20) +
@@ -368,6 +372,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     if (settings.crop) stream.crop = settings.box;
     stream.memory_budget = settings.memory_budget;
     stream.scratch_parent = settings.scratch_dir;
+    stream.scalars = writes_scalars;
     stream.material_library = header.material_library, stream.material = header.material;
     stream.texture_file = header.texture_file;
     SP_ASSIGN_OR_RETURN(StreamDecodeResult streamed, streamDecode(file, chosen, settings.output, stream));

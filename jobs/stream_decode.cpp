@@ -3,6 +3,8 @@
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cstring>
+#include <memory>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -55,60 +57,72 @@ struct Bounds {
   }
 };
 
-// A welded vertex while it can still be used: its output number (once it has one), what its record holds, and the
-// sum of its triangles' normals when the attributes are derived.
+// A welded vertex while it can still be used: its output number (once it has one), what its record holds, its
+// scalar values, and the sum of its triangles' normals when the attributes are derived.
 struct Welded {
   uint32_t owner = 0;   // the tile (decode order) that created it
   bool derive = false;  // its attributes are derived (its owner tile has none of its own)
   uint32_t out = kUnassigned;
   ScratchVertex record{};
   Vec3d normal_sum{0, 0, 0};
+  const uint32_t* scalars = nullptr;  // the layout's words: in its tile's mesh, or in `owned`
+  std::unique_ptr<uint32_t[]> owned;  // a shared vertex's own copy: its key and record outlive its tile
 };
 
-// The scratch vertex records, appended through a buffer; a record already flushed is patched in place.
+// Scratch records of a fixed size (a ScratchVertex; a vertex's scalar words), appended through a buffer; a record
+// already flushed is patched in place.
 class RecordFile {
  public:
+  explicit RecordFile(size_t record_bytes) : size_(record_bytes) {}
   Status open(const std::string& path) { return file_.open(path); }
-  uint64_t size() const { return flushed_ + buffer_.size(); }
-  Status append(const ScratchVertex& r) {
-    buffer_.push_back(r);
-    return buffer_.size() * sizeof(ScratchVertex) >= kBufferBytes ? flush() : Status::ok();
+  Status append(const void* record) {
+    const auto* b = static_cast<const uint8_t*>(record);
+    buffer_.insert(buffer_.end(), b, b + size_);
+    return buffer_.size() >= kBufferBytes ? flush() : Status::ok();
   }
-  Status setNormal(uint64_t i, const OctNormal& n) {
+  // Bytes [offset, offset + len) of record i.
+  Status patch(uint64_t i, size_t offset, const void* bytes, size_t len) {
     if (i >= flushed_) {
-      buffer_[i - flushed_].n = n;
+      std::memcpy(buffer_.data() + (i - flushed_) * size_ + offset, bytes, len);
       return Status::ok();
     }
-    return file_.writeAt(i * sizeof(ScratchVertex) + offsetof(ScratchVertex, n), &n, sizeof n);
+    return file_.writeAt(i * size_ + offset, bytes, len);
   }
   Status flush() {
-    SP_RETURN_IF_ERROR(file_.writeAt(flushed_ * sizeof(ScratchVertex), buffer_.data(),
-                                     buffer_.size() * sizeof(ScratchVertex)));
-    flushed_ += buffer_.size();
+    SP_RETURN_IF_ERROR(file_.writeAt(flushed_ * size_, buffer_.data(), buffer_.size()));
+    flushed_ += buffer_.size() / size_;
     buffer_.clear();
     return Status::ok();
   }
-  Status read(uint64_t first, size_t count, std::vector<ScratchVertex>& out) const {
-    out.resize(count);
-    return file_.readAt(first * sizeof(ScratchVertex), out.data(), count * sizeof(ScratchVertex));
+  // `count` records from `first`, their bytes in `out`.
+  Status read(uint64_t first, size_t count, std::vector<uint8_t>& out) const {
+    out.resize(count * size_);
+    return file_.readAt(first * size_, out.data(), out.size());
   }
 
  private:
+  size_t size_;
   ScratchFile file_;
-  std::vector<ScratchVertex> buffer_;
+  std::vector<uint8_t> buffer_;
   uint64_t flushed_ = 0;
 };
 
 // Welds decoded tiles one after the other, as weldTiles then cropToBox and deriveAttributes (for the vertices of
 // tiles without attributes of their own, `own` by tile in decode order) would on the whole mesh, writing vertex
-// records and face bytes as it goes.
+// records and face bytes as it goes. With `scalars` (a record file of the layout's scalar words per vertex), the
+// tiles' scalar values are welded by and written as well; without, the tiles come without them.
 class Welder {
  public:
   Welder(const ContainerHeader& header, const std::vector<Bounds>& bounds, bool all_complete, std::vector<uint8_t> own,
          bool point_cloud, const std::optional<std::array<double, 6>>& crop, MeshFileFormat format,
-         RecordFile& records, ScratchFile& faces)
+         RecordFile& records, RecordFile* scalars, ScratchFile& faces)
       : grid_(header.grid),
         layout_(header.layout),
+        stride_(scalars ? size_t(header.layout.scalarStride()) : 0),
+        float_normals_(stride_ && !header.layout.hasNormals() ? losslessNormalsWord(header.layout.scalars)
+                                                              : std::nullopt),
+        zeros_(stride_, 0),
+        scalars_(scalars),
         bounds_(bounds),
         by_(all_complete ? WeldBy::kPositionAndAttributes : WeldBy::kPosition),
         own_(std::move(own)),
@@ -120,14 +134,15 @@ class Welder {
         faces_(faces),
         near_(bounds.size()),
         evict_(bounds.size()) {
-    file_layout_.normals = layout_.hasNormals();
+    file_layout_.normals = layout_.hasNormals() || float_normals_.has_value();  // lossless ones are the normals
     file_layout_.color_channels = layout_.color_channels;
     findNeighbours();
   }
 
   Status add(uint32_t t, const QuantizedMesh& m) {
     const size_t n = m.positions.size();
-    local_.assign(n, Welded{});
+    local_.clear();
+    local_.resize(n);
     ref_.assign(n, nullptr);
     for (size_t v = 0; v < n; ++v) {
       const Vec3u& p = m.positions[v];
@@ -140,7 +155,7 @@ class Welder {
         }
       Welded* w = &local_[v];
       if (before || last > t) {
-        const WeldKey key = weldKey(m, v, by_);
+        WeldKey key = weldKey(m, v, by_);
         auto it = shared_.find(key);
         if (it != shared_.end() && it->second.owner != t) {
           ref_[v] = &it->second;
@@ -148,11 +163,19 @@ class Welder {
         }
         // Found with this tile as owner: a second vertex of one tile at one key stays apart, as in weldTiles.
         if (it == shared_.end() && last > t) {
+          std::unique_ptr<uint32_t[]> owned;
+          if (stride_) {  // the key and the record outlive the tile: they use the vertex's own copy
+            owned = std::make_unique<uint32_t[]>(stride_);
+            std::copy_n(m.scalars.data() + v * stride_, stride_, owned.get());
+            if (key.s) key.s = owned.get();
+          }
           w = &shared_.emplace(key, Welded{}).first->second;
+          w->owned = std::move(owned);
           evict_[last].push_back(key);
         }
       }
       w->owner = t;
+      if (stride_) w->scalars = w->owned ? w->owned.get() : m.scalars.data() + v * stride_;
       w->derive = !own_[t];
       w->record = ScratchVertex{p, w->derive || m.normals.empty() ? OctNormal{0, 0} : m.normals[v],
                                 m.colors.empty() ? Rgba8{0, 0, 0, 0} : m.colors[v]};
@@ -160,7 +183,7 @@ class Welder {
       ref_[v] = w;
       if (!crop_ || (point_cloud_ && inside(p))) SP_RETURN_IF_ERROR(emit(*w));
     }
-    if (derive_ && layout_.hasNormals()) sumNormals(m);
+    if (derive_ && (layout_.hasNormals() || float_normals_)) sumNormals(m);
     for (const Triangle& tri : m.triangles) {
       Welded* c[3] = {ref_[tri[0]], ref_[tri[1]], ref_[tri[2]]};
       if (crop_ && !(inside(c[0]->record.p) && inside(c[1]->record.p) && inside(c[2]->record.p))) continue;
@@ -214,14 +237,23 @@ class Welder {
       return makeError(ErrorCode::kLimitExceeded, "more than 2^31-1 vertices: too many for PLY, OBJ or OFF");
     w.out = static_cast<uint32_t>(file_layout_.vertices++);
     file_layout_.double_positions |= !floatPositionSuffices(w.record.p, grid_);
-    return records_.append(w.record);
+    SP_RETURN_IF_ERROR(records_.append(&w.record));
+    // Derived attributes: scalars 0 (lossless normals are patched in when final), as deriveAttributes.
+    return stride_ ? scalars_->append(w.derive ? zeros_.data() : w.scalars) : Status::ok();
   }
   // The vertex's last triangle is in: its derived normal is final.
   Status finish(const Welded& w) {
-    if (!w.derive || !layout_.hasNormals() || w.out == kUnassigned) return Status::ok();
+    if (!w.derive || w.out == kUnassigned) return Status::ok();
     const Vec3d& a = w.normal_sum;
-    return records_.setNormal(w.out,
-                              encodeOctahedral(Vec3f{float(a[0]), float(a[1]), float(a[2])}, layout_.normal_bits));
+    if (layout_.hasNormals()) {
+      const OctNormal n = encodeOctahedral(Vec3f{float(a[0]), float(a[1]), float(a[2])}, layout_.normal_bits);
+      SP_RETURN_IF_ERROR(records_.patch(w.out, offsetof(ScratchVertex, n), &n, sizeof n));
+    }
+    if (float_normals_) {
+      const Vec3f n = derivedFloatNormal(a);
+      SP_RETURN_IF_ERROR(scalars_->patch(w.out, *float_normals_ * sizeof(uint32_t), n.data(), sizeof n));
+    }
+    return Status::ok();
   }
   // As deriveAttributes: each triangle's cross product added to its corners, in triangle order.
   void sumNormals(const QuantizedMesh& m) {
@@ -234,6 +266,10 @@ class Welder {
 
   const Grid& grid_;
   const AttributeLayout& layout_;
+  const size_t stride_;                        // scalar words per vertex welded and written (0: none)
+  const std::optional<size_t> float_normals_;  // the lossless normals' first word among them
+  const std::vector<uint32_t> zeros_;          // a derived vertex's scalar words
+  RecordFile* scalars_;
   const std::vector<Bounds>& bounds_;
   const WeldBy by_;
   const std::vector<uint8_t> own_;
@@ -255,14 +291,15 @@ class Welder {
 // Consecutive runs of `chosen` to decode together: within half the budget, the rest for welding, buffers and the
 // writer; a tile larger than that goes alone, up to three quarters of the budget (the estimate is conservative:
 // measured peaks are 0.4-0.8 of it).
+// `scalar_stride`: the scalar words per vertex the tiles are decoded with.
 Result<std::vector<std::pair<size_t, size_t>>> decodeBatches(const ContainerFile& file,
                                                              const std::vector<const TileEntry*>& chosen,
-                                                             uint64_t memory_budget) {
+                                                             uint64_t memory_budget, size_t scalar_stride = 0) {
   const size_t n = chosen.size();
   const uint64_t batch_budget = memory_budget / 2, tile_limit = memory_budget / 4 * 3;
   std::vector<std::pair<size_t, size_t>> batches;
   for (size_t i = 0; i < n;) {
-    const uint64_t need = tileDecodeBytes(*chosen[i]);
+    const uint64_t need = tileDecodeBytes(*chosen[i], scalar_stride);
     if (need > tile_limit)
       return makeError(ErrorCode::kLimitExceeded,
                        file.path() + ": tile " + std::to_string(chosen[i]->tile_id) + " (" +
@@ -272,7 +309,8 @@ Result<std::vector<std::pair<size_t, size_t>>> decodeBatches(const ContainerFile
                            ": give --memory-budget " + std::to_string((need / 3 * 4 >> 20) + 1) + "M or more");
     size_t j = i + 1;
     uint64_t sum = need;
-    while (j < n && sum + tileDecodeBytes(*chosen[j]) <= batch_budget) sum += tileDecodeBytes(*chosen[j++]);
+    while (j < n && sum + tileDecodeBytes(*chosen[j], scalar_stride) <= batch_budget)
+      sum += tileDecodeBytes(*chosen[j++], scalar_stride);
     batches.push_back({i, j});
     i = j;
   }
@@ -291,8 +329,9 @@ Status checkWithinIndexBounds(const ContainerFile& file, const TileEntry& e, con
 
 }  // namespace
 
-uint64_t tileDecodeBytes(const TileEntry& e) {
-  return e.vertices * kDecodeBytesPerVertex + e.faces * kDecodeBytesPerFace;
+uint64_t tileDecodeBytes(const TileEntry& e, size_t scalar_stride) {
+  // Scalar words: held by the decoder (coded and decoded) and by the decoded tile.
+  return e.vertices * (kDecodeBytesPerVertex + 3 * 4 * uint64_t(scalar_stride)) + e.faces * kDecodeBytesPerFace;
 }
 
 uint64_t inMemoryDecodeBytes(const std::vector<const TileEntry*>& chosen, size_t scalar_stride) {
@@ -300,7 +339,7 @@ uint64_t inMemoryDecodeBytes(const std::vector<const TileEntry*>& chosen, size_t
   for (const TileEntry* e : chosen) {
     total += e->vertices * (kInMemoryBytesPerVertex + 3 * 4 * uint64_t(scalar_stride)) +
              e->faces * kInMemoryBytesPerFace;
-    largest = std::max(largest, tileDecodeBytes(*e));
+    largest = std::max(largest, tileDecodeBytes(*e, scalar_stride));
   }
   return total + largest;
 }
@@ -335,7 +374,8 @@ Result<Mesh> decodeClustered(const ContainerFile& file, uint32_t cells, uint64_t
       all.add(e.lo);
       all.add(e.hi);
     }
-  SP_ASSIGN_OR_RETURN(auto batches, decodeBatches(file, chosen, memory_budget));
+  SP_ASSIGN_OR_RETURN(auto batches,
+                      decodeBatches(file, chosen, memory_budget, size_t(file.header().layout.scalarStride())));
   const ContainerHeader& header = file.header();
   Mesh out;
   if (chosen.empty()) return out;
@@ -384,7 +424,10 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
   SP_ASSIGN_OR_RETURN(MeshFileFormat format, MeshFileFormat::forPath(output));
   const ContainerHeader& header = file.header();
   const size_t n = chosen.size();
-  SP_ASSIGN_OR_RETURN(auto batches, decodeBatches(file, chosen, settings.memory_budget));
+  const size_t stride = settings.scalars ? size_t(header.layout.scalarStride()) : 0;
+  // The tiles decode with every channel, whether or not the output writes them.
+  SP_ASSIGN_OR_RETURN(auto batches,
+                      decodeBatches(file, chosen, settings.memory_budget, size_t(header.layout.scalarStride())));
 
   // Where each tile's vertices lie, whether every tile is complete, whether the decode is a point cloud. From the
   // index for a complete decode; a coarse level is decoded once to measure them.
@@ -414,41 +457,72 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
   }
 
   SP_ASSIGN_OR_RETURN(ScratchDir scratch, ScratchDir::create(settings.scratch_parent));
-  RecordFile records;
+  RecordFile records(sizeof(ScratchVertex)), scalar_records(stride * sizeof(uint32_t));
   ScratchFile faces;
   SP_RETURN_IF_ERROR(records.open(scratch.file("vertices")));
+  if (stride) SP_RETURN_IF_ERROR(scalar_records.open(scratch.file("scalars")));
   SP_RETURN_IF_ERROR(faces.open(scratch.file("faces")));
-  Welder welder(header, bounds, all_complete, std::move(own), total_faces == 0, settings.crop, format, records, faces);
+  Welder welder(header, bounds, all_complete, std::move(own), total_faces == 0, settings.crop, format, records,
+                stride ? &scalar_records : nullptr, faces);
   for (auto [a, b] : batches) {
     SP_ASSIGN_OR_RETURN(auto tiles, decodeTiles(file, std::span(chosen).subspan(a, b - a), settings.level));
     for (size_t i = a; i < b; ++i) {
       QuantizedMesh& m = tiles[i - a].mesh;
-      // The streamed output writes no scalar channels (decodeFile refuses PLY here, and OBJ with texture
-      // coordinates, and reports them dropped for the other formats): the weld ignores them, as the in-memory
-      // decode's does for those formats. Its keys outlive the tile, so they must not point into its values.
-      m.scalars.clear();
+      // An output that writes no scalar channel: the weld ignores them, as the in-memory decode's does then.
+      if (!stride) m.scalars.clear();
       if (!settings.level) SP_RETURN_IF_ERROR(checkWithinIndexBounds(file, *chosen[i], m));
       SP_RETURN_IF_ERROR(welder.add(static_cast<uint32_t>(i), m));
       tiles[i - a].mesh = QuantizedMesh();
     }
   }
   SP_RETURN_IF_ERROR(records.flush());
+  if (stride) SP_RETURN_IF_ERROR(scalar_records.flush());
   SP_RETURN_IF_ERROR(welder.flushFaces());
 
   MeshFileLayout layout = welder.layout();
+  // As dequantizeMesh and the writers: lossless normals (float channels nx, ny, nz) are the normals; PLY writes the
+  // other channels.
+  size_t float_word = SIZE_MAX;  // the first word of the lossless normals (SIZE_MAX: none)
+  if (stride && !header.layout.hasNormals())
+    if (const auto word = losslessNormalsWord(header.layout.scalars)) float_word = *word;
+  const bool float_normals = float_word != SIZE_MAX;
+  std::vector<std::pair<size_t, size_t>> written_words;  // word ranges of the channels the output writes
+  if (stride && format.kind() == MeshFileFormat::Kind::kPly) {
+    size_t w = 0;
+    for (const ScalarChannel& c : header.layout.scalars) {
+      const size_t words = size_t(scalarTypeWords(c.type));
+      if (!float_normals || w < float_word || w >= float_word + 3) {
+        layout.scalars.push_back(c);
+        written_words.push_back({w, words});
+      }
+      w += words;
+    }
+  }
   if (layout.vertices == 0) layout.normals = false, layout.color_channels = 0;  // as the in-memory writers do
   layout.material_library = settings.material_library, layout.material = settings.material;
   layout.texture_file = settings.texture_file;
   SP_ASSIGN_OR_RETURN(auto writer, MeshFileWriter::create(output, layout, format));
   if (format.indexed()) {
-    std::vector<ScratchVertex> chunk;
-    const size_t per_chunk = kBufferBytes / sizeof(ScratchVertex);
+    std::vector<uint8_t> chunk, scalar_chunk;
+    std::vector<uint32_t> words(stride), out_words;
+    const size_t per_chunk = kBufferBytes / (sizeof(ScratchVertex) + stride * sizeof(uint32_t));
     for (uint64_t first = 0; first < layout.vertices; first += per_chunk) {
-      SP_RETURN_IF_ERROR(records.read(first, size_t(std::min<uint64_t>(per_chunk, layout.vertices - first)), chunk));
-      for (const ScratchVertex& r : chunk) {
-        const Vec3f normal = layout.normals ? decodeOctahedral(r.n, header.layout.normal_bits) : Vec3f{};
+      const size_t count = size_t(std::min<uint64_t>(per_chunk, layout.vertices - first));
+      SP_RETURN_IF_ERROR(records.read(first, count, chunk));
+      if (stride) SP_RETURN_IF_ERROR(scalar_records.read(first, count, scalar_chunk));
+      for (size_t i = 0; i < count; ++i) {
+        ScratchVertex r;
+        std::memcpy(&r, chunk.data() + i * sizeof r, sizeof r);
+        if (stride) std::memcpy(words.data(), scalar_chunk.data() + i * stride * sizeof(uint32_t), stride * 4);
+        Vec3f normal{};
+        if (float_normals)
+          for (size_t k = 0; k < 3; ++k) normal[k] = std::bit_cast<float>(words[float_word + k]);
+        else if (layout.normals) normal = decodeOctahedral(r.n, header.layout.normal_bits);
+        out_words.clear();
+        for (const auto& [w, len] : written_words) out_words.insert(out_words.end(), &words[w], &words[w] + len);
         SP_RETURN_IF_ERROR(writer->vertex(header.grid.dequantize(r.p), layout.normals ? &normal : nullptr,
-                                          layout.color_channels ? &r.c : nullptr));
+                                          layout.color_channels ? &r.c : nullptr,
+                                          layout.scalars.empty() ? nullptr : out_words.data()));
       }
     }
   }

@@ -10,14 +10,16 @@
 //    tile's bounds (the index's bounds for complete decodes; a first pass measures them for --level, whose coarse
 //    vertices may lie outside). A kept vertex is dropped once the last tile whose bounds hold it is done. Memory
 //    for welding is therefore proportional to the vertices near tile borders that are still open.
-//  - The vertices (quantized, 20 bytes each) and the faces (already in the output format's bytes) go to scratch
-//    files; the output is written last, when the counts its header needs are known (jobs/mesh_io/mesh_writer.h).
-//    Normals a coarse level derives from the welded triangles (engine/codecs/codec.h, deriveAttributes; when some
-//    tile has no attributes of its own at that level) are summed in the same order and patched into the scratch
-//    file when the vertex's last tile is done.
+//  - The vertices (quantized, 20 bytes each, and their scalar words when the output writes scalar channels) and
+//    the faces (already in the output format's bytes) go to scratch files; the output is written last, when the
+//    counts its header needs are known (jobs/mesh_io/mesh_writer.h). Normals a coarse level derives from the welded
+//    triangles (engine/codecs/codec.h, deriveAttributes; when some tile has no attributes of its own at that
+//    level), octahedral or lossless, are summed in the same order and patched into the scratch files when the
+//    vertex's last tile is done.
 //  - `crop` numbers vertices by their first use in a kept triangle, as the in-memory crop does.
 // glTF is not written this way (its binary buffer precedes nothing, but its JSON needs bounds and it is one
-// buffer): the caller refuses glTF output over the budget.
+// buffer), nor OBJ with texture coordinates (one `v` line per position, shared by the wedges at texture seams, which
+// needs every position at once): the caller refuses them over the budget.
 #pragma once
 
 #include <array>
@@ -32,8 +34,8 @@
 namespace scanpress {
 
 // Decode memory a tile needs, estimated from its index counts (the largest codec's peak while decoding a tile,
-// plus the decoded tile itself).
-uint64_t tileDecodeBytes(const TileEntry& e);
+// plus the decoded tile itself), with `scalar_stride` scalar words per vertex.
+uint64_t tileDecodeBytes(const TileEntry& e, size_t scalar_stride = 0);
 // What the in-memory decode of `chosen` peaks at (decoded tiles, welded mesh, float copy, weld table).
 // `scalar_stride`: the layout's scalar words per vertex (each held in the tile, the welded copy and the mesh).
 uint64_t inMemoryDecodeBytes(const std::vector<const TileEntry*>& chosen, size_t scalar_stride = 0);
@@ -51,9 +53,14 @@ struct StreamDecodeSettings {
   std::optional<uint32_t> level;
   std::optional<std::array<double, 6>> crop;  // world box; triangles wholly inside are kept
   uint64_t memory_budget = 0;                 // bytes (at least 16 MiB)
-  std::string scratch_parent;                 // empty: the system temp directory
-  std::string material_library, material;     // OBJ output's `mtllib` and `usemtl` (empty: none)
-  std::string texture_file;                   // PLY output's `comment TextureFile` (empty: none)
+  // Weld by and write the scalar channels (what the in-memory decode does when the format writes any): PLY writes
+  // them all, and lossless normals are PLY's and OBJ's normals (the caller leaves this false for STL and OFF, which
+  // write none). Not for OBJ with texture coordinates (its `v` lines are shared by the wedges at seams: the caller
+  // refuses it).
+  bool scalars = false;
+  std::string scratch_parent;              // empty: the system temp directory
+  std::string material_library, material;  // OBJ output's `mtllib` and `usemtl` (empty: none)
+  std::string texture_file;                // PLY output's `comment TextureFile` (empty: none)
 };
 
 struct StreamDecodeResult {

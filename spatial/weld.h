@@ -21,7 +21,7 @@ enum class WeldBy { kPositionAndAttributes, kPosition };
 
 // A vertex's identity for welding: position and attributes (zero attributes when welding by position). `s`: the
 // vertex's scalar values (`stride` words, in its tile), compared word for word: a key is valid while its tile's
-// mesh lives (a caller that keeps keys longer clears the tile's scalars first, as the streamed decode does).
+// mesh lives (a caller that keeps keys longer points them at a copy of the values, as the streamed decode does).
 struct WeldKey {
   Vec3u p;
   OctNormal n;

@@ -158,6 +158,12 @@ Vec3d triangleCross(const std::vector<Vec3u>& positions, const Triangle& t) {
   return {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
 }
 
+Vec3f derivedFloatNormal(const Vec3d& a) {
+  const double len = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+  if (!(len > 0) || !std::isfinite(len)) return {0, 0, 1};
+  return {float(a[0] / len), float(a[1] / len), float(a[2] / len)};
+}
+
 void deriveAttributes(QuantizedMesh& m, const AttributeLayout& layout, std::span<const uint8_t> keep) {
   std::vector<OctNormal> old_normals;
   std::vector<Rgba8> old_colors;
@@ -187,11 +193,8 @@ void deriveAttributes(QuantizedMesh& m, const AttributeLayout& layout, std::span
   m.scalars.assign(m.positions.size() * stride, 0);  // zero: 0 or +0.0 at every type
   if (float_normals)
     for (size_t v = 0; v < acc.size(); ++v) {
-      // The unit normal; a vertex on no triangle gets +z, as the octahedral code of a zero sum decodes to.
-      const Vec3d& a = acc[v];
-      const double len = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-      const Vec3d n = len > 0 && std::isfinite(len) ? Vec3d{a[0] / len, a[1] / len, a[2] / len} : Vec3d{0, 0, 1};
-      for (size_t k = 0; k < 3; ++k) m.scalars[v * stride + *float_normals + k] = std::bit_cast<uint32_t>(float(n[k]));
+      const Vec3f n = derivedFloatNormal(acc[v]);
+      for (size_t k = 0; k < 3; ++k) m.scalars[v * stride + *float_normals + k] = std::bit_cast<uint32_t>(n[k]);
     }
   for (size_t v = 0; v < keep.size() && v < m.positions.size(); ++v)
     if (keep[v]) {

@@ -208,6 +208,9 @@ TileSummary summarize(const QuantizedMesh& mesh);
 // (as the layout asks); replaces whatever attributes the mesh had.
 // `keep` (when not empty, one per vertex): the vertices that keep the attributes they have.
 void deriveAttributes(QuantizedMesh& mesh, const AttributeLayout& layout, std::span<const uint8_t> keep = {});
+// The lossless (float) normal deriveAttributes gives a vertex whose triangles' cross products sum to `sum`: the unit
+// vector, or +z for a zero sum (as the octahedral code of a zero sum decodes to).
+Vec3f derivedFloatNormal(const Vec3d& sum);
 // A triangle's cross product on the grid (edges from its first corner, in double): the area-weighted normal that
 // deriveAttributes sums at each corner, in triangle order.
 Vec3d triangleCross(const std::vector<Vec3u>& positions, const Triangle& t);

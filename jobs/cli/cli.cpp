@@ -644,12 +644,12 @@ int runInfo(int argc, char** argv) {
   if (!file.isOk()) return fail(file.status());
   if (args.has("--verify"))
     for (const auto& t : file->tiles()) {  // one tile at a time
-      if (budget != 0 && tileDecodeBytes(t) > budget)
+      const uint64_t need = tileDecodeBytes(t, size_t(file->header().layout.scalarStride()));
+      if (budget != 0 && need > budget)
         return fail(makeError(ErrorCode::kLimitExceeded,
                               file->path() + ": tile " + std::to_string(t.tile_id) + " needs about " +
-                                  humanBytes(tileDecodeBytes(t)) + " to decode, over the memory budget of " +
-                                  humanBytes(budget) + ": give --memory-budget " +
-                                  std::to_string((tileDecodeBytes(t) >> 20) + 1) + "M or more"));
+                                  humanBytes(need) + " to decode, over the memory budget of " + humanBytes(budget) +
+                                  ": give --memory-budget " + std::to_string((need >> 20) + 1) + "M or more"));
       auto m = file->decodeTile(t);
       if (!m.isOk()) return fail(m.status());
     }
