@@ -124,6 +124,15 @@ inline std::optional<size_t> losslessNormalsWord(std::span<const ScalarChannel> 
   return std::nullopt;
 }
 
+// The names a mesh file gives its look, kept through encode and decode (container v3; empty: none): OBJ's `mtllib`
+// arguments (space-separated, each library once) and the `usemtl` name that every face shares; PLY's `comment
+// TextureFile` name (MeshLab's and Metashape's texture image). OBJ writes the first two, PLY the third.
+struct MaterialNames {
+  std::string library, material, texture;
+  bool empty() const { return library.empty() && material.empty() && texture.empty(); }
+  bool operator==(const MaterialNames&) const = default;
+};
+
 // Which per-vertex attributes a scan carries, and at what precision they are stored.
 struct AttributeLayout {
   uint8_t normal_bits = 0;     // 0: no normals; else octahedral bits per component (4..16)

@@ -179,8 +179,7 @@ Result<MergeResult> mergeContainers(const std::vector<std::string>& parts, const
                                                         std::to_string(h.subset_count) + ", not of " +
                                                         std::to_string(n) + " as " + parts[0]);
     if (h.grid.bits != first.grid.bits || h.grid.cell != first.grid.cell || h.grid.origin != first.grid.origin ||
-        h.layout != first.layout || h.material_library != first.material_library || h.material != first.material ||
-        h.texture_file != first.texture_file)
+        h.layout != first.layout || h.materials != first.materials)
       return makeError(ErrorCode::kInvalidArgument, f.path() + ": another grid or attribute layout than " + parts[0] +
                                                         ": parts of different scans or settings");
     if (by_index[h.subset_index])
@@ -206,7 +205,7 @@ Result<MergeResult> mergeContainers(const std::vector<std::string>& parts, const
   std::sort(tiles.begin(), tiles.end(), [](auto& a, auto& b) { return a.first->tile_id < b.first->tile_id; });
   SP_ASSIGN_OR_RETURN(auto out, AtomicFile::create(output));
   ContainerWriter writer(*out, first.grid, first.layout);
-  SP_RETURN_IF_ERROR(writer.setMaterial(first.material_library, first.material, first.texture_file));
+  SP_RETURN_IF_ERROR(writer.setMaterial(first.materials));
   SP_RETURN_IF_ERROR(writer.begin());
   std::vector<uint8_t> chunk;
   for (const auto& [e, f] : tiles) {
@@ -323,9 +322,9 @@ void noteDroppedScalars(const ContainerHeader& header, const std::string& output
   const auto format = MeshFileFormat::forPath(output);
   const auto kind = format.isOk() ? std::optional(format->kind()) : std::nullopt;
   for (const auto& [name, value, home] :
-       {std::tuple{"obj mtllib", &header.material_library, MeshFileFormat::Kind::kObj},
-        {"obj usemtl", &header.material, MeshFileFormat::Kind::kObj},
-        {"ply comment TextureFile", &header.texture_file, MeshFileFormat::Kind::kPly}})
+       {std::tuple{"obj mtllib", &header.materials.library, MeshFileFormat::Kind::kObj},
+        {"obj usemtl", &header.materials.material, MeshFileFormat::Kind::kObj},
+        {"ply comment TextureFile", &header.materials.texture, MeshFileFormat::Kind::kPly}})
     if (!value->empty() && kind != home) result.dropped.push_back({std::string(name) + " " + *value, 1});
 }
 
@@ -373,8 +372,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
     stream.memory_budget = settings.memory_budget;
     stream.scratch_parent = settings.scratch_dir;
     stream.scalars = writes_scalars;
-    stream.material_library = header.material_library, stream.material = header.material;
-    stream.texture_file = header.texture_file;
+    stream.materials = header.materials;
     SP_ASSIGN_OR_RETURN(StreamDecodeResult streamed, streamDecode(file, chosen, settings.output, stream));
     result.vertices = streamed.vertices;
     result.faces = streamed.faces;
@@ -386,8 +384,7 @@ Result<DecodeResult> decodeFile(const DecodeSettings& settings) {
   WriteOptions write;
   write.gltf_compression = settings.gltf_compression;
   write.grid = &header.grid;
-  write.material_library = header.material_library, write.material = header.material;
-  write.texture_file = header.texture_file;
+  write.materials = header.materials;
   if (settings.gltf_tile_nodes) {  // one node per tile, each decoded on its own (border vertices in both)
     std::vector<Mesh> meshes;
     std::vector<std::string> names;

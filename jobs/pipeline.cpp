@@ -404,9 +404,9 @@ class ScanEncoder {
         for (size_t ch : {tc->u, tc->v}) result_.layout.scalars[ch].bits = static_cast<uint8_t>(s_.uv_bits);
     }
     // A PLY's texture image is kept with the texture coordinates it belongs to.
-    if (!result_.read.texture_file.empty() && !findTexcoords(result_.layout.scalars)) {
+    if (!result_.read.materials.texture.empty() && !findTexcoords(result_.layout.scalars)) {
       result_.read.dropped.push_back({"ply comment TextureFile (its texture coordinates are not kept)", 1});
-      result_.read.texture_file.clear();
+      result_.read.materials.texture.clear();
     }
     if (lossless_normals) {
       for (const ScalarChannel& c : result_.layout.scalars)
@@ -547,8 +547,7 @@ class ScanEncoder {
     SP_ASSIGN_OR_RETURN(file_, AtomicFile::create(s_.output));
     writer_.emplace(*file_, result_.grid, result_.layout);
     if (s_.subset_count) writer_->setSubset(s_.subset_index, s_.subset_count);
-    SP_RETURN_IF_ERROR(writer_->setMaterial(result_.read.material_library, result_.read.material,
-                                            result_.read.texture_file));
+    SP_RETURN_IF_ERROR(writer_->setMaterial(result_.read.materials));
     SP_RETURN_IF_ERROR(writer_->begin());
     // A point cloud has no surface to sample (jobs/measure.h): it is not measured.
     result_.measured = s_.measure.enabled && !result_.point_cloud;

@@ -134,9 +134,9 @@ nlohmann::json encodeReport(const EncodeSettings& settings, const EncodeResult& 
   j["stages"] = r.stages;
   j["grid"] = gridJson(r.grid);
   j["attributes"] = layoutJson(r.layout);
-  j["material_library"] = r.read.material_library;  // kept (OBJ mtllib; empty: none)
-  j["material"] = r.read.material;
-  j["texture_file"] = r.read.texture_file;  // kept (PLY comment TextureFile; empty: none)
+  j["material_library"] = r.read.materials.library;  // kept (OBJ mtllib; empty: none)
+  j["material"] = r.read.materials.material;
+  j["texture_file"] = r.read.materials.texture;  // kept (PLY comment TextureFile; empty: none)
   j["input_vertices"] = r.read.vertices;
   j["input_faces"] = r.read.triangles;
   j["input_polygons_triangulated"] = r.read.polygons;
@@ -344,9 +344,9 @@ std::string containerInfoJson(const ContainerFile& file) {
   j["format_version"] = h.version;
   j["grid"] = gridJson(h.grid);
   j["attributes"] = layoutJson(h.layout);
-  j["material_library"] = h.material_library;
-  j["material"] = h.material;
-  j["texture_file"] = h.texture_file;
+  j["material_library"] = h.materials.library;
+  j["material"] = h.materials.material;
+  j["texture_file"] = h.materials.texture;
   j["vertices"] = h.vertices;
   j["faces"] = h.faces;
   j["bytes"] = file.size();
@@ -429,10 +429,11 @@ std::string containerInfoText(const ContainerFile& file) {
            (c.bits ? ", multiples of 2^-" + std::to_string(int(c.bits)) : std::string()) + ")";
     return s.empty() ? std::string("no") : s;
   }() << "\n";
-  if (!h.material_library.empty() || !h.material.empty())
-    os << "  material:  " << (h.material.empty() ? std::string("(none)") : h.material)
-       << (h.material_library.empty() ? std::string() : " from " + h.material_library) << "\n";
-  if (!h.texture_file.empty()) os << "  texture:   " << h.texture_file << "\n";
+  const MaterialNames& m = h.materials;
+  if (!m.library.empty() || !m.material.empty())
+    os << "  material:  " << (m.material.empty() ? std::string("(none)") : m.material)
+       << (m.library.empty() ? std::string() : " from " + m.library) << "\n";
+  if (!m.texture.empty()) os << "  texture:   " << m.texture << "\n";
   os << "  tiles:     " << h.tile_count << "\n";
   for (const auto& t : file.tiles()) {
     os << "    tile " << t.tile_id << ": " << codecName(t.codec) << " v" << t.codec_version << ", " << t.vertices

@@ -499,8 +499,7 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
     }
   }
   if (layout.vertices == 0) layout.normals = false, layout.color_channels = 0;  // as the in-memory writers do
-  layout.material_library = settings.material_library, layout.material = settings.material;
-  layout.texture_file = settings.texture_file;
+  layout.materials = settings.materials;
   SP_ASSIGN_OR_RETURN(auto writer, MeshFileWriter::create(output, layout, format));
   if (format.indexed()) {
     std::vector<uint8_t> chunk, scalar_chunk;

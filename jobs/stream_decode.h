@@ -58,9 +58,8 @@ struct StreamDecodeSettings {
   // write none). Not for OBJ with texture coordinates (its `v` lines are shared by the wedges at seams: the caller
   // refuses it).
   bool scalars = false;
-  std::string scratch_parent;              // empty: the system temp directory
-  std::string material_library, material;  // OBJ output's `mtllib` and `usemtl` (empty: none)
-  std::string texture_file;                // PLY output's `comment TextureFile` (empty: none)
+  std::string scratch_parent;  // empty: the system temp directory
+  MaterialNames materials;     // OBJ output's `mtllib` and `usemtl`, PLY output's `comment TextureFile`
 };
 
 struct StreamDecodeResult {

@@ -389,8 +389,8 @@ TEST(Readers, ObjListsTextureCoordinatesMaterialsAndOtherRecords) {
   EXPECT_EQ(droppedText(stats),
             "obj o x 1, obj s x 1, obj usemtl (several materials or faces without one: none is "
             "kept) x 2, obj vn unused x 1, obj v w x 1");
-  EXPECT_EQ(stats.material_library, "x.mtl");
-  EXPECT_EQ(stats.material, "");
+  EXPECT_EQ(stats.materials.library, "x.mtl");
+  EXPECT_EQ(stats.materials.material, "");
   EXPECT_EQ(m.positions.size(), 6u);
   // Without them (ReadOptions off: a codec that simplifies), `vt` and the second normals are listed.
   {

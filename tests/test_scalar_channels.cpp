@@ -733,7 +733,7 @@ TEST(UvBits, ContainerVersion3HoldsBitsAndMaterials) {
     std::vector<uint8_t> out;
     VectorSink sink(out);
     ContainerWriter writer(sink, grid, l);
-    SP_RETURN_IF_ERROR(writer.setMaterial(library, material));
+    SP_RETURN_IF_ERROR(writer.setMaterial({library, material, {}}));
     SP_RETURN_IF_ERROR(writer.begin());
     SP_ASSIGN_OR_RETURN(EncodedTile tile, encodeMesh(*findCodec(CodecId::kEdgebreaker), TileContext{12, l}, m));
     SP_RETURN_IF_ERROR(writer.addTile(0, *findCodec(CodecId::kEdgebreaker), tile.decoded, tile.payload));
@@ -747,10 +747,10 @@ TEST(UvBits, ContainerVersion3HoldsBitsAndMaterials) {
   ASSERT_TRUE(pc.isOk()) << pc.status().toString();
   EXPECT_EQ(pc->header.version, 3u);
   EXPECT_EQ(pc->header.layout, layout);
-  EXPECT_EQ(pc->header.material_library, library);
-  EXPECT_EQ(pc->header.material, material);
+  EXPECT_EQ(pc->header.materials.library, library);
+  EXPECT_EQ(pc->header.materials.material, material);
   EXPECT_EQ(pc->header.header_size, kHeaderSize + 1 + 3 * 3 + 3 + 6 + library.size() + material.size() + 4);
-  EXPECT_TRUE(pc->header.texture_file.empty());
+  EXPECT_TRUE(pc->header.materials.texture.empty());
   // Materials alone, without any channel: version 3 with an empty table.
   QuantizedMesh plain = q;
   plain.scalars.clear();
@@ -759,8 +759,8 @@ TEST(UvBits, ContainerVersion3HoldsBitsAndMaterials) {
   auto po = parseContainer(*only, "mem");
   ASSERT_TRUE(po.isOk()) << po.status().toString();
   EXPECT_EQ(po->header.version, 3u);
-  EXPECT_EQ(po->header.material, "skin");
-  EXPECT_TRUE(po->header.material_library.empty());
+  EXPECT_EQ(po->header.materials.material, "skin");
+  EXPECT_TRUE(po->header.materials.library.empty());
   // Lossless channels and no material: version 2, byte for byte as before.
   AttributeLayout lossless = layout;
   for (ScalarChannel& c : lossless.scalars) c.bits = 0;
@@ -786,7 +786,7 @@ TEST(UvBits, ContainerVersion3HoldsBitsAndMaterials) {
     VectorSink sink(out);
     ContainerWriter writer(sink, grid, layout);
     ASSERT_TRUE(writer.begin().isOk());
-    EXPECT_EQ(writer.setMaterial("late.mtl", "").code(), ErrorCode::kInternal);
+    EXPECT_EQ(writer.setMaterial({"late.mtl", "", ""}).code(), ErrorCode::kInternal);
   }
   EXPECT_FALSE(write(layout, q, "", std::string(kMaxMaterialBytes + 1, 'm')).isOk());
   EXPECT_TRUE(write(layout, q, "", std::string(kMaxMaterialBytes, 'm')).isOk());
@@ -802,7 +802,7 @@ TEST(UvBits, HostileVersion3TablesFailCleanly) {
   {
     VectorSink sink(file);
     ContainerWriter writer(sink, Grid{{0, 0, 0}, 1.0, 12}, layout);
-    ASSERT_TRUE(writer.setMaterial("a.mtl", "m").isOk());
+    ASSERT_TRUE(writer.setMaterial({"a.mtl", "m", ""}).isOk());
     ASSERT_TRUE(writer.begin().isOk());
     auto tile = encodeMesh(*findCodec(CodecId::kKdtree), TileContext{12, layout}, q);
     ASSERT_TRUE(tile.isOk());
@@ -819,8 +819,8 @@ TEST(UvBits, HostileVersion3TablesFailCleanly) {
         EXPECT_TRUE(isFloatScalar(c.type));
       }
     }
-    EXPECT_TRUE(validMaterialName(h.material_library) && validMaterialName(h.material) &&
-                validMaterialName(h.texture_file));
+    EXPECT_TRUE(validMaterialName(h.materials.library) && validMaterialName(h.materials.material) &&
+                validMaterialName(h.materials.texture));
   });
   EXPECT_GT(refused, tried / 4);
   // A version 2 reader's view: the same table read as version 2 does not parse.
@@ -846,7 +846,7 @@ TEST(UvBits, GoldenContainersDecodeAndAreReproduced) {
     {
       VectorSink sink(bytes);
       ContainerWriter writer(sink, grid, layout);
-      ASSERT_TRUE(writer.setMaterial("chart.mtl", "chart").isOk());
+      ASSERT_TRUE(writer.setMaterial({"chart.mtl", "chart", ""}).isOk());
       ASSERT_TRUE(writer.begin().isOk());
       auto tile = encodeMesh(codec, TileContext{12, layout}, q);
       ASSERT_TRUE(tile.isOk()) << tile.status().toString();
@@ -861,7 +861,7 @@ TEST(UvBits, GoldenContainersDecodeAndAreReproduced) {
     EXPECT_TRUE(golden == bytes) << "the writer no longer reproduces " << path;
     auto pc = parseContainer(golden, path);
     ASSERT_TRUE(pc.isOk()) << pc.status().toString();
-    EXPECT_EQ(pc->header.material, "chart");
+    EXPECT_EQ(pc->header.materials.material, "chart");
     const TileEntry& e = pc->tiles.at(0);
     auto payload = parseTileChunk(std::span(golden).subspan(e.offset, e.chunk_bytes), e, path);
     ASSERT_TRUE(payload.isOk());

@@ -457,8 +457,8 @@ TEST(Materials, MtllibAndOneUsemtlAreKept) {
   s.tile_triangles = 200;
   auto enc = encodeFile(s);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-  EXPECT_EQ(enc->read.material_library, "sphere.mtl");
-  EXPECT_EQ(enc->read.material, "skin");
+  EXPECT_EQ(enc->read.materials.library, "sphere.mtl");
+  EXPECT_EQ(enc->read.materials.material, "skin");
   EXPECT_EQ(describeDropped(enc->read.dropped), "");
   auto file = ContainerFile::open(s.output);
   ASSERT_TRUE(file.isOk());
@@ -499,8 +499,8 @@ TEST(Materials, MtllibAndOneUsemtlAreKept) {
     testing::writeBytes(dir.file("q.obj"), head + c.faces);
     ReadStats stats;
     ASSERT_TRUE(readMeshFile(dir.file("q.obj"), &stats).isOk());
-    EXPECT_EQ(stats.material_library, "a.mtl b.mtl");
-    EXPECT_EQ(stats.material, c.material);
+    EXPECT_EQ(stats.materials.library, "a.mtl b.mtl");
+    EXPECT_EQ(stats.materials.material, c.material);
     EXPECT_EQ(describeDropped(stats.dropped), c.dropped);
   }
   // PLY's `comment TextureFile`: kept and written back to PLY output; listed dropped for OBJ output, and when a
@@ -516,7 +516,7 @@ TEST(Materials, MtllibAndOneUsemtlAreKept) {
     EncodeSettings t = uvSettingsFor(dir.file("t.ply"), dir.file("t.spz"), "edgebreaker");
     auto e = encodeFile(t);
     ASSERT_TRUE(e.isOk()) << e.status().toString();
-    EXPECT_EQ(e->read.texture_file, "bark 2.jpg");
+    EXPECT_EQ(e->read.materials.texture, "bark 2.jpg");
     EXPECT_TRUE(e->read.dropped.empty()) << describeDropped(e->read.dropped);
     DecodeSettings td;
     td.input = t.output;
@@ -535,27 +535,27 @@ TEST(Materials, MtllibAndOneUsemtlAreKept) {
     ASSERT_TRUE(e.isOk()) << e.status().toString();
     const std::string unkept = "ply comment TextureFile (its texture coordinates are not kept) x 1";
     EXPECT_NE(describeDropped(e->read.dropped).find(unkept), std::string::npos) << describeDropped(e->read.dropped);
-    EXPECT_EQ(ContainerFile::open(t.output)->header().texture_file, "");
+    EXPECT_EQ(ContainerFile::open(t.output)->header().materials.texture, "");
     std::string blank = ply;
     blank.replace(blank.find(with), with.size(), "comment written by scanpress\ncomment TextureFile  \t\n");
     testing::writeBytes(dir.file("blank.ply"), blank);
     ReadStats blank_stats;
     ASSERT_TRUE(readMeshFile(dir.file("blank.ply"), &blank_stats).isOk());
-    EXPECT_EQ(blank_stats.texture_file, "");
+    EXPECT_EQ(blank_stats.materials.texture, "");
     EXPECT_TRUE(blank_stats.dropped.empty()) << describeDropped(blank_stats.dropped);
     ply.replace(ply.find(with), with.size(), with + "comment TextureFile leaf.jpg\n");
     testing::writeBytes(dir.file("t.ply"), ply);
     ReadStats stats;
     ASSERT_TRUE(readMeshFile(dir.file("t.ply"), &stats).isOk());
-    EXPECT_EQ(stats.texture_file, "");
+    EXPECT_EQ(stats.materials.texture, "");
     EXPECT_EQ(describeDropped(stats.dropped), "comment TextureFile (several textures: none is kept) x 2");
   }
   // Names that are not UTF-8 (Latin-1 here) are listed, not kept: the reports are JSON.
   testing::writeBytes(dir.file("latin.obj"), "mtllib caf\xE9.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl Ma\xDF\nf 1 2 3\n");
   ReadStats stats;
   ASSERT_TRUE(readMeshFile(dir.file("latin.obj"), &stats).isOk());
-  EXPECT_EQ(stats.material_library, "");
-  EXPECT_EQ(stats.material, "");
+  EXPECT_EQ(stats.materials.library, "");
+  EXPECT_EQ(stats.materials.material, "");
   EXPECT_EQ(describeDropped(stats.dropped),
             "obj usemtl (over 1024 bytes, control characters or not UTF-8: not kept) x 1, obj mtllib (over 1024 "
             "bytes, control characters or not UTF-8: not kept) x 1");

@@ -53,8 +53,7 @@ namespace {
 uint32_t versionFor(const ContainerHeader& h) {
   const bool quantized =
       std::any_of(h.layout.scalars.begin(), h.layout.scalars.end(), [](const ScalarChannel& c) { return c.bits; });
-  if (quantized || !h.material_library.empty() || !h.material.empty() || !h.texture_file.empty())
-    return kContainerVersionMaterials;
+  if (quantized || !h.materials.empty()) return kContainerVersionMaterials;
   return h.layout.hasScalars() ? kContainerVersionScalars : kContainerVersion;
 }
 
@@ -73,7 +72,7 @@ std::vector<uint8_t> headerTable(const ContainerHeader& h, uint32_t version) {
     if (version >= kContainerVersionMaterials) w.u8(c.bits);
   }
   if (version >= kContainerVersionMaterials)
-    for (const std::string* s : {&h.material_library, &h.material, &h.texture_file}) {
+    for (const std::string* s : {&h.materials.library, &h.materials.material, &h.materials.texture}) {
       w.u16(static_cast<uint16_t>(s->size()));
       for (char ch : *s) w.u8(static_cast<uint8_t>(ch));
     }
@@ -160,7 +159,7 @@ Status ContainerWriter::begin() {
     return makeError(ErrorCode::kInvalidArgument, "color bits must be in [1, 8]");
   if (!header_.layout.hasColors()) header_.layout.color_bits = 8;  // byte 51 is 0 without colors
   SP_RETURN_IF_ERROR(checkScalarChannels(header_.layout));
-  for (const std::string* s : {&header_.material_library, &header_.material, &header_.texture_file})
+  for (const std::string* s : {&header_.materials.library, &header_.materials.material, &header_.materials.texture})
     if (!validMaterialName(*s))
       return makeError(ErrorCode::kInvalidArgument, "material name of " + std::to_string(s->size()) +
                                                         " bytes: at most " + std::to_string(kMaxMaterialBytes) +
@@ -337,7 +336,7 @@ Result<ContainerHeader> parseHeader(std::span<const uint8_t> bytes, const std::s
       h.layout.scalars.push_back({std::string(name.begin(), name.end()), static_cast<ScalarType>(type), channel_bits});
     }
     if (v3)
-      for (std::string* s : {&h.material_library, &h.material, &h.texture_file}) {
+      for (std::string* s : {&h.materials.library, &h.materials.material, &h.materials.texture}) {
         uint16_t length = 0;
         SP_RETURN_IF_ERROR(t.u16(length));
         std::span<const uint8_t> text;

@@ -46,9 +46,8 @@ struct ContainerHeader {
   // A partial container (`encode --subset i/N`): the tiles t with t % N == i of the whole tiling, for `merge`.
   // 0 and 0: a whole container.
   uint16_t subset_index = 0, subset_count = 0;
-  // OBJ's `mtllib` arguments and its one `usemtl` name, written back to decoded OBJ files; PLY's `comment
-  // TextureFile` name, written back to decoded PLY files (v3; empty: none).
-  std::string material_library, material, texture_file;
+  // Written back to decoded OBJ and PLY files (v3).
+  MaterialNames materials;
   bool partial() const { return subset_count != 0; }
 };
 
@@ -118,10 +117,9 @@ class ContainerWriter {
   void setSubset(uint16_t index, uint16_t count) { header_.subset_index = index, header_.subset_count = count; }
   // The material names to keep (ContainerHeader's): before begin() (finish() rewrites the header in place, so its
   // size is fixed then); kInternal after.
-  Status setMaterial(std::string library, std::string material, std::string texture_file = {}) {
+  Status setMaterial(MaterialNames names) {
     if (begun_) return makeError(ErrorCode::kInternal, "the container's material names are set after its header");
-    header_.material_library = std::move(library), header_.material = std::move(material);
-    header_.texture_file = std::move(texture_file);
+    header_.materials = std::move(names);
     return Status::ok();
   }
   uint64_t bytesWritten() const { return offset_; }

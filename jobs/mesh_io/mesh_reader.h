@@ -74,12 +74,10 @@ struct ReadStats {
   uint64_t polygons = 0;                 // faces with more than 3 corners that were triangulated
   uint64_t source_vertices = 0;          // vertex records in the file (STL: 3 per facet)
   std::vector<DroppedProperty> dropped;  // what the reader read past, in file order (empty: nothing)
-  // OBJ materials: the `mtllib` lines' arguments (space-separated, each library once) and the `usemtl` name when
-  // every face has that one. A file naming several materials keeps none (listed dropped: a material per face is
-  // not kept yet); its libraries are kept.
-  std::string material_library, material;
-  // PLY: the `comment TextureFile` name (MeshLab's and Metashape's texture image), when the header names one.
-  std::string texture_file;
+  // OBJ: the `mtllib` libraries, and the `usemtl` name when every face has that one (a file naming several
+  // materials keeps none, listed dropped: a material per face is not kept yet; its libraries are kept). PLY: the
+  // `comment TextureFile` name, when the header names one.
+  MaterialNames materials;
   // PLY: normals stored as double (delivered as float: --lossless-normals refuses them).
   bool double_normals = false;
 };

@@ -119,7 +119,7 @@ Status writeTexturedObj(const std::string& path, const Mesh& mesh, const WriteOp
   if (mesh.triangles.size() > 0x7FFFFFFF || mesh.positions.size() > 0x7FFFFFFF)
     return makeError(ErrorCode::kLimitExceeded, path + ": mesh too large for an int32-indexed OBJ");
   MeshFileLayout header;
-  header.material_library = options.material_library, header.material = options.material;
+  header.materials = options.materials;
   SP_ASSIGN_OR_RETURN(auto writer,
                       MeshFileWriter::create(path, header, MeshFileFormat::of(MeshFileFormat::Kind::kObj)));
   const size_t n = mesh.positions.size(), stride = scalarWords(mesh.scalar_channels);
@@ -200,8 +200,7 @@ Status writeWith(const std::string& path, const Mesh& mesh, const WriteOptions& 
   layout.color_channels = mesh.colors.empty() ? 0 : (mesh.color_channels == 4 ? 4 : 3);
   layout.double_positions = options.double_positions;
   if (format.kind() == MeshFileFormat::Kind::kPly) layout.scalars = mesh.scalar_channels;
-  layout.material_library = options.material_library, layout.material = options.material;
-  layout.texture_file = options.texture_file;
+  layout.materials = options.materials;
   const size_t stride = scalarWords(layout.scalars);
   SP_ASSIGN_OR_RETURN(auto writer, MeshFileWriter::create(path, layout, format));
   if (format.indexed())
@@ -246,7 +245,7 @@ void MeshFileFormat::header(const MeshFileLayout& layout, std::string& out) cons
   switch (kind_) {
     case Kind::kPly: {
       out += "ply\nformat binary_little_endian 1.0\ncomment written by scanpress\n";
-      if (!layout.texture_file.empty()) out += "comment TextureFile " + layout.texture_file + "\n";
+      if (!layout.materials.texture.empty()) out += "comment TextureFile " + layout.materials.texture + "\n";
       out += "element vertex " + std::to_string(layout.vertices) + "\n";
       const char* t = layout.double_positions ? "double" : "float";
       for (const char* axis : {"x", "y", "z"}) out += std::string("property ") + t + " " + axis + "\n";
@@ -261,8 +260,8 @@ void MeshFileFormat::header(const MeshFileLayout& layout, std::string& out) cons
     }
     case Kind::kObj:
       out += "# written by scanpress\n";
-      if (!layout.material_library.empty()) out += "mtllib " + layout.material_library + "\n";
-      if (!layout.material.empty()) out += "usemtl " + layout.material + "\n";
+      if (!layout.materials.library.empty()) out += "mtllib " + layout.materials.library + "\n";
+      if (!layout.materials.material.empty()) out += "usemtl " + layout.materials.material + "\n";
       return;
     case Kind::kStl: {
       // Binary STL: an 80-byte header (which must not start with "solid", or readers take it for ASCII), the

@@ -28,9 +28,9 @@ struct WriteOptions {
   // The grid the positions lie on (decoded containers): with compression and at most 16 bits, glTF positions are
   // its integer cells (KHR_mesh_quantization, exact). nullptr: float positions.
   const Grid* grid = nullptr;
-  // OBJ: the `mtllib` arguments and the `usemtl` name to write; PLY: the `comment TextureFile` name (empty:
-  // none). Other formats write none of them (the caller reports them dropped).
-  std::string material_library, material, texture_file;
+  // OBJ writes the `mtllib` and `usemtl` lines, PLY the `comment TextureFile` line; other formats none of them
+  // (the caller reports them dropped).
+  MaterialNames materials;
 };
 
 Status writePly(const std::string& path, const Mesh& mesh, const WriteOptions& options = {});
@@ -51,8 +51,7 @@ struct MeshFileLayout {
   // (the caller reports them dropped: channelsWritten in texcoords.h). The OBJ writer writes a mesh's texture
   // coordinates itself (writeObj), not through this layout.
   std::vector<ScalarChannel> scalars;
-  std::string material_library, material;  // OBJ's `mtllib` and `usemtl` lines (empty: none)
-  std::string texture_file;                // PLY's `comment TextureFile` line (empty: none)
+  MaterialNames materials;  // OBJ's `mtllib` and `usemtl` lines, PLY's `comment TextureFile` line
 };
 
 // The byte form of one indexed format (.ply, .obj, .stl, .off; .zst is the output's business).

@@ -382,9 +382,9 @@ Result<ReadStats> readObj(Scanner& in, MeshSink& sink, const ReadOptions& option
   // not: a material per face is not kept yet.
   const bool one_material = usemtl_records && other_materials == 0 && triangles_before_usemtl == 0;
   const bool material_valid = !first_material.empty() && validMaterialName(first_material);
-  if (one_material && material_valid) stats.material = first_material;
+  if (one_material && material_valid) stats.materials.material = first_material;
   const bool library_kept = validMaterialName(libraries);
-  if (library_kept) stats.material_library = libraries;
+  if (library_kept) stats.materials.library = libraries;
   const std::string unfit = " (over " + std::to_string(kMaxMaterialBytes) +
                             " bytes, control characters or not UTF-8: not kept)";
   stats.dropped = skipped.take({{"obj usemtl (several materials or faces without one: none is kept)",

@@ -192,7 +192,7 @@ class PlyParser {
     // One texture image is kept; several (a texture per face, `texnumber`) or a name the container cannot hold are
     // listed.
     if (texture_files_ && other_textures_ == 0 && !texture_file_.empty() && validMaterialName(texture_file_))
-      stats_.texture_file = texture_file_;
+      stats_.materials.texture = texture_file_;
     else if (texture_files_)
       stats_.dropped.push_back({other_textures_ ? "comment TextureFile (several textures: none is kept)"
                                                 : "comment TextureFile (over 1024 bytes, control characters or not "
