@@ -64,6 +64,14 @@ std::string uvSphereObj(int lat, int lon) {
   return o.str();
 }
 
+// uvSphereObj(lat, lon) written to `dir` and read back as in the file (wedges, texture coordinates as channels).
+Mesh uvSphere(const TempDir& dir, int lat, int lon) {
+  testing::writeBytes(dir.file("s.obj"), uvSphereObj(lat, lon));
+  auto m = readMeshFile(dir.file("s.obj"), nullptr, ReadOptions::asInFile());
+  EXPECT_TRUE(m.isOk()) << m.status().toString();
+  return m.isOk() ? *std::move(m) : Mesh();
+}
+
 // An OBJ as this test reads it: positions, texture coordinates (as float, what a reader keeps) and faces of
 // (position index, vt index) corners.
 struct ObjText {
@@ -806,10 +814,8 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
 // the scan's own scalar channels beside them, and --no-scalars keeps them; STL output lists them dropped.
 TEST(LosslessNormals, EveryBitPatternComesBack) {
   TempDir dir;
-  testing::writeBytes(dir.file("s.obj"), uvSphereObj(16, 32));
-  auto base = readMeshFile(dir.file("s.obj"), nullptr, ReadOptions::asInFile());
-  ASSERT_TRUE(base.isOk());
-  Mesh m = *base;
+  Mesh m = uvSphere(dir, 16, 32);
+  ASSERT_FALSE(m.positions.empty());
   m.scalar_channels = {{"confidence", ScalarType::kUint8}};
   m.scalars.clear();
   const float specials[] = {0.0f, -0.0f, 1e-42f, -3e38f, std::numeric_limits<float>::max(), 7.25f};
@@ -901,10 +907,8 @@ TEST(LosslessNormals, EveryBitPatternComesBack) {
 // every decoded normal at every level is finite and of unit length, one tile and many.
 TEST(LosslessNormals, DerivedLevelsGetUnitNormals) {
   TempDir dir;
-  testing::writeBytes(dir.file("s.obj"), uvSphereObj(24, 48));
-  auto base = readMeshFile(dir.file("s.obj"), nullptr, ReadOptions::asInFile());
-  ASSERT_TRUE(base.isOk());
-  Mesh m = *base;
+  Mesh m = uvSphere(dir, 24, 48);
+  ASSERT_FALSE(m.positions.empty());
   m.normals.clear();
   for (const Vec3d& p : m.positions) m.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
   const std::string in = dir.file("n.ply");
