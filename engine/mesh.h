@@ -124,6 +124,19 @@ inline std::optional<size_t> losslessNormalsWord(std::span<const ScalarChannel> 
   return std::nullopt;
 }
 
+// What is left when the lossless normals at `word` (losslessNormalsWord) are lifted out as the mesh's normals, as
+// dequantizeMesh and the streamed decode do: the other channels, and a vertex's other words (appended to `out`).
+inline std::vector<ScalarChannel> channelsBesideLosslessNormals(std::span<const ScalarChannel> channels, size_t word) {
+  std::vector<ScalarChannel> out;
+  for (size_t i = 0, w = 0; i < channels.size(); w += size_t(scalarTypeWords(channels[i++].type)))
+    if (w < word || w >= word + 3) out.push_back(channels[i]);
+  return out;
+}
+inline void appendWordsBesideLosslessNormals(const uint32_t* row, size_t stride, size_t word, ScalarValues& out) {
+  out.insert(out.end(), row, row + word);
+  out.insert(out.end(), row + word + 3, row + stride);
+}
+
 // The names a mesh file gives its look, kept through encode and decode (container v3; empty: none): OBJ's `mtllib`
 // arguments (space-separated, each library once) and the `usemtl` name that every face shares; PLY's `comment
 // TextureFile` name (MeshLab's and Metashape's texture image). OBJ writes the first two, PLY the third.

@@ -224,17 +224,10 @@ Mesh dequantizeMesh(const QuantizedMesh& mesh, const Grid& grid, const Attribute
     for (size_t v = 0; v < n; ++v) {
       const uint32_t* row = mesh.scalars.data() + v * stride;
       for (int k = 0; k < 3; ++k) out.normals[v][size_t(k)] = std::bit_cast<float>(row[*word + size_t(k)]);
-      rest.insert(rest.end(), row, row + *word);
-      rest.insert(rest.end(), row + *word + 3, row + stride);
+      appendWordsBesideLosslessNormals(row, stride, *word, rest);
     }
     out.scalars = std::move(rest);
-    for (size_t i = 0, w = 0; i < out.scalar_channels.size();
-         w += size_t(scalarTypeWords(out.scalar_channels[i++].type)))
-      if (w == *word) {
-        out.scalar_channels.erase(out.scalar_channels.begin() + ptrdiff_t(i),
-                                  out.scalar_channels.begin() + ptrdiff_t(i) + 3);
-        break;
-      }
+    out.scalar_channels = channelsBesideLosslessNormals(layout.scalars, *word);
   }
   return out;
 }

@@ -486,18 +486,9 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
   if (stride && !header.layout.hasNormals())
     if (const auto word = losslessNormalsWord(header.layout.scalars)) float_word = *word;
   const bool float_normals = float_word != SIZE_MAX;
-  std::vector<std::pair<size_t, size_t>> written_words;  // word ranges of the channels the output writes
-  if (stride && format.kind() == MeshFileFormat::Kind::kPly) {
-    size_t w = 0;
-    for (const ScalarChannel& c : header.layout.scalars) {
-      const size_t words = size_t(scalarTypeWords(c.type));
-      if (!float_normals || w < float_word || w >= float_word + 3) {
-        layout.scalars.push_back(c);
-        written_words.push_back({w, words});
-      }
-      w += words;
-    }
-  }
+  if (stride && format.kind() == MeshFileFormat::Kind::kPly)
+    layout.scalars = float_normals ? channelsBesideLosslessNormals(header.layout.scalars, float_word)
+                                   : header.layout.scalars;
   if (layout.vertices == 0) layout.normals = false, layout.color_channels = 0;  // as the in-memory writers do
   layout.materials = settings.materials;
   SP_ASSIGN_OR_RETURN(auto writer, MeshFileWriter::create(output, layout, format));
@@ -517,11 +508,15 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
         if (float_normals)
           for (size_t k = 0; k < 3; ++k) normal[k] = std::bit_cast<float>(words[float_word + k]);
         else if (layout.normals) normal = decodeOctahedral(r.n, header.layout.normal_bits);
-        out_words.clear();
-        for (const auto& [w, len] : written_words) out_words.insert(out_words.end(), &words[w], &words[w] + len);
+        const uint32_t* written = words.data();  // the words of layout.scalars
+        if (float_normals && !layout.scalars.empty()) {
+          out_words.clear();
+          appendWordsBesideLosslessNormals(words.data(), stride, float_word, out_words);
+          written = out_words.data();
+        }
         SP_RETURN_IF_ERROR(writer->vertex(header.grid.dequantize(r.p), layout.normals ? &normal : nullptr,
                                           layout.color_channels ? &r.c : nullptr,
-                                          layout.scalars.empty() ? nullptr : out_words.data()));
+                                          layout.scalars.empty() ? nullptr : written));
       }
     }
   }
