@@ -310,7 +310,8 @@ int registerAll() {
       ->Arg(16384)
       ->Arg(131072)
       ->Unit(benchmark::kMillisecond);
-  const StatsEncoder kdtree = &kdtreeEncodeWithStats;
+  const StatsEncoder kdtree = [](const TileContext& c, const QuantizedMesh& m, std::vector<uint8_t>& o,
+                                 CodecStats* s) { return kdtreeEncodeWithStats(c, m, o, s); };
   const StatsEncoder edgebreaker = &edgebreakerEncodeWithStats;
   const StatsEncoder octree = [](const TileContext& c, const QuantizedMesh& m, std::vector<uint8_t>& o,
                                  CodecStats* s) { return octreeEncodeWithStats(c, m, o, s, OctreeOptions{true}); };

@@ -776,7 +776,7 @@ class ScanEncoder {
     if (!r.status.isOk()) {
       ++result_.failed_tiles;
     } else if (write_status_.isOk()) {
-      write_status_ = writer_->addTile(r.tile, codec_, r.encoded.decoded, r.encoded.payload);
+      write_status_ = writer_->addTile(r.tile, codec_, r.encoded);
       rep.bytes = kChunkHeaderSize + r.encoded.payload.size();
       result_.tile_vertices += r.encoded.decoded.vertices;
     }

@@ -49,8 +49,8 @@ TileResult TileEncoder::run(const TileMesh& tm, const std::vector<Vec3d>& origin
 // tile's surface is not considered, which can only make a distance larger (never hide an error).
 Status TileEncoder::measureTile(const TileContext& ctx, const TileMesh& tm, const std::vector<Vec3d>& originals,
                                 TileResult& r) const {
-  SP_ASSIGN_OR_RETURN(QuantizedMesh decoded_q,
-                      codec_.decode(ctx, codec_.version, r.encoded.payload, limitsOf(r.encoded.decoded)));
+  SP_ASSIGN_OR_RETURN(QuantizedMesh decoded_q, codec_.decode(ctx, payloadVersion(codec_, r.encoded), r.encoded.payload,
+                                                             limitsOf(r.encoded.decoded)));
   std::vector<Vec3d> decoded(decoded_q.positions.size());
   for (size_t i = 0; i < decoded.size(); ++i) {
     decoded[i] = scan_.grid.dequantize(decoded_q.positions[i]);

@@ -231,7 +231,7 @@ TEST_P(AttributeRoundTrip, EveryNormalPrecisionAndColorLayoutIsExact) {
         const TileContext ctx{12, layout};
         auto enc = encodeMesh(codec(), ctx, q);
         ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-        auto d = codec().decode(ctx, codec().version, enc->payload, limitsOf(enc->decoded));
+        auto d = codec().decode(ctx, payloadVersion(codec(), *enc), enc->payload, limitsOf(enc->decoded));
         ASSERT_TRUE(d.isOk()) << d.status().toString();
         const auto got = vertexMultiset(*d), want = vertexMultiset(q);
         ASSERT_EQ(got.size(), want.size());
@@ -255,7 +255,8 @@ TEST_P(AttributeRoundTrip, EveryTruncationFailsCleanly) {
   // through the rest (each cut decodes the whole tile before it fails: every byte would take minutes under ASan).
   for (size_t n = 0; n < bytes.size();
        n += (n < 256 || n + 256 >= bytes.size() ? testing::sampleStride() : 13 * testing::sampleStride())) {
-    auto d = codec().decode(ctx, codec().version, std::span<const uint8_t>(bytes.data(), n), limitsOf(enc->decoded));
+    auto d = codec().decode(ctx, payloadVersion(codec(), *enc), std::span<const uint8_t>(bytes.data(), n),
+                            limitsOf(enc->decoded));
     EXPECT_FALSE(d.isOk()) << "a payload cut to " << n << " of " << bytes.size() << " bytes decoded";
   }
 }
@@ -273,7 +274,7 @@ TEST_P(AttributeRoundTrip, ColorLevelsAtEveryPrecision) {
       const TileContext ctx{12, layout};
       auto enc = encodeMesh(codec(), ctx, q);
       ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-      auto d = codec().decode(ctx, codec().version, enc->payload, limitsOf(enc->decoded));
+      auto d = codec().decode(ctx, payloadVersion(codec(), *enc), enc->payload, limitsOf(enc->decoded));
       ASSERT_TRUE(d.isOk()) << d.status().toString();
       EXPECT_TRUE(vertexMultiset(*d) == vertexMultiset(q));
       if (color_bits < 8) {
@@ -310,7 +311,7 @@ TEST_P(AttributeRoundTrip, CorruptedAttributesFailCleanly) {
   for (int trial = 0; trial < testing::sampled(300); ++trial) {
     std::vector<uint8_t> bad = enc->payload;
     for (int k = 0; k < 1 + trial % 4; ++k) bad[n - 1 - rng() % tail] ^= uint8_t(1 + rng() % 255);
-    auto d = codec().decode(ctx, codec().version, bad, limitsOf(enc->decoded));
+    auto d = codec().decode(ctx, payloadVersion(codec(), *enc), bad, limitsOf(enc->decoded));
     if (d.isOk()) {
       EXPECT_TRUE(validateTile(ctx, *d).isOk());
     }
@@ -347,7 +348,7 @@ void expectCoarseLevelsShowTheTilesOwnAttributes(const CodecInfo& codec, const A
   const TileContext ctx{12, layout};
   auto enc = encodeMesh(codec, ctx, q);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-  auto levels = codec.levels(ctx, codec.version, enc->payload, limitsOf(enc->decoded));
+  auto levels = codec.levels(ctx, payloadVersion(codec, *enc), enc->payload, limitsOf(enc->decoded));
   ASSERT_TRUE(levels.isOk());
   const uint32_t n = uint32_t(q.positions.size());  // distinct points: twins differ in their attributes
   const uint32_t limit = std::max<uint32_t>(64, n / 16);
@@ -357,7 +358,7 @@ void expectCoarseLevelsShowTheTilesOwnAttributes(const CodecInfo& codec, const A
     const CodecLevel& l = (*levels)[i];
     if (l.complete) continue;
     SCOPED_TRACE("level " + std::to_string(l.level));
-    auto d = codec.decode_level(ctx, codec.version, std::span(enc->payload.data(), l.end_bytes), l.level,
+    auto d = codec.decode_level(ctx, payloadVersion(codec, *enc), std::span(enc->payload.data(), l.end_bytes), l.level,
                                 limitsOf(enc->decoded));
     ASSERT_TRUE(d.isOk()) << d.status().toString();
     ASSERT_EQ(d->normals.size(), layout.hasNormals() ? d->positions.size() : 0u);
@@ -396,14 +397,14 @@ TEST_P(AttributeRoundTrip, ATileAtOneGridPositionDecodesAtEveryLevel) {
   auto enc = encodeMesh(codec(), ctx, q);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
   for (uint32_t level : {0u, 5u, 11u}) {
-    auto d = codec().decode_level(ctx, codec().version, enc->payload, level, limitsOf(enc->decoded));
+    auto d = codec().decode_level(ctx, payloadVersion(codec(), *enc), enc->payload, level, limitsOf(enc->decoded));
     ASSERT_TRUE(d.isOk()) << "level " << level << ": " << d.status().toString();
     ASSERT_EQ(d->positions.size(), 1u);
     EXPECT_EQ(d->positions[0], (Vec3u{5, 6, 7}));
     EXPECT_EQ(d->normals.size(), 1u);
     EXPECT_EQ(d->colors.size(), 1u);
   }
-  auto d = codec().decode(ctx, codec().version, enc->payload, limitsOf(enc->decoded));
+  auto d = codec().decode(ctx, payloadVersion(codec(), *enc), enc->payload, limitsOf(enc->decoded));
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   EXPECT_TRUE(vertexMultiset(*d) == vertexMultiset(q));
 }

@@ -31,7 +31,7 @@ EncodedTile encode(const CodecInfo& codec, const TileContext& ctx, const Quantiz
 // Decodes and checks the result is the input (triangles with orientation and multiplicity, attributes).
 void expectRoundTrip(const CodecInfo& codec, const TileContext& ctx, const QuantizedMesh& q) {
   const EncodedTile enc = encode(codec, ctx, q);
-  auto d = codec.decode(ctx, codec.version, enc.payload, limitsOf(enc.decoded));
+  auto d = codec.decode(ctx, payloadVersion(codec, enc), enc.payload, limitsOf(enc.decoded));
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   EXPECT_EQ(d->triangles.size(), q.triangles.size());
   EXPECT_TRUE(testing::cornerMultiset(*d, ctx.layout.normal_bits) ==
@@ -44,13 +44,17 @@ void expectRoundTrip(const CodecInfo& codec, const TileContext& ctx, const Quant
   EXPECT_EQ(got.hi, enc.decoded.hi);
   // A limit one below either count is refused before decoding.
   if (enc.decoded.vertices > 0) {
-    EXPECT_EQ(codec.decode(ctx, codec.version, enc.payload, DecodeLimits{enc.decoded.vertices - 1, enc.decoded.faces})
+    EXPECT_EQ(codec
+                  .decode(ctx, payloadVersion(codec, enc), enc.payload,
+                          DecodeLimits{enc.decoded.vertices - 1, enc.decoded.faces})
                   .status()
                   .code(),
               ErrorCode::kMalformed);
   }
   if (enc.decoded.faces > 0) {
-    EXPECT_EQ(codec.decode(ctx, codec.version, enc.payload, DecodeLimits{enc.decoded.vertices, enc.decoded.faces - 1})
+    EXPECT_EQ(codec
+                  .decode(ctx, payloadVersion(codec, enc), enc.payload,
+                          DecodeLimits{enc.decoded.vertices, enc.decoded.faces - 1})
                   .status()
                   .code(),
               ErrorCode::kMalformed);
@@ -170,7 +174,7 @@ TEST_P(Progressive, EveryLevelDecodesToAValidMesh) {
   const EncodedTile enc = encode(codec(), ctx, q);
   const auto& bytes = enc.payload;
   const DecodeLimits lim = limitsOf(enc.decoded);
-  auto levels = codec().levels(ctx, codec().version, bytes, lim);
+  auto levels = codec().levels(ctx, payloadVersion(codec(), enc), bytes, lim);
   ASSERT_TRUE(levels.isOk()) << levels.status().toString();
   ASSERT_EQ(levels->back().level, 12u);
   EXPECT_EQ(levels->back().end_bytes, bytes.size());
@@ -191,7 +195,7 @@ TEST_P(Progressive, EveryLevelDecodesToAValidMesh) {
   for (const auto& lv : *levels) {
     SCOPED_TRACE(lv.level);
     const std::span<const uint8_t> prefix(bytes.data(), lv.end_bytes);
-    auto m = codec().decode_level(ctx, codec().version, prefix, lv.level, lim);
+    auto m = codec().decode_level(ctx, payloadVersion(codec(), enc), prefix, lv.level, lim);
     ASSERT_TRUE(m.isOk()) << m.status().toString();
     EXPECT_TRUE(validateTile(ctx, *m).isOk());
     for (const auto& t : m->triangles) {
@@ -202,22 +206,22 @@ TEST_P(Progressive, EveryLevelDecodesToAValidMesh) {
     EXPECT_GE(m->positions.size(), last_vertices);
     last_vertices = m->positions.size();
     // The same level from the whole payload.
-    auto full = codec().decode_level(ctx, codec().version, bytes, lv.level, lim);
+    auto full = codec().decode_level(ctx, payloadVersion(codec(), enc), bytes, lv.level, lim);
     ASSERT_TRUE(full.isOk());
     EXPECT_EQ(full->positions, m->positions);
     EXPECT_EQ(full->triangles, m->triangles);
     if (lv.level < 12 && lv.end_bytes > 0) {  // one byte short of the level is an error, not a crash
-      auto cut = codec().decode_level(ctx, codec().version, std::span<const uint8_t>(bytes.data(), lv.end_bytes - 1),
-                                      lv.level, lim);
+      auto cut = codec().decode_level(ctx, payloadVersion(codec(), enc),
+                                      std::span<const uint8_t>(bytes.data(), lv.end_bytes - 1), lv.level, lim);
       if (lv.level > levels->front().level) {
         EXPECT_FALSE(cut.isOk());
       }
     }
   }
-  EXPECT_TRUE(testing::cornerMultiset(*codec().decode_level(ctx, codec().version, bytes, 12, lim), 12) ==
+  EXPECT_TRUE(testing::cornerMultiset(*codec().decode_level(ctx, payloadVersion(codec(), enc), bytes, 12, lim), 12) ==
               testing::cornerMultiset(q, 12));
   // Coarse levels look like the mesh: by level 6 it has most of its sphere.
-  auto l6 = codec().decode_level(ctx, codec().version, bytes, 6, lim);
+  auto l6 = codec().decode_level(ctx, payloadVersion(codec(), enc), bytes, 6, lim);
   ASSERT_TRUE(l6.isOk());
   EXPECT_GT(l6->triangles.size(), 100u);
 }
@@ -228,7 +232,7 @@ TEST_P(Progressive, EveryTruncationFailsCleanly) {
   const auto& bytes = enc.payload;
   const DecodeLimits lim = limitsOf(enc.decoded);
   for (size_t n = 0; n < bytes.size(); ++n) {
-    auto d = codec().decode(ctx, codec().version, std::span<const uint8_t>(bytes.data(), n), lim);
+    auto d = codec().decode(ctx, payloadVersion(codec(), enc), std::span<const uint8_t>(bytes.data(), n), lim);
     EXPECT_FALSE(d.isOk()) << "a payload cut to " << n << " of " << bytes.size() << " bytes decoded";
   }
   EXPECT_EQ(codec().decode(ctx, codec().version + 1, bytes, lim).status().code(), ErrorCode::kUnknownVersion);
@@ -254,8 +258,8 @@ TEST_P(Progressive, RandomCorruptionsNeverCrash) {
     const int flips = 1 + trial % 4;
     for (int f = 0; f < flips; ++f) b[rng() % b.size()] ^= uint8_t(1 + rng() % 255);
     const uint32_t level = trial % 3 == 0 ? uint32_t(rng() % 13) : 12u;
-    auto d = codec().progressive() ? codec().decode_level(ctx, codec().version, b, level, lim)
-                                   : codec().decode(ctx, codec().version, b, lim);
+    auto d = codec().progressive() ? codec().decode_level(ctx, payloadVersion(codec(), enc), b, level, lim)
+                                   : codec().decode(ctx, payloadVersion(codec(), enc), b, lim);
     if (!d.isOk()) {
       ++failures;
     } else {

@@ -637,43 +637,21 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
   auto base = readMeshFile(fandisk);
   ASSERT_TRUE(base.isOk());
   const Mesh& m = *base;
-  std::vector<Vec3d> face_normal;
-  std::vector<std::vector<uint32_t>> faces_of(m.positions.size());
-  for (size_t f = 0; f < m.triangles.size(); ++f) {
-    const Triangle& t = m.triangles[f];
-    const Vec3d &a = m.positions[t[0]], &b = m.positions[t[1]], &c = m.positions[t[2]];
-    const Vec3d u{b[0] - a[0], b[1] - a[1], b[2] - a[2]}, w{c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-    Vec3d n{u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]};
-    const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-    for (double& x : n) x /= len > 0 ? len : 1;
-    face_normal.push_back(n);
-    for (uint32_t v : t) faces_of[v].push_back(uint32_t(f));
-  }
-  const double cos30 = std::cos(M_PI / 6);
+  const auto split = testing::cornerNormalsSplitAt(m, 30);
   std::ostringstream obj;
   obj.precision(9);
   for (const Vec3d& p : m.positions) obj << "v " << p[0] << ' ' << p[1] << ' ' << p[2] << '\n';
   std::vector<std::array<float, 3>> corner_normal;  // per corner, as the file has it (float)
-  for (size_t f = 0; f < m.triangles.size(); ++f)
-    for (uint32_t v : m.triangles[f]) {
-      Vec3d sum{0, 0, 0};
-      for (uint32_t g : faces_of[v]) {
-        const Vec3d &a = face_normal[f], &b = face_normal[g];
-        if (a[0] * b[0] + a[1] * b[1] + a[2] * b[2] >= cos30)
-          for (int k = 0; k < 3; ++k) sum[size_t(k)] += b[size_t(k)];
-      }
-      const double len = std::sqrt(sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]);
-      std::array<float, 3> n;
-      for (int k = 0; k < 3; ++k) n[size_t(k)] = float(sum[size_t(k)] / len);
-      std::ostringstream line;
-      line.precision(9);
-      line << n[0] << ' ' << n[1] << ' ' << n[2];
-      obj << "vn " << line.str() << '\n';
-      // What the reader keeps: the printed digits, read back as float.
-      std::array<float, 3> back;
-      std::istringstream(line.str()) >> back[0] >> back[1] >> back[2];
-      corner_normal.push_back(back);
-    }
+  for (const auto& c : split) {
+    std::ostringstream line;
+    line.precision(9);
+    line << float(c[0]) << ' ' << float(c[1]) << ' ' << float(c[2]);
+    obj << "vn " << line.str() << '\n';
+    // What the reader keeps: the printed digits, read back as float.
+    std::array<float, 3> back;
+    std::istringstream(line.str()) >> back[0] >> back[1] >> back[2];
+    corner_normal.push_back(back);
+  }
   for (size_t f = 0; f < m.triangles.size(); ++f) {
     obj << 'f';
     for (int k = 0; k < 3; ++k) obj << ' ' << m.triangles[f][size_t(k)] + 1 << "//" << 3 * f + size_t(k) + 1;

@@ -226,4 +226,37 @@ inline LockedCap lockedCap(const QuantizedMesh& sphere, int bits, double lift) {
   return c;
 }
 
+// A normal per corner of `m` (3 per triangle, in triangle order) split at its sharp edges, as CAD and scan tools
+// write them: the mean of the unit normals of the corner's vertex's faces within `degrees` of the corner's face
+// (smooth across gentle edges, apart across sharp ones).
+inline std::vector<std::array<double, 3>> cornerNormalsSplitAt(const Mesh& m, double degrees) {
+  std::vector<std::array<double, 3>> face_normal;
+  std::vector<std::vector<uint32_t>> faces_of(m.positions.size());
+  const auto unit = [](std::array<double, 3> n) {
+    const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    for (double& x : n) x /= len > 0 ? len : 1;
+    return n;
+  };
+  for (size_t f = 0; f < m.triangles.size(); ++f) {
+    const Triangle& t = m.triangles[f];
+    const Vec3d &a = m.positions[t[0]], &b = m.positions[t[1]], &c = m.positions[t[2]];
+    const Vec3d u{b[0] - a[0], b[1] - a[1], b[2] - a[2]}, w{c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    face_normal.push_back(unit({u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]}));
+    for (uint32_t v : t) faces_of[v].push_back(uint32_t(f));
+  }
+  const double limit = std::cos(degrees * M_PI / 180);
+  std::vector<std::array<double, 3>> out;
+  for (size_t f = 0; f < m.triangles.size(); ++f)
+    for (uint32_t v : m.triangles[f]) {
+      std::array<double, 3> sum{0, 0, 0};
+      for (uint32_t g : faces_of[v]) {
+        const auto &a = face_normal[f], &b = face_normal[g];
+        if (a[0] * b[0] + a[1] * b[1] + a[2] * b[2] >= limit)
+          for (int k = 0; k < 3; ++k) sum[size_t(k)] += b[size_t(k)];
+      }
+      out.push_back(unit(sum));
+    }
+  return out;
+}
+
 }  // namespace scanpress::testing

@@ -445,6 +445,23 @@ void codeScalarRange(Io& io, const AttributeLayout& layout, AttributeModels& mod
 constexpr uint16_t kPredictedAttributes = 2;
 constexpr uint16_t kCoarseAttributes = 3;
 
+// The octahedral code of the direction of `s` (not zero), or of -s: a bit (`flip`'s model) says which is nearer
+// `actual`, the truth's code (encoder; compared in integers, so that every machine writes the same bytes).
+// `flipped` gets the bit.
+template <class Io>
+std::array<int, 2> flippedPrediction(Io& io, BitModel& flip, const Sum3& s, int bits, std::array<int, 2> actual,
+                                     bool encoding, int& flipped) {
+  const int m = (1 << (bits - 1)) - 1;
+  const std::array<int, 2> pred = octahedralOfSum(s, bits);
+  int bit = 0;
+  if (encoding) {
+    const auto a = octahedralVector(actual, m), p = octahedralVector(pred, m);
+    bit = a[0] * p[0] + a[1] * p[1] + a[2] * p[2] < 0;
+  }
+  flipped = io.bit(flip, bit);
+  return flipped ? octahedralOfSum(Sum3{-s[0], -s[1], -s[2]}, bits) : pred;
+}
+
 // The predicted coding of the vertices v in [first, n) that are not known(v), in vertex order. A vertex w's
 // attributes count as decoded when v's are coded if w < v or known(w) (its activity: 0 when it was not coded here). faces_of(v): v's triangles (indices into
 // `tris`, a triangle once per corner naming v); geometric(v): v's angle-weighted normal sum. `truth` (encoder):
@@ -472,16 +489,7 @@ void codePredictedRange(Io& io, const AttributeLayout& layout, u32 first, u32 n,
           truth ? std::array<int, 2>{int(truth->normals[v][0]) - m, int(truth->normals[v][1]) - m}
                 : std::array<int, 2>{0, 0};
       if (s[0] != 0 || s[1] != 0 || s[2] != 0) {
-        pred = octahedralOfSum(s, bits);
-        int flip = 0;
-        if (truth) {
-          // In integers, so that every machine writes the same bytes.
-          const auto a = octahedralVector(actual, m), p = octahedralVector(pred, m);
-          flip = a[0] * p[0] + a[1] * p[1] + a[2] * p[2] < 0;
-        }
-        flip = io.bit(models.flip[last_flip], flip);
-        last_flip = flip;
-        if (flip) pred = octahedralOfSum(Sum3{-s[0], -s[1], -s[2]}, bits);
+        pred = flippedPrediction(io, models.flip[last_flip], s, bits, actual, truth != nullptr, last_flip);
       } else if (v > 0) {
         pred = {int(normals[v - 1][0]) - m, int(normals[v - 1][1]) - m};
       }
@@ -575,6 +583,8 @@ class CoarseAttributes {
     coded_.assign(n, 0);
   }
   bool active() const { return active_; }
+  // The point whose attributes vertex v shows (kNone: none yet).
+  u32 shown(u32 v) const { return active_ ? shown_[v] : kNone; }
   // Vertex v appears at a split of `parent` (kNone: v is the root).
   void birth(u32 v, u32 parent) {
     if (active_) born_.push_back({v, parent});

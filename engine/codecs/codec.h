@@ -119,6 +119,9 @@ struct EncodedTile {
   std::vector<uint8_t> payload;
   TileSummary decoded;
   std::vector<CodecLevel> levels;  // progressive codecs; empty for single-rate ones
+  // The format version of the payload (0: the codec's, CodecInfo::version): kdtree writes a tile without creases
+  // or seams as version 3, which older builds read too. The container records it (ContainerWriter::addTile).
+  uint16_t version = 0;
 };
 
 // Hard limits on what a decoder may produce, from the container's index entry for the tile (DESIGN.md decision
@@ -181,6 +184,11 @@ struct CodecInfo {
     return coded && (!root || root_level_attributes);
   }
 };
+
+// The version a tile's payload decodes with: the one its encoder wrote (EncodedTile::version), or the codec's.
+inline uint16_t payloadVersion(const CodecInfo& codec, const EncodedTile& tile) {
+  return tile.version ? tile.version : codec.version;
+}
 
 std::span<const CodecInfo> allCodecs();
 const CodecInfo* findCodec(CodecId id);
@@ -268,8 +276,9 @@ struct CodecStats {
   uint64_t payload_bytes = 0;
   uint64_t regular_faces = 0, patches = 0, lattice_points = 0;  // prm
 };
+// `version` (when given) gets the payload's format version (EncodedTile::version).
 Status kdtreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
-                             CodecStats* stats);
+                             CodecStats* stats, uint16_t* version = nullptr);
 // edgebreaker: `splits` and `edge_expansions` stay zero.
 Status edgebreakerEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
                                   CodecStats* stats);

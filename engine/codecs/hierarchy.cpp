@@ -169,9 +169,13 @@ void writeHeader(const HeaderFormat& f, const Header& h, int bits, const Attribu
 }
 
 Status checkVersion(std::string_view codec, uint16_t version) {
-  if (version < 1 || version > 3)  // 2: predicted attributes; 3: coarse levels with their own (attributes.h)
+  // 2: predicted attributes; 3: coarse levels with their own (attributes.h); kdtree 4: with their creases (creases.h).
+  const CodecInfo* info = findCodec(codec);
+  const uint16_t known = info ? info->version : 3;
+  if (version < 1 || version > known)
     return makeError(ErrorCode::kUnknownVersion, std::string(codec) + " codec version " + std::to_string(version) +
-                                                     " is not known to this build (knows 1 to 3)");
+                                                     " is not known to this build (knows 1 to " +
+                                                     std::to_string(known) + ")");
   return Status::ok();
 }
 

@@ -35,14 +35,17 @@
 //  - Attributes (normals, colors) are coded per vertex in the final segment: raw in v1, predicted from the decoded
 //    positions, triangles and neighbours in v2 (attributes.h). In v2 coarse levels get normals computed from their
 //    triangles and gray colors; from v3 each coarse vertex shows the attributes of a point of its cell, those of
-//    the first levels coded at the end of their segments (attributes.h, CoarseAttributes).
+//    the first levels coded at the end of their segments (attributes.h, CoarseAttributes); v4 (written only for a
+//    tile with creases or texture seams, else v3) keeps them at every coarse level: sharp edges, a vertex per group
+//    of corners between them, and the groups' values (creases.h).
 //
-// Payload v1, v2 and v3 (the same layout; they differ in the attributes' coding):
+// Payload v1 to v4 (the same layout; they differ in the attributes' coding):
 //   varint N (points), varint T (triangles, with multiplicity); if N == 0 nothing follows.
 //   u8 k0 (root level), 3 x varint root cell index (coordinate >> (bits - k0)),
 //   varint S (= bits - k0 + 1 segments), S x varint segment length, then the segments.
 //   Segment i < S-1 holds the splits from level k0+i to k0+i+1 (x, y, z), then (v3) the attributes of the cells it
-//   created while there are few; segment S-1 the unit splits of coincident vertices, orientation and multiplicity,
+//   created while there are few, then (v4) the level's sharp flags and chosen values; segment S-1 the unit splits
+//   of coincident vertices, orientation and multiplicity,
 //   and the attributes (v3: of the points not coded yet). Each is one range-coder stream.
 #include <algorithm>
 #include <cmath>
@@ -52,6 +55,7 @@
 
 #include "engine/codecs/codec.h"
 #include "engine/codecs/attributes.h"
+#include "engine/codecs/creases.h"
 #include "engine/codecs/hierarchy.h"
 #include "engine/entropy/range_coder.h"
 #include "engine/io/bytes.h"
@@ -206,6 +210,7 @@ void applySplit(Complex& cx, u32 v, u32 v2, const std::vector<u32>& nbrs, const 
 
 // What only the encoder knows: the points in kd order, the split codes, triangle copies, attributes.
 struct Truth : Points {
+  std::vector<u64> cut;                    // cutEdges (creases.h), when the layout has attributes
   std::vector<std::array<u32, 3>> splits;  // (s, s+c, e) of every vertex split, in decoder order
   std::vector<u8> codes;
   std::vector<u32> code_start;  // per split, into codes; one extra entry at the end
@@ -264,8 +269,10 @@ class Engine {
     if (n_ == 0) return Status::ok();
     coarse_ = std::make_unique<CoarseAttributes>(layout, version, n_);
     coarse_->birth(0, CoarseAttributes::kNone);
+    creases_ = std::make_unique<CoarseCreases>(layout, n_);
     for (int k = k0_; k < bits_ && k < target; ++k) {
       SP_RETURN_IF_ERROR(io_.begin());
+      if (k == k0_ && version >= kCoarseCreases && coarse_->active()) creases_->begin();
       for (int axis = 0; axis < 3; ++axis) {
         const int d = 3 * k + axis;
         next_.clear();
@@ -275,6 +282,17 @@ class Engine {
       io_.meter(&CodecStats::attribute_bits);
       coarse_->endLevel(io_, u32(cells_.size()), bits_ - (k + 1), truth_, normals_, colors_, scalars_,
                         [&](u32 v) -> const std::vector<u32>& { return cx_.nb[v]; });
+      if (creases_->on()) {
+        if (truth_) {  // the encoder's cell of each point
+          cell_of_.resize(n_);
+          for (const Cell& c : cells_) std::fill(cell_of_.begin() + c.s, cell_of_.begin() + c.e, c.s);
+        }
+        const auto cell_of = [&](u32 point) { return cell_of_[point]; };
+        SP_RETURN_IF_ERROR(creases_->endLevel(
+            io_, triangleKeys(), u32(cells_.size()), cell_of, [&](u32 v) -> const Vec3u& { return c2_[v]; },
+            [&](u32 v) { return coarse_->shown(v); }, normals_, colors_, scalars_, truth_ ? &truth_->cut : nullptr,
+            truth_, n_));
+      }
       SP_RETURN_IF_ERROR(io_.end());
       level_ = k + 1;
     }
@@ -307,11 +325,55 @@ class Engine {
       return m;
     }
     std::vector<u32> index(n_, UINT32_MAX);
+    // Version 4: a cell of several groups of corners (its creases and seams) shows a vertex per group, and a cell
+    // may show a value chosen for it instead of its representative's (creases.h).
+    const bool creased = creases_ && creases_->on() && !creases_->level().keys.empty();
     for (const auto& c : cells_) {
       index[c.s] = static_cast<u32>(m.positions.size());
       Vec3u p = lo_[c.s];
       for (int a = 0; a < 3; ++a) p[a] += (1u << (bits_ - splitsAlong(depth_[c.s], a))) >> 1;
-      m.positions.push_back(p);
+      const auto* w = creased ? creases_->level().find(c.s) : nullptr;
+      m.positions.insert(m.positions.end(), w ? (*w)[2] : 1, p);
+    }
+    if (creased) {
+      const auto& level = creases_->level();
+      m.triangles = orientedTriangles(level.keys);
+      for (size_t t = 0; t < m.triangles.size(); ++t)
+        for (u32& v : m.triangles[t]) {
+          const auto& k = level.keys[t];
+          v = index[v] + level.corner_group[3 * t + (k[0] == v ? 0 : k[1] == v ? 1 : 2)];
+        }
+      if (!coarse_->show(
+              u32(cells_.size()), [&](u32 i) { return cells_[i].s; }, normals_, colors_, scalars_, m)) {
+        deriveAttributes(m, layout);
+        return m;
+      }
+      // show() gave each cell its representative's values: the wedged cells' groups and the chosen cells show theirs.
+      QuantizedMesh per_cell;
+      per_cell.normals.swap(m.normals);
+      per_cell.colors.swap(m.colors);
+      per_cell.scalars.swap(m.scalars);
+      const size_t stride = size_t(layout.scalarStride());
+      const auto append = [&](OctNormal n, Rgba8 c, const uint32_t* s) {
+        if (layout.hasNormals()) m.normals.push_back(n);
+        if (layout.hasColors()) m.colors.push_back(c);
+        m.scalars.insert(m.scalars.end(), s, s + stride);
+      };
+      for (size_t i = 0; i < cells_.size(); ++i) {
+        const u32 v = cells_[i].s;
+        if (const auto* w = level.find(v)) {
+          for (u32 g = 0; g < (*w)[2]; ++g) {
+            const u32 x = creases_->groupValue((*w)[1] + g);
+            append(creases_->normal(x), creases_->color(x), creases_->scalarsOf(x));
+          }
+        } else if (const u32 x = creases_->showOverride(v); x != CoarseCreases::kNone) {
+          append(creases_->normal(x), creases_->color(x), creases_->scalarsOf(x));
+        } else {
+          append(layout.hasNormals() ? per_cell.normals[i] : OctNormal{0, 0},
+                 layout.hasColors() ? per_cell.colors[i] : Rgba8{0, 0, 0, 255}, per_cell.scalars.data() + i * stride);
+        }
+      }
+      return m;
     }
     m.triangles = orientedTriangles(triangleKeys());
     for (auto& t : m.triangles)
@@ -323,8 +385,10 @@ class Engine {
     return m;
   }
 
-  AttributeLayout layout;                // set by the caller before run()
-  uint16_t version = kCoarseAttributes;  // the payload's (attribute coding)
+  bool creasesOverflowed() const { return creases_ && creases_->overflowed(); }
+
+  AttributeLayout layout;             // set by the caller before run()
+  uint16_t version = kCoarseCreases;  // the payload's (attribute coding)
 
  private:
   struct Cell {
@@ -384,6 +448,7 @@ class Engine {
     setCell(cell.s, left, nd);
     setCell(v2, right, nd);
     coarse_->birth(v2, cell.s);
+    creases_->birth(v2, cell.s);
     next_.push_back({cell.s, v2});
     next_.push_back({v2, cell.e});
     return splitVertex(cell.s, v2, cell.e);
@@ -765,11 +830,15 @@ class Engine {
   std::vector<Rgba8> colors_;
   ScalarValues scalars_;  // by point, the layout's scalarStride() words each
   std::unique_ptr<CoarseAttributes> coarse_;
+  std::unique_ptr<CoarseCreases> creases_;
+  std::vector<u32> cell_of_;  // encoder, version 4: per point, its cell at the level
 };
 
 constexpr HeaderFormat kFormat{"kdtree", false};
 
-Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<u8>& out, CodecStats* stats) {
+Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<u8>& out, CodecStats* stats,
+                  uint16_t* version) {
+  if (version) *version = kCoarseAttributes;
   Truth truth;
   SP_RETURN_IF_ERROR(collectPoints("kdtree", ctx, mesh, {0, 1, 2}, truth));
   const u32 n = u32(truth.pos.size());
@@ -853,17 +922,33 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
     truth.code_start.push_back(u32(truth.codes.size()));
   }
 
+  // Version 4 (creases through the coarse levels) when the tile has cut edges, else version 3.
+  const AttributeLayout& layout = ctx.layout;
+  if (layout.hasNormals() || layout.hasColors() || layout.hasScalars()) truth.cut = cutEdges(truth);
   EncodeIo io;
   io.stats = stats;
-  Engine<EncodeIo> engine(io, ctx.bits, n, k0, root, &truth);
-  engine.layout = ctx.layout;
-  SP_RETURN_IF_ERROR(engine.run(ctx.bits));
+  auto engine = std::make_unique<Engine<EncodeIo>>(io, ctx.bits, n, k0, root, &truth);
+  engine->layout = layout;
+  engine->version = truth.cut.empty() ? kCoarseAttributes : kCoarseCreases;
+  if (Status st = engine->run(ctx.bits); !st.isOk()) {
+    // A coarse level whose creases would show more vertices than the tile has (not seen on real scans): the tile
+    // is coded without them, as version 3.
+    if (!engine->creasesOverflowed()) return st;
+    io = EncodeIo{};
+    io.stats = stats;
+    if (stats) *stats = CodecStats{.points = n, .triangles = mesh.triangles.size()};
+    engine = std::make_unique<Engine<EncodeIo>>(io, ctx.bits, n, k0, root, &truth);
+    engine->layout = layout;
+    engine->version = kCoarseAttributes;
+    SP_RETURN_IF_ERROR(engine->run(ctx.bits));
+  }
+  if (version) *version = engine->version;
   h.k0 = k0;
   h.root = root;
   writeHeader(kFormat, h, ctx.bits, ctx.layout, io.segments, out);
   if (stats) {
-    stats->splits = engine.splits_;
-    stats->edge_expansions = engine.expansions_;
+    stats->splits = engine->splits_;
+    stats->edge_expansions = engine->expansions_;
     stats->payload_bytes = out.size() - start;
   }
   return Status::ok();
@@ -892,13 +977,16 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
 
 Result<EncodedTile> kdtreeEncode(const TileContext& ctx, const TileView& tile, const CodecOptions&) {
   std::vector<u8> out;
-  SP_RETURN_IF_ERROR(encodeImpl(ctx, tile.mesh, out, nullptr));
-  return encodedTile(kFormat, ctx, tile.mesh, std::move(out));
+  uint16_t version = 0;
+  SP_RETURN_IF_ERROR(encodeImpl(ctx, tile.mesh, out, nullptr, &version));
+  SP_ASSIGN_OR_RETURN(EncodedTile e, encodedTile(kFormat, ctx, tile.mesh, std::move(out)));
+  e.version = version;
+  return e;
 }
 
 Status kdtreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
-                             CodecStats* stats) {
-  return encodeImpl(ctx, mesh, out, stats);
+                             CodecStats* stats, uint16_t* version) {
+  return encodeImpl(ctx, mesh, out, stats, version);
 }
 
 Result<QuantizedMesh> kdtreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,

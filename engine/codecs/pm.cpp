@@ -892,6 +892,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
     if (base.positions[sorted_base[i]] == base.positions[sorted_base[i - 1]]) unique_positions = false;
   const auto base_keys = faceKeys(base.triangles);
   const CodecInfo* best = nullptr;
+  uint16_t best_version = 0;
   std::vector<uint8_t> best_payload;
   QuantizedMesh best_decoded;
   std::vector<uint32_t> best_map;  // decoded base vertex -> last-level vertex
@@ -900,7 +901,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
     auto enc = codec.encode(base_ctx, TileView{base, {}}, options);
     if (!enc.isOk()) continue;
     if (best && enc->payload.size() >= best_payload.size()) continue;
-    auto dec = codec.decode(base_ctx, codec.version, enc->payload, limitsOf(enc->decoded));
+    auto dec = codec.decode(base_ctx, payloadVersion(codec, *enc), enc->payload, limitsOf(enc->decoded));
     if (!dec.isOk() || dec->positions.size() != base.positions.size()) continue;
     if ((with_normals && dec->normals.size() != dec->positions.size()) ||
         (with_colors && dec->colors.size() != dec->positions.size()))
@@ -929,6 +930,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
     if (faceKeys(mapped) != base_keys) continue;
     for (uint32_t& v : map) v = base_to_last[v];
     best = &codec;
+    best_version = payloadVersion(codec, *enc);
     best_payload = std::move(enc->payload);
     best_decoded = std::move(dec).value();
     best_map = std::move(map);
@@ -947,7 +949,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   h.base_codec = uint8_t(best->id);
   // Without attributes kdtree's and octree's version 3 payloads are their version 2 bytes: such a base keeps naming
   // 2, as pm v2 always has (the same bytes as v2, golden ones included).
-  h.base_version = attributes ? best->version : std::min<uint16_t>(best->version, 2);
+  h.base_version = attributes ? best_version : std::min<uint16_t>(best_version, 2);
   h.base_bytes = best_payload.size();
   h.base_vertices = best_decoded.positions.size();
   h.base_faces = best_decoded.triangles.size();

@@ -176,6 +176,9 @@ Status ContainerWriter::begin() {
 Status ContainerWriter::addTile(uint32_t tile_id, const CodecInfo& codec, const TileSummary& decoded,
                                 std::span<const uint8_t> payload, uint16_t version) {
   if (entries_.size() >= kMaxTiles) return makeError(ErrorCode::kLimitExceeded, "too many tiles");
+  if (version > codec.version)
+    return makeError(ErrorCode::kInternal, "tile " + std::to_string(tile_id) + ": " + std::string(codec.name) +
+                                               " version " + std::to_string(version) + " is newer than this build's");
   if (!codec.floor.admits(header_.layout, decoded.vertices, decoded.faces, payload.size()))
     return makeError(ErrorCode::kInternal, "tile " + std::to_string(tile_id) + ": " + std::string(codec.name) +
                                                " wrote " + std::to_string(payload.size()) + " bytes for " +
@@ -553,7 +556,7 @@ Result<std::vector<uint8_t>> encodeContainer(const Grid& grid, const AttributeLa
   const TileContext ctx{grid.bits, layout};
   for (size_t i = 0; i < tiles.size(); ++i) {
     SP_ASSIGN_OR_RETURN(EncodedTile tile, encodeMesh(codec, ctx, tiles[i], options));
-    SP_RETURN_IF_ERROR(writer.addTile(static_cast<uint32_t>(i), codec, tile.decoded, tile.payload));
+    SP_RETURN_IF_ERROR(writer.addTile(static_cast<uint32_t>(i), codec, tile));
   }
   SP_RETURN_IF_ERROR(writer.finish());
   return out;

@@ -112,6 +112,10 @@ class ContainerWriter {
   // `version`: the payload's codec version, when it is not the one this build writes (a merge of older parts).
   Status addTile(uint32_t tile_id, const CodecInfo& codec, const TileSummary& decoded,
                  std::span<const uint8_t> payload, uint16_t version = 0);
+  // A tile as its encoder returned it (its payload's version included).
+  Status addTile(uint32_t tile_id, const CodecInfo& codec, const EncodedTile& tile) {
+    return addTile(tile_id, codec, tile.decoded, tile.payload, tile.version);
+  }
   Status finish();
   // Marks the container as subset `index` of `count` (before finish()).
   void setSubset(uint16_t index, uint16_t count) { header_.subset_index = index, header_.subset_count = count; }

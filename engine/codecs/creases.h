@@ -1,0 +1,519 @@
+// Creases and texture seams through kdtree's coarse levels (payload version 4; issue 22 part 2). After
+// ../shared/papers/attributes-selective-refinement.md §3 (the corner graph and its sharp edges), adapted to a
+// hierarchy of cells:
+//
+// - A tile's points are (position, attributes) pairs, so a vertex with several normals (a crease) or texture
+//   coordinates (a seam) is several points at one position: its wedges. A *cut edge* is an edge of a triangle over
+//   points whose positions are also joined by a triangle over other points: the two sides of a crease or seam.
+// - A coarse level's edge (between two cells) is *sharp* when a cut edge joins points of those cells. Sharpness only
+//   refines: an edge whose parent (the edge between the cells it came from at the previous level) exists and is
+//   smooth is smooth, so a level codes one flag for each edge inside a cell that split, each edge whose parent was
+//   sharp and each edge without a parent, and nothing else. A tile without cut edges is written as version 3.
+// - Around a cell, the corners of its triangles that meet across smooth edges form a *group*. A cell of one group is
+//   one vertex showing its representative's attributes (attributes.h, CoarseAttributes, unchanged from version 3);
+//   a cell of k >= 2 groups is k vertices at its center, one per group (the coarse level's wedges), each showing the
+//   attributes of a point at one of the group's corners.
+// - A group's attributes: either a *slot* (the cell's representative's, or one of the groups' of the cell it came
+//   from at the previous level; a bit and the slot's index) or a new value, the attributes of a point at one of its
+//   corners: the normal predicted from the group's triangles at the level (with a flip bit, as version 2's), the
+//   colors and scalars from the representative's. The encoder reuses a slot whose point lies at one of the group's
+//   corners.
+//
+// Where we depart from the paper: it codes edge types with every vertex split and merges the attributes of a
+// contraction into new values; we code the types per level (only where the parent does not decide them) and show
+// the scan's own values, as version 3 does. Semi-sharp edges (normals apart, colors not) are sharp here: a group
+// carries every attribute of one point. Wedge values are coded again in the lossless level (measured in
+// bench/RESULTS.md, "Creases through coarse levels").
+#pragma once
+
+#include <algorithm>
+#include <numeric>
+
+#include "engine/codecs/attributes.h"
+#include "engine/octahedral.h"
+
+namespace scanpress::hierarchy {
+
+constexpr uint16_t kCoarseCreases = 4;
+
+inline u64 edgeKey(u32 a, u32 b) { return a < b ? (u64(a) << 32) | b : (u64(b) << 32) | a; }
+
+// The cut edges of Morton-ordered points (points at one position are consecutive), as point pairs (edgeKey), sorted.
+inline std::vector<u64> cutEdges(const Points& pts) {
+  const u32 n = u32(pts.pos.size());
+  std::vector<u32> first(n);
+  for (u32 p = 0; p < n; ++p) first[p] = p > 0 && pts.pos[p] == pts.pos[p - 1] ? first[p - 1] : p;
+  std::vector<std::pair<u64, u64>> es;  // (position edge, point edge)
+  es.reserve(3 * pts.tri_keys.size());
+  for (const TriKey& k : pts.tri_keys)
+    for (int j = 0; j < 3; ++j) {
+      const u32 a = k[j], b = k[(j + 1) % 3];
+      if (first[a] != first[b]) es.push_back({edgeKey(first[a], first[b]), edgeKey(a, b)});
+    }
+  std::sort(es.begin(), es.end());
+  es.erase(std::unique(es.begin(), es.end()), es.end());
+  std::vector<u64> cut;
+  for (size_t i = 0, j = 0; i < es.size(); i = j) {
+    while (j < es.size() && es[j].first == es[i].first) ++j;
+    if (j - i > 1)
+      for (size_t x = i; x < j; ++x) cut.push_back(es[x].second);
+  }
+  std::sort(cut.begin(), cut.end());
+  return cut;
+}
+
+class CoarseCreases {
+ public:
+  static constexpr u32 kNone = UINT32_MAX;
+  static constexpr u32 kPoint = 1u << 31;  // a value that is a point's (points are fewer than 2^26)
+
+  CoarseCreases(const AttributeLayout& layout, u32 n)
+      : layout_(layout), models_(layout), stride_(size_t(layout.scalarStride())), n_(n) {}
+
+  // At the start of the first segment of a version 4 payload with attributes.
+  void begin() {
+    on_ = true;
+    anc_.resize(n_);
+    std::iota(anc_.begin(), anc_.end(), 0u);
+    count_.assign(n_, 0);
+    show_.assign(n_, kNone);
+    mark_.assign(n_, 0);
+    touch_.assign(n_, 0);
+  }
+  bool on() const { return on_; }
+  // Whether a level would have shown more vertices than allowed (endLevel's error).
+  bool overflowed() const { return overflowed_; }
+  // Vertex v appears at a split of `parent` (within the level).
+  void birth(u32 v, u32 parent) {
+    if (!on_) return;
+    anc_[v] = anc_[parent];
+    show_[v] = show_[parent];
+    born_.push_back(v);
+  }
+
+  // What a level shows: its triangle keys and, per corner (3 x key + position in the key), the group of the corner
+  // within its vertex; per vertex of k >= 2 groups, the groups' values (into values_).
+  struct Level {
+    std::vector<TriKey> keys;
+    std::vector<u32> corner_group;
+    std::vector<std::array<u32, 3>> wedged;  // (vertex, first value, groups), by vertex
+    const std::array<u32, 3>* find(u32 v) const {
+      auto it = std::lower_bound(wedged.begin(), wedged.end(), std::array<u32, 3>{v, 0, 0},
+                                 [](const auto& a, const auto& b) { return a[0] < b[0]; });
+      return it != wedged.end() && (*it)[0] == v ? &*it : nullptr;
+    }
+  };
+  const Level& level() const { return level_; }
+
+  // The end of a level's segment (after CoarseAttributes::endLevel). `keys`: the level's triangle keys (sorted,
+  // distinct); `cells`: its vertex count; cell_of(point): the cell holding a point (encoder); c2(v): twice the
+  // center of cell v; rep(v): the point whose attributes v shows (CoarseAttributes::shown), whose values are in
+  // `normals`, `colors`, `scalars` (by point). `max_vertices`: the most the level may show (the header's count).
+  // Encoder: `cut` (cutEdges) and `truth`. An error when the level would show more vertices (the encoder then
+  // codes the tile without creases).
+  template <class Io, class CellOf, class Center2, class Rep>
+  Status endLevel(Io& io, std::vector<TriKey> keys, u32 cells, const CellOf& cell_of, const Center2& c2,
+                  const Rep& rep, const std::vector<OctNormal>& normals, const std::vector<Rgba8>& colors,
+                  const ScalarValues& scalars, const std::vector<u64>* cut, const Points* truth, u32 max_vertices) {
+    if (!on_) return Status::ok();
+    point_normals_ = &normals, point_colors_ = &colors, point_scalars_ = &scalars;
+    const size_t nk = keys.size();
+    // The level's edges in order, each with the triangles on it (bucketed by the smaller end, not sorted whole).
+    std::vector<std::pair<u64, u32>> on_edge;
+    {
+      const EdgeThirds adj(keys);
+      on_edge.reserve(adj.items.size());
+      for (u32 lo = 0; lo + 1 < adj.start.size(); ++lo)
+        for (u32 i = adj.start[lo]; i < adj.start[lo + 1]; ++i)
+          on_edge.push_back({edgeKey(lo, adj.items[i][0]), adj.items[i][2]});
+    }
+    std::vector<u64> truth_sharp;
+    if (truth) {
+      for (u64 e : *cut) {
+        const u32 a = cell_of(u32(e >> 32)), b = cell_of(u32(e));
+        if (a != b) truth_sharp.push_back(edgeKey(a, b));
+      }
+      std::sort(truth_sharp.begin(), truth_sharp.end());
+    }
+    // Sharp flags, where the previous level does not decide them: an edge inside a cell that split, an edge whose
+    // parent was sharp and one of whose cells split (one whose cells did not is the same edge), an edge without a
+    // parent.
+    for (u32 v : born_) mark_[v] = mark_[anc_[v]] = 1;
+    std::vector<u64> edges, sharp;
+    for (size_t i = 0; i < on_edge.size();) {
+      const u64 e = on_edge[i].first;
+      while (i < on_edge.size() && on_edge[i].first == e) ++i;
+      edges.push_back(e);
+      const u32 pa = anc_[u32(e >> 32)], pb = anc_[u32(e)];
+      int context = -1;
+      bool known_sharp = false;
+      if (pa == pb) context = std::binary_search(prev_touch_.begin(), prev_touch_.end(), pa) ? 3 : 0;
+      else if (std::binary_search(prev_sharp_.begin(), prev_sharp_.end(), edgeKey(pa, pb)))
+        context = mark_[u32(e >> 32)] || mark_[u32(e)] ? 1 : -1, known_sharp = context < 0;
+      else if ((mark_[u32(e >> 32)] || mark_[u32(e)]) &&  // (between cells that did not split: an old edge)
+               !std::binary_search(prev_edges_.begin(), prev_edges_.end(), edgeKey(pa, pb)))
+        context = 2;
+      const bool truly = truth && std::binary_search(truth_sharp.begin(), truth_sharp.end(), e);
+      if (context < 0) {
+        if (truth && truly != known_sharp) {
+          for (u32 v : born_) mark_[v] = mark_[anc_[v]] = 0;
+          return makeError(ErrorCode::kInternal, "kdtree encoder: an edge's sharpness changed without a split");
+        }
+        if (known_sharp) sharp.push_back(e);
+        continue;
+      }
+      if (io.bit(flag_[context], truly ? 1 : 0)) sharp.push_back(e);
+    }
+    for (u32 v : born_) mark_[v] = mark_[anc_[v]] = 0;
+    // Corners that meet across smooth edges: one group (union-find over the corners).
+    std::vector<u32> parent(3 * nk);
+    std::iota(parent.begin(), parent.end(), 0u);
+    const auto find = [&](u32 x) {
+      while (parent[x] != x) x = parent[x] = parent[parent[x]];
+      return x;
+    };
+    const auto corner = [&](u32 t, u32 v) {
+      const TriKey& k = keys[t];
+      return 3 * t + (k[0] == v ? 0 : k[1] == v ? 1 : 2);
+    };
+    // Only around a vertex on a sharp edge: any other is one group (a non-manifold vertex is not split).
+    for (u64 e : sharp) touch_[u32(e >> 32)] = touch_[u32(e)] = 1;
+    for (size_t i = 0, j = 0; i < on_edge.size(); i = j) {
+      const u64 e = on_edge[i].first;
+      while (j < on_edge.size() && on_edge[j].first == e) ++j;
+      if (!touch_[u32(e >> 32)] && !touch_[u32(e)]) continue;
+      if (std::binary_search(sharp.begin(), sharp.end(), e)) continue;
+      for (u32 v : {u32(e >> 32), u32(e)}) {
+        if (!touch_[v]) continue;
+        const u32 r0 = find(corner(on_edge[i].second, v));
+        for (auto it = on_edge.begin() + ptrdiff_t(i + 1); it != on_edge.begin() + ptrdiff_t(j); ++it)
+          parent[find(corner(it->second, v))] = r0;
+      }
+    }
+    Level next;
+    next.corner_group.assign(3 * nk, 0);
+    std::vector<u32> number(3 * nk, kNone);
+    std::vector<u32> touched;
+    for (u32 c = 0; c < 3 * nk; ++c) {
+      const u32 v = keys[c / 3][c % 3];
+      if (!touch_[v]) {
+        if (count_[v] == 0) touched.push_back(v), count_[v] = 1;
+        continue;
+      }
+      const u32 r = find(c);
+      if (number[r] == kNone) {
+        if (count_[v] == 0) touched.push_back(v);
+        number[r] = count_[v]++;
+      }
+      next.corner_group[c] = number[r];
+    }
+    std::sort(touched.begin(), touched.end());
+    u64 shown = cells;
+    for (u32 v : touched) shown += count_[v] - 1;
+    for (u64 e : sharp) touch_[u32(e >> 32)] = touch_[u32(e)] = 0;
+    const auto reset = [&] {
+      for (u32 v : touched) count_[v] = 0;
+    };
+    if (shown > max_vertices) {
+      reset();
+      overflowed_ = true;
+      return makeError(truth ? ErrorCode::kInternal : ErrorCode::kMalformed,
+                       "kdtree payload: a coarse level with its creases shows " + std::to_string(shown) +
+                           " vertices, more than the tile's " + std::to_string(max_vertices));
+    }
+    // The vertices whose values are chosen here: the wedged ones and those of the cells that split at this level
+    // (a value a cell inherited may come from across a crease now). Each group takes one of its slots' values or a
+    // new one. A vertex whose representative was coded at this level (attributes.h, CoarseAttributes) shows it
+    // unless chosen here.
+    for (u32 v : born_)
+      if (rep(v) == v) show_[v] = kNone;
+    values_.clear();
+    for (u32 v : born_) mark_[v] = mark_[anc_[v]] = 1;
+    std::vector<u32> chosen;
+    for (u32 v : touched)
+      if (count_[v] > 1 || mark_[v]) chosen.push_back(v);
+    for (u32 v : born_) mark_[v] = mark_[anc_[v]] = 0;
+    for (u32 v : chosen) mark_[v] = 1;
+    const auto unmark = [&] {
+      for (u32 v : chosen) mark_[v] = 0;
+    };
+    // Encoder: per group of a chosen vertex, the points at its corners (v, group, point), sorted.
+    std::vector<std::array<u32, 3>> at_corner;
+    if (truth && !chosen.empty())
+      for (const TriKey& f : truth->tri_keys) {
+        std::array<std::pair<u32, u32>, 3> cp;
+        for (int j = 0; j < 3; ++j) cp[j] = {cell_of(f[j]), f[j]};
+        if (!mark_[cp[0].first] && !mark_[cp[1].first] && !mark_[cp[2].first]) continue;
+        std::sort(cp.begin(), cp.end());
+        if (cp[0].first == cp[1].first || cp[1].first == cp[2].first) continue;
+        const TriKey k{cp[0].first, cp[1].first, cp[2].first};
+        const auto it = std::lower_bound(keys.begin(), keys.end(), k);
+        if (it == keys.end() || *it != k) {
+          reset();
+          unmark();
+          return makeError(ErrorCode::kInternal, "kdtree encoder: a coarse triangle without its fine one");
+        }
+        const u32 t = u32(it - keys.begin());
+        for (int j = 0; j < 3; ++j)
+          if (mark_[k[j]]) at_corner.push_back({k[j], next.corner_group[3 * t + j], cp[j].second});
+      }
+    std::sort(at_corner.begin(), at_corner.end());
+    // Per chosen vertex and group, its triangles (for the normal's prediction): (v, group, triangle), sorted.
+    std::vector<std::array<u32, 3>> group_tris;
+    for (u32 c = 0; c < 3 * nk; ++c)
+      if (const u32 v = keys[c / 3][c % 3]; mark_[v]) group_tris.push_back({v, next.corner_group[c], c / 3});
+    std::sort(group_tris.begin(), group_tris.end());
+
+    const int nb = layout_.normal_bits, m = layout_.hasNormals() ? (1 << (nb - 1)) - 1 : 0;
+    size_t gt = 0;
+    std::vector<u32> slots;  // pool indices
+    for (u32 v : chosen) {
+      const u32 k = count_[v];
+      // The slots: what v shows now (its override, else its representative's), then the groups' of the cell it
+      // came from.
+      slots.clear();
+      if (show_[v] != kNone) slots.push_back(show_[v]);
+      else if (const u32 r = rep(v); r != kNone) slots.push_back(r | kPoint);
+      if (const auto* w = prev_.find(anc_[v]))
+        for (u32 g = 0; g < (*w)[2]; ++g) slots.push_back(prev_values_[(*w)[1] + g]);
+      if (k > 1) next.wedged.push_back({v, u32(values_.size()), k});
+      for (u32 g = 0; g < k; ++g) {
+        const std::array<u32, 3> lo{v, g, 0}, hi{v, g, UINT32_MAX};
+        const auto c0 = std::lower_bound(at_corner.begin(), at_corner.end(), lo);
+        const auto c1 = std::upper_bound(at_corner.begin(), at_corner.end(), hi);
+        // The group's triangles' normal sum (twice the area-weighted normal, on the level's cell centers; each
+        // triangle turned to agree with the sum so far: coarse triangles have no orientation of their own).
+        while (gt < group_tris.size() && (group_tris[gt][0] < v || (group_tris[gt][0] == v && group_tris[gt][1] < g)))
+          ++gt;
+        Sum3 sum{0, 0, 0};
+        for (size_t x = gt; x < group_tris.size() && group_tris[x][0] == v && group_tris[x][1] == g; ++x) {
+          const TriKey& t = keys[group_tris[x][2]];
+          const Vec3u &a = c2(t[0]), &b = c2(t[1]), &c = c2(t[2]);
+          const int64_t u0 = int64_t(b[0]) - a[0], u1 = int64_t(b[1]) - a[1], u2 = int64_t(b[2]) - a[2];
+          const int64_t w0 = int64_t(c[0]) - a[0], w1 = int64_t(c[1]) - a[1], w2 = int64_t(c[2]) - a[2];
+          const Sum3 cross{i128(u1) * w2 - i128(u2) * w1, i128(u2) * w0 - i128(u0) * w2, i128(u0) * w1 - i128(u1) * w0};
+          // (The sum scaled below 2^70, the cross product is below 2^52: the dot product fits in 128 bits.)
+          i128 big = 0;
+          for (const i128& x : sum) big = std::max(big, x < 0 ? -x : x);
+          int shift = 0;
+          while ((big >> shift) >= (i128(1) << 70)) ++shift;
+          const bool against =
+              (sum[0] >> shift) * cross[0] + (sum[1] >> shift) * cross[1] + (sum[2] >> shift) * cross[2] < 0;
+          for (int i = 0; i < 3; ++i) sum[i] += against ? -cross[i] : cross[i];
+        }
+        const u32 ns = u32(slots.size());
+        const u32 predicted = predictSlot(slots, sum, g);
+        u32 pick = kNone, truth_point = v;
+        if (truth && c0 != c1) {
+          // The predicted slot, else the first, whose values lie within the range of the group's corners' points'
+          // values (widened): one from across a crease or seam does not.
+          rangeOf(*truth, c0, c1);
+          if (ns > 0 && admits(slots[predicted])) pick = predicted;
+          for (u32 i = 0; i < ns && pick == kNone; ++i)
+            if (admits(slots[i])) pick = i;
+          if (pick == kNone) truth_point = (*c0)[2];
+        } else if (truth && ns > 0) {
+          pick = predicted;
+        }
+        u32 value = kNone;
+        if (ns > 0 && io.bit(predicted_[std::min<u32>(ns, 3) - 1], pick == predicted ? 1 : 0)) {
+          value = slots[predicted];
+        } else if (ns > 0 && io.bit(reuse_[std::min<u32>(ns, 3) - 1], pick != kNone ? 1 : 0)) {
+          value = slots[ns > 1 ? std::min(io.uniform(pick == kNone ? 0 : pick, ns), ns - 1) : 0];
+        } else {
+          value = codeValue(io, sum, ns > 0 ? slots[0] : kNone, truth, truth_point, nb, m);
+        }
+        if (k > 1) values_.push_back(value);
+        else show_[v] = value;
+      }
+    }
+    unmark();
+    reset();
+    for (u32 v : born_) anc_[v] = v;
+    born_.clear();
+    prev_edges_ = std::move(edges);
+    prev_touch_.clear();
+    for (u64 e : sharp) prev_touch_.insert(prev_touch_.end(), {u32(e >> 32), u32(e)});
+    std::sort(prev_touch_.begin(), prev_touch_.end());
+    prev_touch_.erase(std::unique(prev_touch_.begin(), prev_touch_.end()), prev_touch_.end());
+    prev_sharp_ = std::move(sharp);
+    next.keys = std::move(keys);
+    level_ = std::move(next);
+    // The previous level's wedged vertices and their values, for the next level's choices.
+    prev_.wedged = level_.wedged;
+    prev_values_ = values_;
+    return Status::ok();
+  }
+
+  // A vertex's override: the pool value it shows instead of its representative's (kNone: none).
+  u32 showOverride(u32 v) const { return on_ ? show_[v] : kNone; }
+  // The values of the level's wedged vertices' groups, into the pool (Level::wedged indexes it).
+  u32 groupValue(u32 i) const { return values_[i]; }
+  // A value: a point's (kPoint | point: the arrays endLevel was given, by point) or the pool's.
+  OctNormal normal(u32 value) const {
+    if (!layout_.hasNormals()) return {0, 0};
+    return value & kPoint ? (*point_normals_)[value & ~kPoint] : pool_.n[value];
+  }
+  Rgba8 color(u32 value) const {
+    if (!layout_.hasColors()) return {0, 0, 0, 255};
+    return value & kPoint ? (*point_colors_)[value & ~kPoint] : pool_.c[value];
+  }
+  const uint32_t* scalarsOf(u32 value) const {
+    return value & kPoint ? point_scalars_->data() + size_t(value & ~kPoint) * stride_
+                          : pool_.s.data() + size_t(value) * stride_;
+  }
+
+ private:
+  // A new value in the pool: the attributes of `truth_point` (encoder), the normal predicted from the group's
+  // triangles (`sum`, with a flip bit) else from `base` (a pool value or kNone), colors and scalars from `base`.
+  template <class Io>
+  u32 codeValue(Io& io, const Sum3& sum, u32 base, const Points* truth, u32 truth_point, int nb, int m) {
+    int act = 0;
+    OctNormal coded_normal{0, 0};
+    if (layout_.hasNormals()) {
+      std::array<int, 2> pred = base == kNone ? std::array<int, 2>{0, 0}
+                                              : std::array<int, 2>{int(normal(base)[0]) - m, int(normal(base)[1]) - m};
+      const std::array<int, 2> actual =
+          truth ? std::array<int, 2>{int(truth->normals[truth_point][0]) - m, int(truth->normals[truth_point][1]) - m}
+                : std::array<int, 2>{0, 0};
+      int flipped = 0;
+      if (sum[0] != 0 || sum[1] != 0 || sum[2] != 0)
+        pred = flippedPrediction(io, flip_, sum, nb, actual, truth != nullptr, flipped);
+      coded_normal = codeNormal(io, models_, nb, pred, actual, truth != nullptr, 0, act);
+    }
+    Rgba8 coded_color{0, 0, 0, 255};
+    if (layout_.hasColors()) {
+      int pred[4];
+      for (int c = 0; c < 4; ++c)
+        pred[c] = base != kNone ? int(colorLevel(color(base)[c], layout_.color_bits))
+                  : c == 3      ? (1 << layout_.color_bits) - 1
+                                : (1 << layout_.color_bits) / 2;
+      coded_color = colorOfLevels(codeColorLevels(io, models_, layout_, pred,
+                                                  truth ? &truth->colors[truth_point] : nullptr, 0, act),
+                                  layout_);
+    }
+    const u32 value = u32(pool_.n.size());
+    pool_.n.push_back(coded_normal);
+    pool_.c.push_back(coded_color);
+    pool_.s.resize(pool_.s.size() + stride_);
+    size_t offset = 0;
+    for (size_t ch = 0; ch < layout_.scalars.size(); ++ch) {
+      const ScalarChannel& c = layout_.scalars[ch];
+      const int64_t pred = base == kNone ? 0 : channelOrdered(c, scalarsOf(base) + offset);
+      const int64_t actual = truth ? channelOrdered(c, truth->scalars.data() + size_t(truth_point) * stride_ + offset)
+                                   : 0;
+      int cls = 0;
+      const int64_t x = codeScalar(io, models_.scalar[ch], codedType(c), pred, actual, 0, cls);
+      channelFromOrdered(c, x, pool_.s.data() + size_t(value) * stride_ + offset);
+      offset += size_t(scalarTypeWords(c.type));
+    }
+    return value;
+  }
+  // The slot a group most likely takes: the one whose normal is nearest its triangles' (either side; in exact
+  // integers, L1-normalised as every octahedral vector is), else the g-th of the groups' of the cell it came from.
+  u32 predictSlot(const std::vector<u32>& slots, const Sum3& sum, u32 g) const {
+    if (slots.empty()) return 0;
+    if (layout_.hasNormals() && (sum[0] != 0 || sum[1] != 0 || sum[2] != 0)) {
+      const int m = (1 << (layout_.normal_bits - 1)) - 1;
+      u32 best = 0;
+      i128 best_dot = -1;
+      for (u32 i = 0; i < slots.size(); ++i) {
+        const OctNormal n = normal(slots[i]);
+        const auto d = octahedralVector({int(n[0]) - m, int(n[1]) - m}, m);
+        i128 dot = sum[0] * d[0] + sum[1] * d[1] + sum[2] * d[2];
+        if (dot < 0) dot = -dot;
+        if (dot > best_dot) best_dot = dot, best = i;
+      }
+      return best;
+    }
+    return std::min<u32>(g + 1, u32(slots.size()) - 1);
+  }
+
+  // The values the encoder compares, as doubles: a normal's unit vector, the colors' channels, each scalar
+  // channel's value (floats') or integer; into `out` (its memory reused).
+  void valuesInto(const OctNormal& n, const Rgba8& c, const uint32_t* s, std::vector<double>& out) const {
+    out.clear();
+    if (layout_.hasNormals()) {
+      const Vec3f d = decodeOctahedral(n, layout_.normal_bits);
+      out.insert(out.end(), {d[0], d[1], d[2]});
+    }
+    for (int ch = 0; ch < layout_.color_channels; ++ch) out.push_back(c[ch]);
+    size_t offset = 0;
+    for (const ScalarChannel& ch : layout_.scalars) {
+      out.push_back(isFloatScalar(ch.type) ? floatChannelValue(ch, s + offset)
+                                           : double(scalarOrdered(ch.type, s + offset)));
+      offset += size_t(scalarTypeWords(ch.type));
+    }
+  }
+  void poolValuesInto(u32 value, std::vector<double>& out) const {
+    valuesInto(normal(value), color(value), scalarsOf(value), out);
+  }
+  void pointValuesInto(const Points& truth, u32 p, std::vector<double>& out) const {
+    valuesInto(layout_.hasNormals() ? truth.normals[p] : OctNormal{0, 0},
+               layout_.hasColors() ? truth.colors[p] : Rgba8{0, 0, 0, 255}, truth.scalars.data() + size_t(p) * stride_,
+               out);
+  }
+  // Whether pool value `value` lies in the range of the values of the points [c0, c1) (third entries), widened by
+  // its width and at least a floor per value: 0.2 for a normal's components (about 11 degrees), 24 levels for a
+  // color, 1/16 of the tile's range for a scalar.
+  template <class It>
+  void rangeOf(const Points& truth, It c0, It c1) {
+    if (floor_.empty()) {  // once per tile
+      const size_t first = (layout_.hasNormals() ? 3 : 0) + size_t(layout_.color_channels);
+      floor_.assign(layout_.hasNormals() ? 3 : 0, 0.2);
+      floor_.insert(floor_.end(), size_t(layout_.color_channels), 24.0);
+      for (u32 p = 0; p < truth.pos.size(); ++p) {
+        pointValuesInto(truth, p, x_);
+        if (p == 0) lo_ = hi_ = x_;
+        for (size_t i = first; i < x_.size(); ++i) lo_[i] = std::min(lo_[i], x_[i]), hi_[i] = std::max(hi_[i], x_[i]);
+      }
+      for (size_t i = first; i < lo_.size(); ++i)
+        floor_.push_back(std::isfinite(hi_[i] - lo_[i]) ? (hi_[i] - lo_[i]) / 16 : 0);
+    }
+    for (It it = c0; it != c1; ++it) {
+      pointValuesInto(truth, (*it)[2], x_);
+      if (it == c0) lo_ = hi_ = x_;
+      for (size_t i = 0; i < x_.size(); ++i) lo_[i] = std::min(lo_[i], x_[i]), hi_[i] = std::max(hi_[i], x_[i]);
+    }
+    for (size_t i = 0; i < lo_.size(); ++i) {
+      const double w = std::max(hi_[i] - lo_[i], floor_[i]);
+      lo_[i] -= w, hi_[i] += w;
+    }
+  }
+  bool admits(u32 value) {
+    poolValuesInto(value, x_);
+    for (size_t i = 0; i < x_.size(); ++i)
+      if (!(x_[i] >= lo_[i] && x_[i] <= hi_[i])) return false;
+    return true;
+  }
+
+ private:
+  // Attribute values, one after another (normals and colors one each, scalars stride words).
+  struct Values {
+    std::vector<OctNormal> n;
+    std::vector<Rgba8> c;
+    ScalarValues s;
+  };
+
+  AttributeLayout layout_;
+  AttributeModels models_;
+  size_t stride_;
+  u32 n_;
+  bool on_ = false, overflowed_ = false;
+  // Sharp flags by context: inside a cell that split (0; 3: a cell on a sharp edge), under a sharp edge (1), without
+  // a parent (2).
+  BitModel flag_[4], predicted_[3], reuse_[3], flip_;
+  std::vector<u32> anc_, count_, born_, show_;
+  std::vector<u8> mark_, touch_;
+  std::vector<u64> prev_edges_, prev_sharp_;
+  std::vector<u32> prev_touch_;  // the vertices on a sharp edge at the previous level
+  Level prev_, level_;
+  std::vector<u32> values_, prev_values_;  // the wedged vertices' groups' values (pool indices), by Level::wedged
+  Values pool_;                            // the values coded so far (new ones)
+  const std::vector<OctNormal>* point_normals_ = nullptr;  // the points' values (endLevel's arrays)
+  const std::vector<Rgba8>* point_colors_ = nullptr;
+  const ScalarValues* point_scalars_ = nullptr;
+  std::vector<double> floor_, lo_, hi_, x_;  // encoder: rangeOf's floors, the range, scratch
+};
+
+}  // namespace scanpress::hierarchy
