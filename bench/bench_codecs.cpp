@@ -72,7 +72,7 @@ void BM_Decode(benchmark::State& state, const CodecInfo* codec, std::string scan
   if (!encoded.isOk()) return state.SkipWithError("encode failed");
   const std::vector<uint8_t>& out = encoded->payload;
   for (auto _ : state) {
-    auto m = codec->decode(p.ctx, codec->version, out, limitsOf(encoded->decoded));
+    auto m = codec->decode(p.ctx, payloadVersion(*codec, *encoded), out, limitsOf(encoded->decoded));
     if (!m.isOk()) state.SkipWithError("decode failed");
     benchmark::DoNotOptimize(m);
   }
@@ -93,7 +93,7 @@ void BM_PrmDecode(benchmark::State& state, std::string scan, int bits, double gr
   const std::vector<uint8_t>& out = encoded->payload;
   QuantizedMesh decoded;
   for (auto _ : state) {
-    auto m = codec.decode(p.ctx, codec.version, out, limitsOf(encoded->decoded));
+    auto m = codec.decode(p.ctx, payloadVersion(codec, *encoded), out, limitsOf(encoded->decoded));
     if (!m.isOk()) return state.SkipWithError("decode failed");
     decoded = std::move(m).value();
     benchmark::DoNotOptimize(decoded);
@@ -118,7 +118,7 @@ void BM_PmDecode(benchmark::State& state, std::string scan, int bits, double rat
   if (!encoded.isOk()) return state.SkipWithError(encoded.status().toString().c_str());
   const std::vector<uint8_t>& out = encoded->payload;
   for (auto _ : state) {
-    auto m = codec.decode(p.ctx, codec.version, out, limitsOf(encoded->decoded));
+    auto m = codec.decode(p.ctx, payloadVersion(codec, *encoded), out, limitsOf(encoded->decoded));
     if (!m.isOk()) state.SkipWithError("decode failed");
     benchmark::DoNotOptimize(m);
   }

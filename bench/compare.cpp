@@ -126,7 +126,7 @@ void runScan(const std::string& path, int bits, int first_bits, const Options& o
       return encoded.payload.size();
         },
         [&] {
-      auto r = codec.decode(ctx, codec.version, encoded.payload, limitsOf(encoded.decoded));
+      auto r = codec.decode(ctx, payloadVersion(codec, encoded), encoded.payload, limitsOf(encoded.decoded));
       if (r.isOk()) out = std::move(r).value();
     },
         row);

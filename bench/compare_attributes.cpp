@@ -266,7 +266,7 @@ void runTexcoords(const std::string& scan, const std::string& path, const Mesh& 
         continue;
       }
       r.bytes = e->payload.size();
-      auto d = codec.decode(ctx, codec.version, e->payload, limitsOf(e->decoded));
+      auto d = codec.decode(ctx, payloadVersion(codec, *e), e->payload, limitsOf(e->decoded));
       if (d.isOk()) {  // exact: the same (position, u, v) vertices
         const auto key = [&](const QuantizedMesh& m) {
           std::vector<std::pair<Vec3u, std::vector<uint32_t>>> v;
@@ -328,7 +328,7 @@ void runAttributes(const std::string& scan, const Mesh& mesh, int bits, std::vec
         continue;
       }
       r.bytes = e->payload.size();
-      auto d = codec.decode(ctx, codec.version, e->payload, limitsOf(e->decoded));
+      auto d = codec.decode(ctx, payloadVersion(codec, *e), e->payload, limitsOf(e->decoded));
       if (d.isOk()) {                                // exact: the same (position, normal code, color) vertices
         const bool welds = !codec.keeps_attributes;  // pm: one vertex per position, the first's attributes
         auto key = [&](const QuantizedMesh& m) {

@@ -342,7 +342,7 @@ void runLossySweep(const char* family, std::initializer_list<double> settings, v
       std::fprintf(stderr, "%s failed on %s: %s\n", family, scan.c_str(), encoded.status().toString().c_str());
       continue;
     }
-    auto decoded = codec->decode(ctx, codec->version, encoded->payload, limitsOf(encoded->decoded));
+    auto decoded = codec->decode(ctx, payloadVersion(*codec, *encoded), encoded->payload, limitsOf(encoded->decoded));
     if (!decoded.isOk()) continue;
     char name[96];
     std::snprintf(name, sizeof name, label, grid.bits, x);

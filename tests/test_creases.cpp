@@ -122,6 +122,7 @@ std::vector<std::pair<uint32_t, QuantizedMesh>> coarseLevels(const TileContext& 
   EXPECT_TRUE(enc.isOk()) << enc.status().toString();
   if (!enc.isOk()) return out;
   EXPECT_EQ(enc->version, 4);
+  std::printf("kdtree v4 payload: %zu bytes\n", enc->payload.size());
   auto levels = kdtree().levels(ctx, enc->version, enc->payload, limitsOf(enc->decoded));
   EXPECT_TRUE(levels.isOk());
   if (!levels.isOk()) return out;

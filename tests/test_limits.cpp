@@ -42,7 +42,7 @@ std::vector<uint8_t> craft(CodecId codec, const std::vector<uint8_t>& payload, u
   summary.faces = faces;
   summary.lo = {0, 0, 0};
   summary.hi = {9, 9, 9};
-  EXPECT_TRUE(writer.addTile(7, *findCodec(codec), summary, payload).isOk());
+  EXPECT_TRUE(writer.addTile(7, *findCodec(codec), summary, payload, findCodec(codec)->version).isOk());
   EXPECT_TRUE(writer.finish().isOk());
   return sink.bytes;
 }
@@ -150,7 +150,7 @@ TEST(IndexLimits, WriterRefusesCountsBelowTheFloor) {
   TileSummary summary;
   summary.vertices = 1u << 20;
   const std::vector<uint8_t> payload(100, 0);
-  EXPECT_EQ(writer.addTile(0, *findCodec(CodecId::kStore), summary, payload).code(), ErrorCode::kInternal);
+  EXPECT_EQ(writer.addTile(0, *findCodec(CodecId::kStore), summary, payload, 1).code(), ErrorCode::kInternal);
 }
 
 }  // namespace

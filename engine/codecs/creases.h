@@ -30,7 +30,6 @@
 #include <numeric>
 
 #include "engine/codecs/attributes.h"
-#include "engine/octahedral.h"
 
 namespace scanpress::hierarchy {
 
@@ -81,8 +80,9 @@ class CoarseCreases {
     touch_.assign(n_, 0);
   }
   bool on() const { return on_; }
-  // Whether a level would have shown more vertices than allowed (endLevel's error).
-  bool overflowed() const { return overflowed_; }
+  // Whether endLevel failed: a level would show more vertices than allowed, or (encoder) the tile's cut edges do
+  // not map onto the level as they should (not seen); the encoder then codes the tile as version 3.
+  bool failed() const { return failed_; }
   // Vertex v appears at a split of `parent` (within the level).
   void birth(u32 v, u32 parent) {
     if (!on_) return;
@@ -157,6 +157,7 @@ class CoarseCreases {
       if (context < 0) {
         if (truth && truly != known_sharp) {
           for (u32 v : born_) mark_[v] = mark_[anc_[v]] = 0;
+          failed_ = true;
           return makeError(ErrorCode::kInternal, "kdtree encoder: an edge's sharpness changed without a split");
         }
         if (known_sharp) sharp.push_back(e);
@@ -216,7 +217,7 @@ class CoarseCreases {
     };
     if (shown > max_vertices) {
       reset();
-      overflowed_ = true;
+      failed_ = true;
       return makeError(truth ? ErrorCode::kInternal : ErrorCode::kMalformed,
                        "kdtree payload: a coarse level with its creases shows " + std::to_string(shown) +
                            " vertices, more than the tile's " + std::to_string(max_vertices));
@@ -251,6 +252,7 @@ class CoarseCreases {
         if (it == keys.end() || *it != k) {
           reset();
           unmark();
+          failed_ = true;
           return makeError(ErrorCode::kInternal, "kdtree encoder: a coarse triangle without its fine one");
         }
         const u32 t = u32(it - keys.begin());
@@ -341,6 +343,7 @@ class CoarseCreases {
     level_ = std::move(next);
     // The previous level's wedged vertices and their values, for the next level's choices.
     prev_.wedged = level_.wedged;
+    compactPool();
     prev_values_ = values_;
     return Status::ok();
   }
@@ -429,13 +432,37 @@ class CoarseCreases {
     return std::min<u32>(g + 1, u32(slots.size()) - 1);
   }
 
-  // The values the encoder compares, as doubles: a normal's unit vector, the colors' channels, each scalar
-  // channel's value (floats') or integer; into `out` (its memory reused).
+  // Keeps only the pool values something still shows (a group's, a cell's choice), in their order: the pool holds
+  // at most one value per cell and group of the level, not every value ever coded.
+  void compactPool() {
+    if (pool_.n.empty()) return;
+    std::vector<u32> remap(pool_.n.size(), kNone);
+    Values kept;
+    const auto keep = [&](u32& ref) {
+      if (ref == kNone || (ref & kPoint)) return;
+      if (remap[ref] == kNone) {
+        remap[ref] = u32(kept.n.size());
+        kept.n.push_back(pool_.n[ref]);
+        kept.c.push_back(pool_.c[ref]);
+        kept.s.insert(kept.s.end(), pool_.s.begin() + ptrdiff_t(size_t(ref) * stride_),
+                      pool_.s.begin() + ptrdiff_t(size_t(ref + 1) * stride_));
+      }
+      ref = remap[ref];
+    };
+    for (u32& ref : values_) keep(ref);
+    for (u32& ref : show_) keep(ref);
+    pool_ = std::move(kept);
+  }
+
+  // The values the encoder compares, as doubles: a normal's integer vector on the octahedron, the colors' 8-bit
+  // channels, each scalar channel's value (floats') or integer; into `out` (its memory reused). Only comparisons,
+  // subtractions and a division by 16 follow: every machine makes the same choices.
   void valuesInto(const OctNormal& n, const Rgba8& c, const uint32_t* s, std::vector<double>& out) const {
     out.clear();
-    if (layout_.hasNormals()) {
-      const Vec3f d = decodeOctahedral(n, layout_.normal_bits);
-      out.insert(out.end(), {d[0], d[1], d[2]});
+    if (layout_.hasNormals()) {  // in integers (on the octahedron |x| + |y| + |z| = M): the same on every machine
+      const int m = (1 << (layout_.normal_bits - 1)) - 1;
+      const auto d = octahedralVector({int(n[0]) - m, int(n[1]) - m}, m);
+      out.insert(out.end(), {double(d[0]), double(d[1]), double(d[2])});
     }
     for (int ch = 0; ch < layout_.color_channels; ++ch) out.push_back(c[ch]);
     size_t offset = 0;
@@ -454,13 +481,13 @@ class CoarseCreases {
                out);
   }
   // Whether pool value `value` lies in the range of the values of the points [c0, c1) (third entries), widened by
-  // its width and at least a floor per value: 0.2 for a normal's components (about 11 degrees), 24 levels for a
-  // color, 1/16 of the tile's range for a scalar.
+  // its width and at least a floor per value: 0.2 M for a normal's components (about 11 degrees), 24 for a color
+  // channel (of 255), 1/16 of the tile's range for a scalar.
   template <class It>
   void rangeOf(const Points& truth, It c0, It c1) {
     if (floor_.empty()) {  // once per tile
       const size_t first = (layout_.hasNormals() ? 3 : 0) + size_t(layout_.color_channels);
-      floor_.assign(layout_.hasNormals() ? 3 : 0, 0.2);
+      floor_.assign(layout_.hasNormals() ? 3 : 0, 0.2 * double((1 << (layout_.normal_bits - 1)) - 1));
       floor_.insert(floor_.end(), size_t(layout_.color_channels), 24.0);
       for (u32 p = 0; p < truth.pos.size(); ++p) {
         pointValuesInto(truth, p, x_);
@@ -499,7 +526,7 @@ class CoarseCreases {
   AttributeModels models_;
   size_t stride_;
   u32 n_;
-  bool on_ = false, overflowed_ = false;
+  bool on_ = false, failed_ = false;
   // Sharp flags by context: inside a cell that split (0; 3: a cell on a sharp edge), under a sharp edge (1), without
   // a parent (2).
   BitModel flag_[4], predicted_[3], reuse_[3], flip_;

@@ -385,7 +385,7 @@ class Engine {
     return m;
   }
 
-  bool creasesOverflowed() const { return creases_ && creases_->overflowed(); }
+  bool creasesFailed() const { return creases_ && creases_->failed(); }
 
   AttributeLayout layout;             // set by the caller before run()
   uint16_t version = kCoarseCreases;  // the payload's (attribute coding)
@@ -931,9 +931,9 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
   engine->layout = layout;
   engine->version = truth.cut.empty() ? kCoarseAttributes : kCoarseCreases;
   if (Status st = engine->run(ctx.bits); !st.isOk()) {
-    // A coarse level whose creases would show more vertices than the tile has (not seen on real scans): the tile
-    // is coded without them, as version 3.
-    if (!engine->creasesOverflowed()) return st;
+    // A coarse level whose creases would show more vertices than the tile has, or cut edges that do not map onto
+    // a level as they should (neither seen): the tile is coded without creases, as version 3.
+    if (!engine->creasesFailed()) return st;
     io = EncodeIo{};
     io.stats = stats;
     if (stats) *stats = CodecStats{.points = n, .triangles = mesh.triangles.size()};

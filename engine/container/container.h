@@ -109,9 +109,10 @@ class ContainerWriter {
   Status begin();
   // `decoded` is what the codec's decoder yields from `payload` (EncodedTile::decoded): the index records it.
   // Fails with kInternal if the counts are below the codec's payload floor (the reader would refuse the file).
-  // `version`: the payload's codec version, when it is not the one this build writes (a merge of older parts).
+  // `version`: the payload's codec version (EncodedTile::version; 0: the one this build writes; a merge of older
+  // parts passes theirs). No default: a kdtree tile without creases is version 3.
   Status addTile(uint32_t tile_id, const CodecInfo& codec, const TileSummary& decoded,
-                 std::span<const uint8_t> payload, uint16_t version = 0);
+                 std::span<const uint8_t> payload, uint16_t version);
   // A tile as its encoder returned it (its payload's version included).
   Status addTile(uint32_t tile_id, const CodecInfo& codec, const EncodedTile& tile) {
     return addTile(tile_id, codec, tile.decoded, tile.payload, tile.version);
