@@ -485,9 +485,10 @@ class CoarseCreases {
   // channel (of 255), 1/16 of the tile's range for a scalar.
   template <class It>
   void rangeOf(const Points& truth, It c0, It c1) {
-    if (floor_.empty()) {  // once per tile
+    if (!floors_known_) {  // once per tile
+      floors_known_ = true;
       const size_t first = (layout_.hasNormals() ? 3 : 0) + size_t(layout_.color_channels);
-      floor_.assign(layout_.hasNormals() ? 3 : 0, 0.2 * double((1 << (layout_.normal_bits - 1)) - 1));
+      if (layout_.hasNormals()) floor_.assign(3, 0.2 * double((1 << (layout_.normal_bits - 1)) - 1));
       floor_.insert(floor_.end(), size_t(layout_.color_channels), 24.0);
       for (u32 p = 0; p < truth.pos.size(); ++p) {
         pointValuesInto(truth, p, x_);
@@ -526,7 +527,7 @@ class CoarseCreases {
   AttributeModels models_;
   size_t stride_;
   u32 n_;
-  bool on_ = false, failed_ = false;
+  bool on_ = false, failed_ = false, floors_known_ = false;
   // Sharp flags by context: inside a cell that split (0; 3: a cell on a sharp edge), under a sharp edge (1), without
   // a parent (2).
   BitModel flag_[4], predicted_[3], reuse_[3], flip_;
