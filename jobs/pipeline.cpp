@@ -387,7 +387,7 @@ class ScanEncoder {
       return makeError(ErrorCode::kInvalidArgument,
                        s_.input +
                            ": --lossless-normals needs a codec that carries scalar channels (store, kdtree, "
-                           "octree, edgebreaker) and no remesh stage: " +
+                           "octree, edgebreaker, pm) and no remesh stage: " +
                            scalarsDroppedBy() + " carries none");
     if (lossless_normals && result_.read.double_normals)
       return makeError(ErrorCode::kInvalidArgument,
@@ -400,6 +400,12 @@ class ScanEncoder {
     }
     if (s_.keep_scalars && codecCarriesScalars()) {
       result_.layout.scalars = survey_.scalar_channels;
+      // pm welds by position, so it keeps no texture seam: its texture coordinates are dropped (checkDrops lists
+      // them), its other channels kept.
+      if (const auto tc = findTexcoords(result_.layout.scalars); tc && !codecKeepsWedges()) {
+        result_.layout.scalars.erase(result_.layout.scalars.begin() + ptrdiff_t(std::max(tc->u, tc->v)));
+        result_.layout.scalars.erase(result_.layout.scalars.begin() + ptrdiff_t(std::min(tc->u, tc->v)));
+      }
       if (const auto tc = findTexcoords(result_.layout.scalars); tc && s_.uv_bits > 0)
         for (size_t ch : {tc->u, tc->v}) result_.layout.scalars[ch].bits = static_cast<uint8_t>(s_.uv_bits);
     }
@@ -657,17 +663,22 @@ class ScanEncoder {
       });
     }
     // What a codec that does not keep every vertex made the reader drop, with the reason.
-    if (!codecCarriesScalars()) {
+    if (!codecKeepsWedges()) {
       for (DroppedProperty& d : result_.read.dropped) {
         if (d.name == "obj vt" || d.name == "face.texcoord")
-          d.name += " (" + scalarsDroppedBy() + " carries no texture coordinates)";
+          d.name += " (" + scalarsDroppedBy() + " keeps no texture seams)";
         else if (d.name == "obj vn per corner") d.name += " (" + scalarsDroppedBy() + " keeps a normal per vertex)";
       }
     }
-    for (const ScalarChannel& c : survey_.scalar_channels) {
+    const auto texcoords = findTexcoords(survey_.scalar_channels);
+    for (size_t i = 0; i < survey_.scalar_channels.size(); ++i) {
+      const ScalarChannel& c = survey_.scalar_channels[i];
       if (!s_.keep_scalars) result_.dropped_on_request.push_back({"vertex." + c.name, survey_.vertex_count});
       else if (!codecCarriesScalars())
         result_.read.dropped.push_back({"vertex." + c.name + " (" + scalarsDroppedBy() + " carries no scalar channels)",
+                                        survey_.vertex_count});
+      else if (!codecKeepsWedges() && texcoords && (i == texcoords->u || i == texcoords->v))
+        result_.read.dropped.push_back({"vertex." + c.name + " (" + scalarsDroppedBy() + " keeps no texture seams)",
                                         survey_.vertex_count});
     }
     if (s_.strict && !result_.read.dropped.empty())
@@ -681,13 +692,16 @@ class ScanEncoder {
   EncodeResult& result() { return result_; }
 
  private:
-  // The codecs that code scalar channels (`auto` is one of pm and edgebreaker here; its search keeps edgebreaker's
-  // result when pm's dropped scalars, jobs/targets.cpp), and no remesh stage (which makes new vertices).
+  // The codecs that code scalar channels (`auto` is one of pm and edgebreaker here), and no remesh stage (which
+  // makes new vertices).
   bool codecCarriesScalars() const {
     for (const StageSpec& st : s_.stages)
       if (st.kind == StageKind::kRemesh) return false;
-    return codec_.id != CodecId::kPm && codec_.id != CodecId::kPrm;
+    return codec_.id != CodecId::kPrm;
   }
+  // ... and keep the wedges of texture seams and creases: not pm, which welds by position before it simplifies (one
+  // value per position; its search keeps edgebreaker's result when pm dropped texture coordinates, jobs/targets.cpp).
+  bool codecKeepsWedges() const { return codecCarriesScalars() && codec_.id != CodecId::kPm; }
   std::string scalarsDroppedBy() const {
     for (const StageSpec& st : s_.stages)
       if (st.kind == StageKind::kRemesh) return "the remesh stage";
@@ -725,8 +739,8 @@ class ScanEncoder {
   // vertices as they are, `vt` listed dropped, a vertex's normal its first corner's), and what is kept.
   ReadOptions readOptions() const {
     ReadOptions o;
-    o.texture_coordinates = s_.keep_scalars && codecCarriesScalars();
-    o.corner_normals = s_.keep_normals && codecCarriesScalars();
+    o.texture_coordinates = s_.keep_scalars && codecKeepsWedges();
+    o.corner_normals = s_.keep_normals && codecKeepsWedges();
     return o;
   }
 

@@ -387,15 +387,15 @@ Result<EncodeResult> encodeToTargetAuto(const EncodeSettings& settings, Progress
   };
   std::vector<TargetAttempt> attempts;
   for (const char* codec : {"pm", "edgebreaker"}) {
-    // pm carries no scalar channels, so no lossless normals: edgebreaker alone competes.
-    if (settings.lossless_normals && std::string_view(codec) == "pm") continue;
     EncodeSettings c = settings;
     c.codec = codec;
     if (settings.target.kind != TargetKind::kMaxError) c.measure.enabled = true;
     TargetSearch search(c, progress, device, hooks);
     search.keepInPlace();
     auto r = search.run();
-    // Under strict, pm refuses a scan whose scalar channels it would drop: edgebreaker alone competes.
+    // Under strict, pm refuses a scan whose texture coordinates or corner normals it would drop: edgebreaker alone
+    // competes. (A tile pm refuses, such as one with texture seams in per-vertex coordinates, is a failed tile: its
+    // result misses the target, and edgebreaker's is kept.)
     if (!r.isOk() && settings.strict && r.status().code() == ErrorCode::kUnsupported && c.codec == "pm") continue;
     if (!r.isOk()) {
       for (auto& d : done) discard(d.kept);
@@ -407,11 +407,8 @@ Result<EncodeResult> encodeToTargetAuto(const EncodeSettings& settings, Progress
   auto metOf = [](const Candidate& c) { return c.result.target && c.result.target->met; };
   auto better = [&](const Candidate& a, const Candidate& b) {  // a is better than b
     if (metOf(a) != metOf(b)) return metOf(a);
-    // pm drops a scan's scalar channels (the report lists them): of two that meet the target, the one that keeps
-    // them wins whatever the sizes.
-    if (a.result.layout.scalars.size() != b.result.layout.scalars.size())
-      return a.result.layout.scalars.size() > b.result.layout.scalars.size();
-    // Likewise the one whose read dropped less (pm keeps one normal per vertex of an OBJ with normals per corner).
+    // pm drops an OBJ's texture coordinates and keeps one normal per vertex where its corners name several (the
+    // report lists them): of two that meet the target, the one whose read dropped less wins whatever the sizes.
     if (a.result.read.dropped.size() != b.result.read.dropped.size())
       return a.result.read.dropped.size() < b.result.read.dropped.size();
     if (settings.target.kind == TargetKind::kMaxError) return a.result.bytes < b.result.bytes;

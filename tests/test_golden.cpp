@@ -60,6 +60,10 @@ CodecOptions goldenOptions() {
   return o;
 }
 
+// The last version with a golden stream of the golden mesh: the codec's, but pm's is 3 (it writes version 4 only
+// for scalar channels, which the golden mesh has none of: that stream is scalars-pm.spz, test_scalar_channels.cpp).
+int lastGoldenVersion(const CodecInfo& codec) { return codec.id == CodecId::kPm ? 3 : codec.version; }
+
 std::string goldenPath(const CodecInfo& codec, int version) {
   return std::string(SCANPRESS_GOLDEN) + "/" + std::string(codec.name) + "-v" + std::to_string(version) + ".spz";
 }
@@ -172,14 +176,18 @@ TEST_P(GoldenStream, DecodesToItsMeshAndTheEncoderStillWritesIt) {
   const QuantizedMesh tiles[] = {g.mesh};
   auto now = encodeContainer(g.grid, g.layout, codec, tiles, goldenOptions());
   ASSERT_TRUE(now.isOk()) << now.status().toString();
-  const std::string path = goldenPath(codec, codec.version);
+  auto parsed_now = parseContainer(*now, "now");
+  ASSERT_TRUE(parsed_now.isOk()) << parsed_now.status().toString();
+  const int written = parsed_now->tiles.at(0).codec_version;
+  EXPECT_EQ(written, lastGoldenVersion(codec));
+  const std::string path = goldenPath(codec, written);
   if (!std::filesystem::exists(path)) {
     const char* write = std::getenv("SCANPRESS_WRITE_GOLDEN");
     ASSERT_TRUE(write && std::string(write) == "1")
         << path << " is missing: a new codec or version needs its golden stream (SCANPRESS_WRITE_GOLDEN=1)";
     testing::writeBytes(path, std::string(now->begin(), now->end()));
   }
-  for (int version = 1; version <= codec.version; ++version) {
+  for (int version = 1; version <= written; ++version) {
     const std::string older = goldenPath(codec, version);
     ASSERT_TRUE(std::filesystem::exists(older)) << older << " is missing: golden streams are kept forever";
     expectDecodesToGolden(codec, version, testing::readBytes(older), older);
@@ -203,7 +211,7 @@ TEST_P(GoldenStream, DecodesToItsMeshAndTheEncoderStillWritesIt) {
     return;
   }
   EXPECT_TRUE(*now == testing::readBytes(path))
-      << "this build writes " << codec.name << " v" << codec.version
+      << "this build writes " << codec.name << " v" << written
       << " differently from its golden stream: a format change needs a new version";
 }
 
@@ -229,7 +237,7 @@ void readGoldenTile(const std::string& path, GoldenTile& out) {
 TEST_P(GoldenStream, OlderTilesKeepTheirVersionWhenCopied) {
   const CodecInfo& codec = *findCodec(GetParam());
   const Golden& g = golden();
-  for (int version = 1; version < codec.version; ++version) {
+  for (int version = 1; version < lastGoldenVersion(codec); ++version) {
     const std::string path = goldenPath(codec, version);
     GoldenTile tile;
     ASSERT_NO_FATAL_FAILURE(readGoldenTile(path, tile));
@@ -252,7 +260,7 @@ TEST_P(GoldenStream, CoarseLevelsShowTheGoldenMeshsAttributes) {
   const CodecInfo& codec = *findCodec(GetParam());
   if (!codec.progressive() || codec.coarse_attributes_from == 0) GTEST_SKIP() << codec.name << ": derived";
   const Golden& g = golden();
-  for (int version = 1; version <= codec.version; ++version) {
+  for (int version = 1; version <= lastGoldenVersion(codec); ++version) {
     const std::string path = goldenPath(codec, version);
     SCOPED_TRACE(path);
     GoldenTile tile;

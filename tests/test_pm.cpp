@@ -5,10 +5,12 @@
 // cleanly or decodes a level, and hostile counts are refused before allocation.
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <map>
 #include <random>
 #include <set>
 
+#include "engine/codecs/attributes.h"
 #include "engine/codecs/codec.h"
 #include "engine/quantize.h"
 #include "engine/shapes.h"
@@ -370,6 +372,153 @@ TEST(Pm, EveryLevelShowsTheTilesOwnAttributes) {
   }
 }
 
+// A layout with scalar channels of every kind beside normals and colors: integers of each width and sign, float32,
+// float64, and texture coordinates snapped to 2^-12 (`uv`: with them).
+AttributeLayout scalarLayout(bool uv) {
+  AttributeLayout layout{10, 3};
+  layout.scalars = {{"confidence", ScalarType::kUint8},
+                    {"flags", ScalarType::kInt16},
+                    {"count", ScalarType::kUint32},
+                    {"intensity", ScalarType::kFloat32},
+                    {"time", ScalarType::kFloat64}};
+  if (uv)
+    layout.scalars.insert(layout.scalars.end(), {{"u", ScalarType::kFloat32, 12}, {"v", ScalarType::kFloat32, 12}});
+  return layout;
+}
+
+// attributedPmSphere with the scalar channels of `layout`: a distinct row per input vertex (twins at a position
+// differ from the first vertex there), texture coordinates a smooth function of the position, the same for twins
+// unless `seams` (then every other twin gets other ones).
+QuantizedMesh scalarPmSphere(const AttributeLayout& layout, int subdivisions, bool seams) {
+  QuantizedMesh q = attributedPmSphere(AttributeLayout{layout.normal_bits, layout.color_channels}, subdivisions);
+  std::map<Vec3u, uint32_t> first;
+  uint32_t twins = 0;
+  const size_t stride = size_t(layout.scalarStride());
+  q.scalars.assign(q.positions.size() * stride, 0);
+  for (uint32_t v = 0; v < q.positions.size(); ++v) {
+    const auto [it, fresh] = first.emplace(q.positions[v], v);
+    const bool other_uv = !fresh && seams && twins++ % 2 == 0;
+    uint32_t* row = q.scalars.data() + size_t(v) * stride;
+    size_t w = 0;
+    for (const ScalarChannel& c : layout.scalars) {
+      const Vec3u& p = q.positions[it->second];
+      if (c.name == "u" || c.name == "v") {
+        double t = (c.name == "u" ? p[0] : p[1]) / 4096.0;
+        if (other_uv) t = 1 - t;
+        const float level = float(std::round(t * 4096) / 4096);
+        std::memcpy(&row[w], &level, 4);
+      } else if (c.type == ScalarType::kFloat32) {
+        const float f = float(v) * 0.37f - 100.f;
+        std::memcpy(&row[w], &f, 4);
+      } else if (c.type == ScalarType::kFloat64) {
+        const double d = double(v) * 1e-7 + 1.6e9;
+        std::memcpy(&row[w], &d, 8);
+      } else {
+        const int64_t x = c.type == ScalarType::kInt16 ? int64_t(v % 1000) - 500 : int64_t(v * 2654435761u % 200);
+        hierarchy::scalarFromOrdered(c.type, x, &row[w]);
+      }
+      w += size_t(scalarTypeWords(c.type));
+    }
+  }
+  return q;
+}
+
+std::span<const uint32_t> rowOf(const QuantizedMesh& m, size_t v, size_t stride) {
+  return std::span<const uint32_t>(m.scalars.data() + v * stride, stride);
+}
+
+// v4: scalar channels through every level as normals and colors go (bit for bit: lossless at their type, texture
+// coordinates at their levels). The last level shows, per position, the first input vertex's row (lossless) or a
+// kept input vertex's, each once (lossy); every level shows the base's own rows at base vertices and, elsewhere,
+// until the last level, a base vertex's row that does not change from level to level.
+TEST(Pm, ScalarChannelsThroughEveryLevel) {
+  for (const bool uv : {false, true}) {
+    SCOPED_TRACE(uv);
+    const AttributeLayout layout = scalarLayout(uv);
+    const size_t stride = size_t(layout.scalarStride());
+    const TileContext ctx{12, layout};
+    const QuantizedMesh tile = scalarPmSphere(layout, 4, false);
+    ASSERT_TRUE(validateTile(ctx, tile).isOk());
+    std::map<Vec3u, std::vector<uint32_t>> first;
+    std::set<std::vector<uint32_t>> rows;
+    for (size_t v = 0; v < tile.positions.size(); ++v) {
+      const auto r = rowOf(tile, v, stride);
+      first.emplace(tile.positions[v], std::vector<uint32_t>(r.begin(), r.end()));
+      rows.insert(std::vector<uint32_t>(r.begin(), r.end()));
+    }
+    for (const double ratio : {1.0, 0.2}) {
+      SCOPED_TRACE(ratio);
+      PmOptions opt;
+      opt.ratio = ratio;
+      const Encoded enc = encodeTile(ctx, tile, {}, opt);
+      ASSERT_GE(enc.levels.size(), 3u);
+      EXPECT_EQ(payloadVersion(pm(), enc.tile), 4);
+      auto full = pm().decode(ctx, 4, enc.tile.payload, limitsOf(enc.tile.decoded));
+      ASSERT_TRUE(full.isOk()) << full.status().toString();
+      ASSERT_TRUE(validateTile(ctx, *full).isOk());
+      ASSERT_EQ(full->scalars.size(), full->positions.size() * stride);
+      std::set<std::vector<uint32_t>> shown;
+      for (size_t v = 0; v < full->positions.size(); ++v) {
+        const auto r = rowOf(*full, v, stride);
+        const std::vector<uint32_t> row(r.begin(), r.end());
+        if (ratio == 1.0) {
+          EXPECT_EQ(row, first.at(full->positions[v])) << v;
+        } else {
+          EXPECT_TRUE(rows.count(row)) << "vertex " << v << " shows a row no input vertex has";
+          EXPECT_TRUE(shown.insert(row).second) << "two vertices show one input vertex's row";
+        }
+      }
+      const size_t base = enc.levels.front().vertices;
+      std::set<std::vector<uint32_t>> base_rows;
+      for (size_t v = 0; v < base; ++v) {
+        const auto r = rowOf(*full, v, stride);
+        base_rows.insert(std::vector<uint32_t>(r.begin(), r.end()));
+      }
+      std::map<size_t, std::vector<uint32_t>> deferred;
+      for (const CodecLevel& l : enc.levels) {
+        auto d = pm().decode_level(ctx, 4, std::span(enc.tile.payload).first(l.end_bytes), l.level,
+                                   limitsOf(enc.tile.decoded));
+        ASSERT_TRUE(d.isOk()) << d.status().toString();
+        ASSERT_TRUE(validateTile(ctx, *d).isOk());
+        ASSERT_EQ(d->scalars.size(), l.vertices * stride);
+        for (size_t v = 0; v < d->positions.size(); ++v) {
+          const auto r = rowOf(*d, v, stride);
+          const std::vector<uint32_t> row(r.begin(), r.end());
+          if (v < base || l.complete) {
+            const auto f = rowOf(*full, v, stride);
+            ASSERT_TRUE(std::ranges::equal(r, f)) << "level " << l.level << " vertex " << v;
+          } else {
+            ASSERT_TRUE(base_rows.count(row)) << "level " << l.level << " vertex " << v << " shows no base row";
+            const auto [it, fresh] = deferred.emplace(v, row);
+            ASSERT_TRUE(fresh || it->second == row) << "level " << l.level << " vertex " << v << " changed";
+          }
+        }
+      }
+      // A payload of version 3 (which codes no scalars) in this layout is refused.
+      auto v3 = pm().decode(ctx, 3, enc.tile.payload, limitsOf(enc.tile.decoded));
+      ASSERT_FALSE(v3.isOk());
+      EXPECT_EQ(v3.status().code(), ErrorCode::kMalformed);
+    }
+  }
+}
+
+// Texture coordinates that differ at one position (a seam carried as duplicated vertices) would be welded into one
+// value and map one side's texture across the seam: the tile is refused with the count, not coded wrongly.
+TEST(Pm, TextureSeamsAreRefusedNotWelded) {
+  const AttributeLayout layout = scalarLayout(true);
+  const TileContext ctx{12, layout};
+  const QuantizedMesh tile = scalarPmSphere(layout, 3, true);
+  ASSERT_TRUE(validateTile(ctx, tile).isOk());
+  auto e = pm().encode(ctx, TileView{tile, {}}, CodecOptions{});
+  ASSERT_FALSE(e.isOk());
+  EXPECT_EQ(e.status().code(), ErrorCode::kUnsupported);
+  EXPECT_NE(e.status().message().find("texture seams"), std::string::npos) << e.status().toString();
+  // Without texture coordinates the same twins' other channels differ too, and are welded (the first's kept).
+  AttributeLayout no_uv = scalarLayout(false);
+  const QuantizedMesh plain = scalarPmSphere(no_uv, 3, true);
+  EXPECT_TRUE(pm().encode(TileContext{12, no_uv}, TileView{plain, {}}, CodecOptions{}).isOk());
+}
+
 // Version 2 payloads (no attributes coded) still decode, with attributes derived from the triangles.
 TEST(Pm, Version2DerivesAttributes) {
   const AttributeLayout layout{10, 3};
@@ -385,9 +534,9 @@ TEST(Pm, Version2DerivesAttributes) {
 }
 
 TEST(Pm, EveryTruncationFailsCleanlyOrDecodesALevel) {
-  for (const AttributeLayout& layout : {AttributeLayout{}, AttributeLayout{10, 4}}) {
+  for (const AttributeLayout& layout : {AttributeLayout{}, AttributeLayout{10, 4}, scalarLayout(true)}) {
     const TileContext ctx{12, layout};
-    const QuantizedMesh sphere = attributedPmSphere(layout, 2);
+    const QuantizedMesh sphere = layout.hasScalars() ? scalarPmSphere(layout, 2, false) : attributedPmSphere(layout, 2);
     const Encoded enc = encodeTile(ctx, sphere, {});
     ASSERT_GE(enc.levels.size(), 3u);
     const auto& bytes = enc.tile.payload;
@@ -409,9 +558,9 @@ TEST(Pm, EveryTruncationFailsCleanlyOrDecodesALevel) {
 }
 
 TEST(Pm, CorruptPayloadsFailCleanlyOrStayWithinLimits) {
-  for (const AttributeLayout& layout : {AttributeLayout{}, AttributeLayout{10, 4}}) {
+  for (const AttributeLayout& layout : {AttributeLayout{}, AttributeLayout{10, 4}, scalarLayout(true)}) {
     const TileContext ctx{12, layout};
-    const QuantizedMesh sphere = attributedPmSphere(layout, 3);
+    const QuantizedMesh sphere = layout.hasScalars() ? scalarPmSphere(layout, 3, false) : attributedPmSphere(layout, 3);
     const Encoded enc = encodeTile(ctx, sphere, {});
     const DecodeLimits limits = limitsOf(enc.tile.decoded);
     std::mt19937 rng(7);

@@ -13,6 +13,7 @@
 #include <limits>
 #include <map>
 #include <random>
+#include <set>
 
 #include "engine/codecs/attributes.h"
 #include "engine/codecs/codec.h"
@@ -326,11 +327,12 @@ INSTANTIATE_TEST_SUITE_P(Codecs, ScalarRoundTrip, ::testing::ValuesIn(scalarCode
   return std::string(findCodec(info.param)->name);
 });
 
-TEST(ScalarChannels, LossyCodecsRefuseThemByName) {
+// prm does not carry them (its remeshing makes new vertices); pm does (Pm.ScalarChannelsThroughEveryLevel).
+TEST(ScalarChannels, PrmRefusesThemByName) {
   AttributeLayout layout;
   layout.scalars = {{"confidence", ScalarType::kFloat32}};
   const QuantizedMesh q = scalarSphere(layout, 1);
-  for (CodecId id : {CodecId::kPm, CodecId::kPrm}) {
+  for (CodecId id : {CodecId::kPrm}) {
     auto enc = encodeMesh(*findCodec(id), TileContext{12, layout}, q);
     ASSERT_FALSE(enc.isOk());
     EXPECT_EQ(enc.status().code(), ErrorCode::kInvalidArgument);
@@ -477,14 +479,31 @@ TEST(ScalarChannels, HostileChannelTablesFailCleanly) {
 
 // Golden containers of version 2 (tests/golden/scalars-<codec>.spz, kept forever): each build decodes them to the
 // sphere they were made from, and the writer must still produce them byte for byte (the scalar channels' coding
-// is part of the format). SCANPRESS_WRITE_GOLDEN=1 writes the missing ones.
+// is part of the format). SCANPRESS_WRITE_GOLDEN=1 writes the missing ones. pm (v4) welds the sphere's twins: it
+// decodes to the first vertex's row at each position.
 TEST(ScalarChannels, GoldenContainersDecodeAndAreReproduced) {
   AttributeLayout layout;
   layout.scalars = kEveryType;
   layout.normal_bits = 10, layout.color_channels = 4;
   const QuantizedMesh q = scalarSphere(layout, 11, 2);
   const Grid grid{{0, 0, 0}, 1.0, 12};
-  for (CodecId id : scalarCodecs()) {
+  std::vector<CodecId> codecs = scalarCodecs();
+  codecs.push_back(CodecId::kPm);
+  QuantizedMesh welded;  // the first vertex at each position, as pm keeps it
+  {
+    const size_t stride = size_t(layout.scalarStride());
+    std::set<Vec3u> seen;
+    for (size_t v = 0; v < q.positions.size(); ++v)
+      if (seen.insert(q.positions[v]).second) {
+        welded.positions.push_back(q.positions[v]);
+        welded.normals.push_back(q.normals[v]);
+        welded.colors.push_back(q.colors[v]);
+        welded.scalars.insert(welded.scalars.end(), q.scalars.begin() + ptrdiff_t(v * stride),
+                              q.scalars.begin() + ptrdiff_t((v + 1) * stride));
+      }
+    ASSERT_LT(welded.positions.size(), q.positions.size()) << "the sphere has twins";
+  }
+  for (CodecId id : codecs) {
     const CodecInfo& codec = *findCodec(id);
     SCOPED_TRACE(codec.name);
     const std::string path = std::string(SCANPRESS_GOLDEN) + "/scalars-" + std::string(codec.name) + ".spz";
@@ -504,7 +523,11 @@ TEST(ScalarChannels, GoldenContainersDecodeAndAreReproduced) {
     ASSERT_TRUE(payload.isOk());
     auto d = decodeTilePayload(pc->header, e, *payload, path);
     ASSERT_TRUE(d.isOk()) << d.status().toString();
-    EXPECT_TRUE(vertexRows(*d, size_t(layout.scalarStride())) == vertexRows(q, size_t(layout.scalarStride())));
+    EXPECT_TRUE(vertexRows(*d, size_t(layout.scalarStride())) ==
+                vertexRows(id == CodecId::kPm ? welded : q, size_t(layout.scalarStride())));
+    if (id == CodecId::kPm) {
+      EXPECT_EQ(e.codec_version, 4);
+    }
   }
 }
 

@@ -1,7 +1,7 @@
 // Scalar channels through files (issue 22 part 1): the bunny's confidence and intensity (float PLY properties)
 // through encode and decode with every codec that carries them, in one tile and in many (welded across borders),
-// in memory and out of core, compared with the input file's values vertex by vertex; the lossy codecs, --no-scalars
-// and /strict report or refuse what they drop; formats without scalars say so on decode.
+// in memory and out of core, compared with the input file's values vertex by vertex; prm, --no-scalars and /strict
+// report or refuse what they drop; formats without scalars say so on decode.
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -55,7 +55,7 @@ TEST(ScalarFiles, BunnyConfidenceAndIntensityComeBackBitForBit) {
     uint64_t memory_budget;  // 0: in memory
   };
   for (const Case& c : {Case{"edgebreaker", 131072, 0}, Case{"kdtree", 6000, 0}, Case{"octree", 6000, 0},
-                        Case{"store", 6000, 0}, Case{"edgebreaker", 6000, uint64_t(6) << 20}}) {
+                        Case{"store", 6000, 0}, Case{"pm", 6000, 0}, Case{"edgebreaker", 6000, uint64_t(6) << 20}}) {
     SCOPED_TRACE(std::string(c.codec) + ", " + std::to_string(c.tile_triangles) + " triangles per tile" +
                  (c.memory_budget ? ", out of core" : ""));
     EncodeSettings s = scalarSettingsFor(dir.file("b.spz"), c.codec);
@@ -87,19 +87,19 @@ TEST(ScalarFiles, BunnyConfidenceAndIntensityComeBackBitForBit) {
   }
 }
 
-// pm and prm drop scalars with the reason in the report (and fail under strict); --no-scalars drops them on
-// request and writes a version 1 container; decoding to a format without scalars lists them.
+// prm drops scalars with the reason in the report (and fails under strict); --no-scalars drops them on request and
+// writes a version 1 container; decoding to a format without scalars lists them.
 TEST(ScalarFiles, WhatIsDroppedIsSaid) {
   TempDir dir;
-  EncodeSettings pm = scalarSettingsFor(dir.file("pm.spz"), "pm");
-  auto r = encodeFile(pm);
+  EncodeSettings prm = scalarSettingsFor(dir.file("prm.spz"), "prm");
+  auto r = encodeFile(prm);
   ASSERT_TRUE(r.isOk()) << r.status().toString();
   EXPECT_TRUE(r->layout.scalars.empty());
   const std::string dropped = describeDropped(r->read.dropped);
-  EXPECT_NE(dropped.find("vertex.confidence (codec pm carries no scalar channels)"), std::string::npos) << dropped;
+  EXPECT_NE(dropped.find("vertex.confidence (codec prm carries no scalar channels)"), std::string::npos) << dropped;
   EXPECT_NE(dropped.find("vertex.intensity"), std::string::npos) << dropped;
-  pm.strict = true;
-  auto strict = encodeFile(pm);
+  prm.strict = true;
+  auto strict = encodeFile(prm);
   ASSERT_FALSE(strict.isOk());
   EXPECT_NE(strict.status().message().find("vertex.confidence"), std::string::npos) << strict.status().toString();
 
@@ -171,7 +171,8 @@ TEST(ScalarFiles, StreamedDecodeOfManyTilesWithScalars) {
   EXPECT_EQ(back->scalar_channels.size(), 2u);
 }
 
-// --codec auto under a target with --strict: pm would drop the scalars, so edgebreaker alone competes.
+// --codec auto under a target with --strict: pm keeps the scalars too, so both compete, and at this loose target
+// the simplified result wins with its scalars (before pm carried them, edgebreaker won here by default).
 TEST(ScalarFiles, AutoUnderStrictKeepsTheScalars) {
   TempDir dir;
   EncodeSettings s = scalarSettingsFor(dir.file("auto.spz"), "auto");
@@ -181,8 +182,9 @@ TEST(ScalarFiles, AutoUnderStrictKeepsTheScalars) {
   s.target.max_error = 1e-3;
   auto r = encodeFile(s);
   ASSERT_TRUE(r.isOk()) << r.status().toString();
-  EXPECT_EQ(r->codec, "edgebreaker");
+  EXPECT_EQ(r->codec, "pm");
   EXPECT_EQ(r->layout.scalars.size(), 2u);
+  EXPECT_TRUE(r->read.dropped.empty()) << describeDropped(r->read.dropped);
 }
 
 // Through the command line: the warning on decode to OBJ, and --no-scalars.

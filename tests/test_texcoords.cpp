@@ -570,7 +570,8 @@ TEST(Materials, MtllibAndOneUsemtlAreKept) {
 }
 
 // pm simplifies (it would open the seams): the vertices are read as they are and `vt` is listed dropped; --no-scalars
-// likewise. PLY's u and v are the same channels: an OBJ output writes them as `vt`, and lists only the others.
+// likewise. A PLY's u and v are dropped by pm too (listed), its other channels kept; --codec auto keeps edgebreaker.
+// PLY's u and v are the same channels: an OBJ output writes them as `vt`, and lists only the others.
 TEST(Texcoords, DroppedBySimplifyingCodecsAndWrittenFromPly) {
   TempDir dir;
   const std::string in = dir.file("sphere.obj");
@@ -584,8 +585,7 @@ TEST(Texcoords, DroppedBySimplifyingCodecsAndWrittenFromPly) {
     EXPECT_EQ(enc->read.source_vertices, enc->read.vertices);
     // pm: dropped with the reason; --no-scalars: on request.
     const std::string dropped = describeDropped(pm ? enc->read.dropped : enc->dropped_on_request);
-    EXPECT_NE(dropped.find(pm ? "obj vt (codec pm carries no texture coordinates) x 325" : "obj vt x 325"),
-              std::string::npos)
+    EXPECT_NE(dropped.find(pm ? "obj vt (codec pm keeps no texture seams) x 325" : "obj vt x 325"), std::string::npos)
         << dropped;
   }
 
@@ -600,6 +600,25 @@ TEST(Texcoords, DroppedBySimplifyingCodecsAndWrittenFromPly) {
   m.scalars = words;
   const std::string ply = dir.file("s.ply");
   ASSERT_TRUE(writePly(ply, m).isOk());
+  // Its seam is vertices at one position with other u, v: pm, which welds by position, drops u and v (listed, with
+  // the reason) and keeps the confidence; --codec auto then keeps edgebreaker's result, which drops nothing.
+  EncodeSettings p = uvSettingsFor(ply, dir.file("seam.spz"), "pm");
+  auto welded = encodeFile(p);
+  ASSERT_TRUE(welded.isOk()) << welded.status().toString();
+  EXPECT_EQ(welded->failed_tiles, 0u);
+  EXPECT_EQ(welded->layout.scalars, (std::vector<ScalarChannel>{{"confidence", ScalarType::kUint8}}));
+  const std::string n_in = std::to_string(m.positions.size());
+  EXPECT_EQ(describeDropped(welded->read.dropped), "vertex.u (codec pm keeps no texture seams) x " + n_in +
+                                                       ", vertex.v (codec pm keeps no texture seams) x " + n_in);
+  p.codec = "auto";
+  p.output = dir.file("auto.spz");
+  p.target.kind = TargetKind::kMaxError;
+  p.target.metric = ErrorMetric::kRms;
+  p.target.max_error = 1e-3;
+  auto fallback = encodeFile(p);
+  ASSERT_TRUE(fallback.isOk()) << fallback.status().toString();
+  EXPECT_EQ(fallback->codec, "edgebreaker");
+  EXPECT_EQ(fallback->layout.scalars.size(), 3u);
   EncodeSettings s = uvSettingsFor(ply, dir.file("q.spz"), "edgebreaker");
   ASSERT_TRUE(encodeFile(s).isOk());
   DecodeSettings d;
@@ -775,9 +794,15 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
   EXPECT_NE(describeDropped(enc->read.dropped).find("obj vn per corner (codec pm keeps a normal per vertex)"),
             std::string::npos)
       << describeDropped(enc->read.dropped);
-  // pm carries no scalar channels, so no lossless normals: refused, nothing written.
+  // pm carries scalar channels, so lossless normals too (its first corner's, bit for bit).
   s.lossless_normals = true;
   s.output = dir.file("q.spz");
+  enc = encodeFile(s);
+  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
+  ASSERT_TRUE(losslessNormalsWord(enc->layout.scalars).has_value());
+  // prm carries none: refused, nothing written.
+  s.codec = "prm";
+  s.output = dir.file("r.spz");
   enc = encodeFile(s);
   ASSERT_FALSE(enc.isOk());
   EXPECT_NE(enc.status().message().find("--lossless-normals needs a codec that carries scalar channels"),
@@ -856,16 +881,50 @@ TEST(LosslessNormals, EveryBitPatternComesBack) {
   ASSERT_TRUE(file.isOk());
   EXPECT_EQ(nlohmann::json::parse(containerInfoJson(*file))["attributes"]["lossless_normals"], true);
 
-  // --codec auto under a target: pm cannot keep them, so edgebreaker alone competes.
-  EncodeSettings a = kRunCases[0].settings(in, dir.file("auto.spz"));
-  a.codec = "auto";
-  a.lossless_normals = true;
-  a.target.kind = TargetKind::kMaxError;
-  a.target.metric = ErrorMetric::kRms;
-  a.target.max_error = 1e-3;
-  auto chosen = encodeFile(a);
-  ASSERT_TRUE(chosen.isOk()) << chosen.status().toString();
-  EXPECT_EQ(chosen->codec, "edgebreaker");
+  // pm keeps them too: per grid cell, the first input vertex's normal and confidence (pm welds by position; the
+  // sphere's seam has twins), bit for bit. Under --codec auto with a target, pm and edgebreaker both compete and
+  // either keeps them: every decoded vertex's row (confidence, normal bits) is an input vertex's.
+  const auto rowOf = [](const Mesh& mesh, size_t v) {
+    return std::array{mesh.scalars[v], std::bit_cast<uint32_t>(mesh.normals[v][0]),
+                      std::bit_cast<uint32_t>(mesh.normals[v][1]), std::bit_cast<uint32_t>(mesh.normals[v][2])};
+  };
+  std::set<std::array<uint32_t, 4>> input_rows;
+  for (size_t v = 0; v < m.positions.size(); ++v) input_rows.insert(rowOf(m, v));
+  for (const bool target : {false, true}) {
+    SCOPED_TRACE(target);
+    EncodeSettings a = kRunCases[0].settings(in, dir.file("pm.spz"));
+    a.codec = target ? "auto" : "pm";
+    a.lossless_normals = true;
+    if (target) {
+      a.target.kind = TargetKind::kMaxError;
+      a.target.metric = ErrorMetric::kRms;
+      a.target.max_error = 1e-3;
+    }
+    auto chosen = encodeFile(a);
+    ASSERT_TRUE(chosen.isOk()) << chosen.status().toString();
+    ASSERT_TRUE(losslessNormalsWord(chosen->layout.scalars).has_value());
+    d.input = a.output;
+    d.output = dir.file("pm.ply");
+    ASSERT_TRUE(decodeFile(d).isOk());
+    auto back = readMeshFile(d.output);
+    ASSERT_TRUE(back.isOk());
+    ASSERT_EQ(back->normals.size(), back->positions.size());
+    ASSERT_EQ(back->scalars.size(), back->positions.size());
+    std::map<Vec3u, std::array<uint32_t, 4>> first;
+    for (size_t v = 0; v < m.positions.size(); ++v) first.emplace(chosen->grid.quantize(m.positions[v]), rowOf(m, v));
+    if (!target) {
+      EXPECT_EQ(back->positions.size(), first.size());
+    }
+    for (size_t v = 0; v < back->positions.size(); ++v) {
+      if (target) {
+        EXPECT_TRUE(input_rows.count(rowOf(*back, v))) << chosen->codec << " vertex " << v;
+      } else {
+        const auto it = first.find(chosen->grid.quantize(back->positions[v]));
+        ASSERT_NE(it, first.end()) << v;
+        EXPECT_EQ(it->second, rowOf(*back, v)) << v;
+      }
+    }
+  }
 
   // A PLY whose normals are double: refused (they would be rounded to float).
   testing::writeBytes(dir.file("double.ply"),

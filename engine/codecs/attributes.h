@@ -473,7 +473,7 @@ void codePredictedRange(Io& io, const AttributeLayout& layout, u32 first, u32 n,
                         const std::vector<Vec3u>* pos = nullptr) {
   const auto decoded = [&](u32 w, u32 v) { return w < v || known(w); };
   AttributeModels models(layout);
-  if (layout.hasScalars() && scalars)  // (pm passes none: it refuses layouts with scalars)
+  if (layout.hasScalars() && scalars)
     codeScalarRange(io, layout, models, first, n, tris, faces_of, known, truth ? &truth->scalars : nullptr, *scalars,
                     pos);
   std::vector<u8> activity(n, 0);  // per vertex: its residuals' classes (the context of its later neighbours)

@@ -42,7 +42,7 @@ constexpr std::array<CodecInfo, 6> kCodecs = {{
      true, 3},
     {CodecId::kOctree, "octree", 3, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel,
      true, 3},
-    {CodecId::kPm, "pm", 3, kPmFloor, &pmEncode, &pmDecode, &pmLevels, &pmDecodeLevel, false, 3, true},
+    {CodecId::kPm, "pm", 4, kPmFloor, &pmEncode, &pmDecode, &pmLevels, &pmDecodeLevel, false, 3, true},
     {CodecId::kEdgebreaker, "edgebreaker", 2, kEdgebreakerFloor, &edgebreakerEncode, &edgebreakerDecode},
     {CodecId::kPrm, "prm", 1, kEdgebreakerFloor, &prmEncode, &prmDecode},
 }};

@@ -41,13 +41,17 @@
 //    predicts its (LevelAttributes). Every level thus shows the scan's own values. Where the paper merges the
 //    attributes of a collapse into new values, we keep one of them (the kept vertex's): no value is coded twice,
 //    and no level shows a value the scan does not have.
+//  - Scalar channels (v4: confidence, intensity, lossless normals, texture coordinates) go the same way, coded
+//    before the normals at the last level as kdtree's are. The weld keeps one texture coordinate per position, so a
+//    tile whose vertices at one position have different ones (a seam as duplicated vertices) is refused, not
+//    coded with one side's across the seam; a seam-keeping pm needs wedges through the simplifier and the splits.
 //
-// Payload v1, v2 and v3 (FORMAT.md, "Codec pm"):
+// Payload v1 to v4 (FORMAT.md, "Codec pm"):
 //   u8 base codec id (1 store, 2 kdtree, 3 octree), varint base codec version, varint base payload bytes B,
 //   varint base vertices V0, varint base faces F0, f32 base error (grid cells, little-endian bits),
 //   varint L (levels after the base), L x { varint batches, varint vertices, varint faces, f32 error,
-//   varint stream bytes }, then the base payload (B bytes), then the L level streams (v3 with normals or colors: the
-//   last one ends with the attributes of the vertices the splits added).
+//   varint stream bytes }, then the base payload (B bytes), then the L level streams (v3 with normals or colors, v4
+//   with scalar channels: the last one ends with the attributes of the vertices the splits added).
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -67,8 +71,11 @@ namespace {
 // 2: the same layout as 1; its base payloads are kdtree's and octree's version 2 (so are its golden bytes).
 // 3: normals and colors at every level (the base's in the base payload, the split vertices' at the end of the last
 // level's stream); without them the bytes of v2.
-constexpr uint16_t kVersion = 3;
+// 4: scalar channels too, coded as normals and colors are; a tile without them is written as version 3 (the same
+// bytes), which older builds read.
+constexpr uint16_t kVersion = 4;
 constexpr uint16_t kAttributesFrom = 3;
+constexpr uint16_t kScalarsFrom = 4;
 // A level closes once it has at least this many splits and grew the vertex count by this factor (or at the last
 // batch): fewer, larger levels pay less per-level overhead (a 4-byte flush and the table entry).
 constexpr uint64_t kMinLevelSplits = 64;
@@ -163,6 +170,7 @@ struct PmState {
   std::vector<std::vector<uint32_t>> vf;
   std::vector<OctNormal> normals;  // v3, with normals: per coded vertex
   std::vector<Rgba8> colors;       // v3, with colors: per coded vertex
+  ScalarValues scalars;            // v4, with scalar channels: the layout's stride per coded vertex
   std::vector<uint32_t> parent;    // per vertex: the vertex it split from (a base vertex: itself)
 
   void addFace(const Triangle& t) {
@@ -268,7 +276,7 @@ class LevelAttributes {
     hierarchy::codePredictedRange(
         io, layout_, base_, n, st.faces, [&](uint32_t v) { return std::span<const uint32_t>(st.vf[v]); },
         [&](uint32_t v) { return hierarchy::angleWeightedNormalAt(st.pos, st.faces, st.vf[v], v); },
-        [](uint32_t) { return false; }, truth, st.normals, st.colors);
+        [](uint32_t) { return false; }, truth, st.normals, st.colors, &st.scalars, &st.pos);
     shows_.resize(n);
     std::iota(shows_.begin(), shows_.end(), 0u);
   }
@@ -279,6 +287,14 @@ class LevelAttributes {
       for (uint32_t v = 0; v < n; ++v) out.normals.push_back(st.normals[shows_[v]]);
     if (layout_.hasColors())
       for (uint32_t v = 0; v < n; ++v) out.colors.push_back(st.colors[shows_[v]]);
+    const size_t stride = size_t(layout_.scalarStride());
+    if (stride) {
+      out.scalars.reserve(size_t(n) * stride);
+      for (uint32_t v = 0; v < n; ++v) {
+        const auto row = st.scalars.begin() + ptrdiff_t(size_t(shows_[v]) * stride);
+        out.scalars.insert(out.scalars.end(), row, row + ptrdiff_t(stride));
+      }
+    }
   }
 
  private:
@@ -551,7 +567,7 @@ void putF32(ByteWriter& w, float f) {
 Status checkVersion(uint16_t version) {
   if (version < 1 || version > kVersion)
     return makeError(ErrorCode::kUnknownVersion,
-                     "pm codec version " + std::to_string(version) + " is not known to this build (knows 1 to 3)");
+                     "pm codec version " + std::to_string(version) + " is not known to this build (knows 1 to 4)");
   return Status::ok();
 }
 
@@ -636,6 +652,13 @@ PmState initialState(const QuantizedMesh& base, std::vector<uint32_t>* order_out
     for (uint32_t v : order) st.normals.push_back(base.normals[v]);
   if (!base.colors.empty())
     for (uint32_t v : order) st.colors.push_back(base.colors[v]);
+  if (!base.scalars.empty() && !base.positions.empty()) {
+    const size_t stride = base.scalars.size() / base.positions.size();
+    st.scalars.reserve(base.scalars.size());
+    for (uint32_t v : order)
+      st.scalars.insert(st.scalars.end(), base.scalars.begin() + ptrdiff_t(v * stride),
+                        base.scalars.begin() + ptrdiff_t((v + 1) * stride));
+  }
   st.vf.resize(order.size());
   st.parent.resize(order.size());
   std::iota(st.parent.begin(), st.parent.end(), 0u);
@@ -647,15 +670,17 @@ PmState initialState(const QuantizedMesh& base, std::vector<uint32_t>* order_out
 Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                  uint32_t level, const DecodeLimits& limits) {
   SP_RETURN_IF_ERROR(checkVersion(version));
-  if (ctx.layout.hasScalars())
-    return makeError(ErrorCode::kMalformed, "pm payload in a container with scalar channels (pm carries none)");
+  if (ctx.layout.hasScalars() && version < kScalarsFrom)
+    return makeError(ErrorCode::kMalformed, "pm payload of version " + std::to_string(version) +
+                                                " in a container with scalar channels (those carry none)");
   SP_ASSIGN_OR_RETURN(Header h, parseHeader(payload, limits));
   const uint32_t target = std::min<uint32_t>(level, uint32_t(h.levels.size()));
   if (h.base_bytes > payload.size() - h.base_offset)
     return makeError(ErrorCode::kTruncated, "pm payload ends inside its base mesh");
   const CodecInfo* base_codec = findCodec(CodecId(h.base_codec));
   if (!base_codec) return makeError(ErrorCode::kMalformed, "pm: unknown base codec");
-  const bool attributes = version >= kAttributesFrom && (ctx.layout.hasNormals() || ctx.layout.hasColors());
+  const bool attributes = version >= kAttributesFrom &&
+                          (ctx.layout.hasNormals() || ctx.layout.hasColors() || ctx.layout.hasScalars());
   const TileContext base_ctx{ctx.bits, attributes ? ctx.layout : AttributeLayout{}};
   SP_ASSIGN_OR_RETURN(QuantizedMesh base,
                       base_codec->decode(base_ctx, uint16_t(h.base_version),
@@ -667,7 +692,8 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
     if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2])
       return makeError(ErrorCode::kMalformed, "pm: a base triangle repeats a vertex");
   if (attributes && ((ctx.layout.hasNormals() && base.normals.size() != base.positions.size()) ||
-                     (ctx.layout.hasColors() && base.colors.size() != base.positions.size())))
+                     (ctx.layout.hasColors() && base.colors.size() != base.positions.size()) ||
+                     base.scalars.size() != base.positions.size() * size_t(ctx.layout.scalarStride())))
     return makeError(ErrorCode::kMalformed, "pm: the base mesh lacks the layout's attributes");
   const uint64_t final_v = target == 0 ? h.base_vertices : h.levels[target - 1].vertices;
   const uint64_t final_f = target == 0 ? h.base_faces : h.levels[target - 1].faces;
@@ -755,25 +781,45 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   const QuantizedMesh& in = tile.mesh;
   if (in.positions.size() >= UINT32_MAX || in.triangles.size() >= UINT32_MAX)
     return makeError(ErrorCode::kLimitExceeded, "tile has more than 2^32-2 vertices or triangles");
-  // Weld by position; lock flags are OR-ed; attributes (v3) are the first input vertex's at the position.
+  // Weld by position; lock flags are OR-ed; attributes (v3, scalars v4) are the first input vertex's at the
+  // position.
   const AttributeLayout& layout = ctx.layout;
   const bool with_normals = layout.hasNormals(), with_colors = layout.hasColors();
-  const bool attributes = with_normals || with_colors;
+  const size_t stride = size_t(layout.scalarStride());
+  const bool attributes = with_normals || with_colors || stride > 0;
   if ((with_normals && in.normals.size() != in.positions.size()) ||
-      (with_colors && in.colors.size() != in.positions.size()))
+      (with_colors && in.colors.size() != in.positions.size()) || in.scalars.size() != in.positions.size() * stride)
     return makeError(ErrorCode::kInvalidArgument, "pm: the tile lacks the layout's attributes");
+  const auto scalarRow = [stride](const ScalarValues& values, uint32_t v) {
+    return std::span<const uint32_t>(values.data() + size_t(v) * stride, stride);
+  };
+  const auto appendRow = [](ScalarValues& to, std::span<const uint32_t> row) {
+    to.insert(to.end(), row.begin(), row.end());
+  };
+  // Texture coordinates are one value per position after the weld: a seam (points at one position with different
+  // ones) would take one side's across it, so such a tile is refused rather than mapped wrongly.
+  const std::optional<TexcoordChannels> texcoords = findTexcoords(layout.scalars);
+  uint64_t seam_positions = 0;
   QuantizedMesh welded;
   std::vector<uint8_t> locked;
   {
     const std::vector<uint32_t> order = canonicalOrder(in.positions);
     std::vector<uint32_t> map(in.positions.size());
+    uint32_t first = 0;  // the first input vertex at the current position
+    bool seam = false;
     for (uint32_t i = 0; i < order.size(); ++i) {
       const uint32_t v = order[i];
       if (i == 0 || in.positions[v] != welded.positions.back()) {
         welded.positions.push_back(in.positions[v]);
         if (with_normals) welded.normals.push_back(in.normals[v]);
         if (with_colors) welded.colors.push_back(in.colors[v]);
+        if (stride) appendRow(welded.scalars, scalarRow(in.scalars, v));
         locked.push_back(0);
+        first = v, seam = false;
+      } else if (texcoords && !seam) {
+        const uint32_t *a = in.scalars.data() + size_t(first) * stride, *b = in.scalars.data() + size_t(v) * stride;
+        if (a[texcoords->u_word] != b[texcoords->u_word] || a[texcoords->v_word] != b[texcoords->v_word])
+          seam = true, ++seam_positions;
       }
       map[v] = uint32_t(welded.positions.size() - 1);
       if (!tile.locked.empty() && tile.locked[v]) locked.back() = 1;
@@ -785,6 +831,11 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
       if (w[0] != w[1] && w[1] != w[2] && w[0] != w[2]) welded.triangles.push_back(w);
     }
   }
+  if (seam_positions)
+    return makeError(ErrorCode::kUnsupported,
+                     "pm keeps one texture coordinate per position, and " + std::to_string(seam_positions) +
+                         " positions of this tile have several (texture seams): code it with kdtree, octree or "
+                         "edgebreaker, or drop the texture coordinates (--no-scalars)");
   const PmOptions& opt = options.pm;
   // The last level.
   QuantizedMesh last;
@@ -813,6 +864,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
         last.positions.push_back(s1.mesh.positions[v]);
         if (with_normals) last.normals.push_back(welded.normals[v]);
         if (with_colors) last.colors.push_back(welded.colors[v]);
+        if (stride) appendRow(last.scalars, scalarRow(welded.scalars, v));
         last_locked.push_back(locked[v]);
       }
     for (const auto& t : s1.mesh.triangles) {
@@ -879,6 +931,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
       last_to_base[v] = uint32_t(base.positions.size()), base_to_last.push_back(v), base.positions.push_back(fw.pos[v]);
       if (with_normals) base.normals.push_back(last.normals[v]);
       if (with_colors) base.colors.push_back(last.colors[v]);
+      if (stride) appendRow(base.scalars, scalarRow(last.scalars, v));
     }
   for (uint32_t f = 0; f < fw.faces.size(); ++f)
     if (alive_face[f]) {
@@ -904,7 +957,8 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
     auto dec = codec.decode(base_ctx, payloadVersion(codec, *enc), enc->payload, limitsOf(enc->decoded));
     if (!dec.isOk() || dec->positions.size() != base.positions.size()) continue;
     if ((with_normals && dec->normals.size() != dec->positions.size()) ||
-        (with_colors && dec->colors.size() != dec->positions.size()))
+        (with_colors && dec->colors.size() != dec->positions.size()) ||
+        dec->scalars.size() != dec->positions.size() * stride)
       continue;
     // Decoded vertex -> base vertex: by position when positions are unique, else only an order-keeping decode.
     std::vector<uint32_t> map(dec->positions.size());
@@ -923,6 +977,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
       if (ok && with_normals) ok = dec->normals[i] == base.normals[map[i]];
       if (ok && with_colors)
         for (int c = 0; c < layout.color_channels; ++c) ok &= dec->colors[i][c] == base.colors[map[i]][c];
+      if (ok && stride) ok = std::ranges::equal(scalarRow(dec->scalars, i), scalarRow(base.scalars, map[i]));
     }
     if (!ok) continue;
     std::vector<Triangle> mapped;
@@ -1030,6 +1085,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
         for (uint32_t i = 0; i < nl; ++i) {
           if (with_normals) truth.normals.push_back(last.normals[last_of[i]]);
           if (with_colors) truth.colors.push_back(last.colors[last_of[i]]);
+          if (stride) appendRow(truth.scalars, scalarRow(last.scalars, last_of[i]));
         }
         AttributeEncodeIo io{*re};
         level_attributes.endLevel(io, st, true, &truth);
@@ -1083,13 +1139,13 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   final_mesh.triangles = std::move(st.faces);
   result.decoded = summarize(final_mesh);
   result.levels = levelsOf(h);
+  result.version = stride ? kScalarsFrom : kAttributesFrom;
   return result;
 }
 
 }  // namespace
 
 Result<EncodedTile> pmEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options) {
-  if (ctx.layout.hasScalars()) return scalarsNotCarried("pm");
   return pmEncodeImpl(ctx, tile, options);
 }
 
