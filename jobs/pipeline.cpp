@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <exception>
 #include <new>
+#include <numeric>
 #include <optional>
 
 #include "engine/container/container.h"
@@ -36,6 +37,22 @@ namespace scanpress {
 
 // Memory plan constants (measured; bench/RESULTS.md has the figures).
 namespace {
+
+// Per channel: whether it is one of a pair of texture coordinates (findTexcoords; every pair, not only the first).
+std::vector<bool> texcoordChannels(std::span<const ScalarChannel> channels) {
+  std::vector<bool> out(channels.size(), false);
+  std::vector<ScalarChannel> rest(channels.begin(), channels.end());
+  std::vector<size_t> index(channels.size());
+  std::iota(index.begin(), index.end(), size_t{0});
+  while (const auto tc = findTexcoords(rest)) {
+    out[index[tc->u]] = out[index[tc->v]] = true;
+    for (const size_t i : {std::max(tc->u, tc->v), std::min(tc->u, tc->v)}) {
+      rest.erase(rest.begin() + ptrdiff_t(i));
+      index.erase(index.begin() + ptrdiff_t(i));
+    }
+  }
+  return out;
+}
 
 // The survey keeps the mesh for the ingest pass only while it is this small: a large mesh held in doubles costs
 // more in memory traffic and page faults than parsing the file again. A binary PLY is never kept: reading it again
@@ -383,12 +400,12 @@ class ScanEncoder {
     stage("reading");
     SP_ASSIGN_OR_RETURN(result_.read, readInput(survey_));
     const bool lossless_normals = s_.keep_normals && survey_.has_normals && s_.lossless_normals;
-    if (lossless_normals && !codecCarriesScalars())
+    if (lossless_normals && !keepsScanVertices())
       return makeError(ErrorCode::kInvalidArgument,
                        s_.input +
-                           ": --lossless-normals needs a codec that carries scalar channels (store, kdtree, "
+                           ": --lossless-normals needs a codec that keeps the scan's vertices (store, kdtree, "
                            "octree, edgebreaker, pm) and no remesh stage: " +
-                           scalarsDroppedBy() + " carries none");
+                           droppedBy() + " makes new ones, whose normals would be resampled");
     if (lossless_normals && result_.read.double_normals)
       return makeError(ErrorCode::kInvalidArgument,
                        s_.input + ": --lossless-normals keeps float normals bit for bit; this PLY's are double");
@@ -398,13 +415,14 @@ class ScanEncoder {
       result_.layout.color_channels = survey_.colorChannels();
       result_.layout.color_bits = static_cast<uint8_t>(s_.color_bits);
     }
-    if (s_.keep_scalars && codecCarriesScalars()) {
+    if (s_.keep_scalars) {
       result_.layout.scalars = survey_.scalar_channels;
-      // pm welds by position, so it keeps no texture seam: its texture coordinates are dropped (checkDrops lists
-      // them), its other channels kept.
-      if (const auto tc = findTexcoords(result_.layout.scalars); tc && !codecKeepsWedges()) {
-        result_.layout.scalars.erase(result_.layout.scalars.begin() + ptrdiff_t(std::max(tc->u, tc->v)));
-        result_.layout.scalars.erase(result_.layout.scalars.begin() + ptrdiff_t(std::min(tc->u, tc->v)));
+      // pm welds by position, and prm and the remesh stage resample: they keep no texture seam, so texture
+      // coordinates are dropped (checkDrops lists them), the other channels kept.
+      if (!codecKeepsWedges()) {
+        const std::vector<bool> texcoords = texcoordChannels(result_.layout.scalars);
+        for (size_t i = texcoords.size(); i-- > 0;)
+          if (texcoords[i]) result_.layout.scalars.erase(result_.layout.scalars.begin() + ptrdiff_t(i));
       }
       if (const auto tc = findTexcoords(result_.layout.scalars); tc && s_.uv_bits > 0)
         for (size_t ch : {tc->u, tc->v}) result_.layout.scalars[ch].bits = static_cast<uint8_t>(s_.uv_bits);
@@ -665,44 +683,43 @@ class ScanEncoder {
     // What a codec that does not keep every vertex made the reader drop, with the reason.
     if (!codecKeepsWedges()) {
       for (DroppedProperty& d : result_.read.dropped) {
-        if (d.name == "obj vt" || d.name == "face.texcoord")
-          d.name += " (" + scalarsDroppedBy() + " keeps no texture seams)";
-        else if (d.name == "obj vn per corner") d.name += " (" + scalarsDroppedBy() + " keeps a normal per vertex)";
+        if (d.name == "obj vt" || d.name == "face.texcoord") d.name += " (" + droppedBy() + " keeps no texture seams)";
+        else if (d.name == "obj vn per corner") d.name += " (" + droppedBy() + " keeps a normal per vertex)";
       }
     }
-    const auto texcoords = findTexcoords(survey_.scalar_channels);
+    const std::vector<bool> texcoords = texcoordChannels(survey_.scalar_channels);
     for (size_t i = 0; i < survey_.scalar_channels.size(); ++i) {
       const ScalarChannel& c = survey_.scalar_channels[i];
       if (!s_.keep_scalars) result_.dropped_on_request.push_back({"vertex." + c.name, survey_.vertex_count});
-      else if (!codecCarriesScalars())
-        result_.read.dropped.push_back({"vertex." + c.name + " (" + scalarsDroppedBy() + " carries no scalar channels)",
-                                        survey_.vertex_count});
-      else if (!codecKeepsWedges() && texcoords && (i == texcoords->u || i == texcoords->v))
-        result_.read.dropped.push_back({"vertex." + c.name + " (" + scalarsDroppedBy() + " keeps no texture seams)",
+      else if (!codecKeepsWedges() && texcoords[i])
+        result_.read.dropped.push_back({"vertex." + c.name + " (" + droppedBy() + " keeps no texture seams)",
                                         survey_.vertex_count});
     }
     if (s_.strict && !result_.read.dropped.empty())
       return makeError(ErrorCode::kUnsupported,
                        s_.input + ": strict: the container would not keep " + describeDropped(result_.read.dropped) +
-                           " (scanpress keeps positions, triangles, normals, colors and, with store, kdtree, octree "
-                           "and edgebreaker, per-vertex scalars; encode without --strict or /strict to drop them)");
+                           " (scanpress keeps positions, triangles, normals, colors and per-vertex scalars; texture "
+                           "coordinates and normals per corner with store, kdtree, octree and edgebreaker; encode "
+                           "without --strict or /strict to drop them)");
     return Status::ok();
   }
 
   EncodeResult& result() { return result_; }
 
  private:
-  // The codecs that code scalar channels (`auto` is one of pm and edgebreaker here), and no remesh stage (which
-  // makes new vertices).
-  bool codecCarriesScalars() const {
+  // Whether the codec keeps the scan's own vertices: not prm, nor any codec after a remesh stage (they make new
+  // vertices and resample their attributes).
+  bool keepsScanVertices() const {
     for (const StageSpec& st : s_.stages)
       if (st.kind == StageKind::kRemesh) return false;
     return codec_.id != CodecId::kPrm;
   }
-  // ... and keep the wedges of texture seams and creases: not pm, which welds by position before it simplifies (one
-  // value per position; its search keeps edgebreaker's result when pm dropped texture coordinates, jobs/targets.cpp).
-  bool codecKeepsWedges() const { return codecCarriesScalars() && codec_.id != CodecId::kPm; }
-  std::string scalarsDroppedBy() const {
+  // ... and the wedges of texture seams and creases: not pm either, which welds by position before it simplifies
+  // (one value per position; `auto` is one of pm and edgebreaker, and its search keeps edgebreaker's result when pm
+  // dropped texture coordinates, jobs/targets.cpp).
+  bool codecKeepsWedges() const { return keepsScanVertices() && codec_.id != CodecId::kPm; }
+  // What drops wedges (or lossless normals), as the report names it.
+  std::string droppedBy() const {
     for (const StageSpec& st : s_.stages)
       if (st.kind == StageKind::kRemesh) return "the remesh stage";
     return "codec " + std::string(codec_.name);

@@ -407,8 +407,12 @@ Result<EncodeResult> encodeToTargetAuto(const EncodeSettings& settings, Progress
   auto metOf = [](const Candidate& c) { return c.result.target && c.result.target->met; };
   auto better = [&](const Candidate& a, const Candidate& b) {  // a is better than b
     if (metOf(a) != metOf(b)) return metOf(a);
-    // pm drops an OBJ's texture coordinates and keeps one normal per vertex where its corners name several (the
-    // report lists them): of two that meet the target, the one whose read dropped less wins whatever the sizes.
+    // pm drops texture coordinates and keeps one normal per vertex where an OBJ's corners name several (the report
+    // lists them): of two that meet the target, the one that keeps more scalar channels wins whatever the sizes,
+    // then the one whose read dropped less (a count of entries: an OBJ read with wedges may list other `vt` records
+    // than the one entry a read without them lists, so the channels come first).
+    if (a.result.layout.scalars.size() != b.result.layout.scalars.size())
+      return a.result.layout.scalars.size() > b.result.layout.scalars.size();
     if (a.result.read.dropped.size() != b.result.read.dropped.size())
       return a.result.read.dropped.size() < b.result.read.dropped.size();
     if (settings.target.kind == TargetKind::kMaxError) return a.result.bytes < b.result.bytes;

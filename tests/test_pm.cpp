@@ -540,14 +540,15 @@ TEST(Pm, EveryTruncationFailsCleanlyOrDecodesALevel) {
     const Encoded enc = encodeTile(ctx, sphere, {});
     ASSERT_GE(enc.levels.size(), 3u);
     const auto& bytes = enc.tile.payload;
+    const uint16_t version = payloadVersion(pm(), enc.tile);  // the version the container records
     const DecodeLimits limits = limitsOf(enc.tile.decoded);
     // Every cut (every fourth under the sanitizers).
     for (size_t cut = 0; cut < bytes.size(); cut += testing::sampleStride()) {
       const auto part = std::span(bytes).first(cut);
-      EXPECT_FALSE(pm().decode(ctx, pm().version, part, limits).isOk()) << cut;
-      EXPECT_FALSE(pm().levels(ctx, pm().version, part, limits).isOk()) << cut;
+      EXPECT_FALSE(pm().decode(ctx, version, part, limits).isOk()) << cut;
+      EXPECT_FALSE(pm().levels(ctx, version, part, limits).isOk()) << cut;
       for (const CodecLevel& l : enc.levels) {
-        auto d = pm().decode_level(ctx, pm().version, part, l.level, limits);
+        auto d = pm().decode_level(ctx, version, part, l.level, limits);
         EXPECT_EQ(d.isOk(), cut >= l.end_bytes) << "cut " << cut << " level " << l.level;
         if (d.isOk()) {
           EXPECT_EQ(d->positions.size(), l.vertices);
@@ -563,12 +564,13 @@ TEST(Pm, CorruptPayloadsFailCleanlyOrStayWithinLimits) {
     const QuantizedMesh sphere = layout.hasScalars() ? scalarPmSphere(layout, 3, false) : attributedPmSphere(layout, 3);
     const Encoded enc = encodeTile(ctx, sphere, {});
     const DecodeLimits limits = limitsOf(enc.tile.decoded);
+    const uint16_t version = payloadVersion(pm(), enc.tile);
     std::mt19937 rng(7);
     for (int trial = 0; trial < testing::sampled(1500); ++trial) {
       std::vector<uint8_t> bad = enc.tile.payload;
       const int flips = 1 + int(rng() % 3);
       for (int f = 0; f < flips; ++f) bad[rng() % bad.size()] ^= uint8_t(1u << (rng() % 8));
-      auto d = pm().decode(ctx, pm().version, bad, limits);
+      auto d = pm().decode(ctx, version, bad, limits);
       if (d.isOk()) {
         EXPECT_LE(d->positions.size(), limits.vertices);
         EXPECT_LE(d->triangles.size(), limits.faces);

@@ -5,7 +5,9 @@
 // the error knob's floor, and hostile payloads.
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cmath>
+#include <limits>
 #include <functional>
 #include <map>
 #include <random>
@@ -255,6 +257,104 @@ TEST(Prm, RemeshedAttributesDecodeExactly) {
   EXPECT_TRUE(testing::cornerMultiset(d, layout.normal_bits) == testing::cornerMultiset(staged, layout.normal_bits));
 }
 
+// Scalar channels (v2, issue 22 part 4): the remesh stage resamples them and prm's coder codes the result exactly.
+// A kept input vertex keeps its row; an added one, lying on an input triangle, takes float channels interpolated
+// from its corners (a linear field stays near its value at the vertex; the float64 channel shows values no input
+// vertex has) and integer and quantized channels (texture coordinates) from one corner (a value an input vertex
+// has). A non-finite corner value is never mixed (no NaN). A version 1 payload in this layout is refused.
+TEST(Prm, ScalarChannelsAreResampledAndDecodeExactly) {
+  AttributeLayout layout{10, 3};
+  layout.scalars = {{"field", ScalarType::kFloat32},
+                    {"time", ScalarType::kFloat64},
+                    {"label", ScalarType::kUint16},
+                    {"u", ScalarType::kFloat32, 12},
+                    {"v", ScalarType::kFloat32, 12}};
+  const size_t stride = size_t(layout.scalarStride());
+  QuantizedMesh q = testing::quantized(testing::coloredIcosphere(4), 14, AttributeLayout{10, 3});
+  const auto field = [](const Vec3u& p) { return 1e-3 * (double(p[0]) + 2.0 * p[1] - 0.5 * p[2]); };
+  std::map<uint32_t, std::set<std::vector<uint32_t>>> input_values;  // word -> the input's values there
+  q.scalars.clear();
+  for (size_t v = 0; v < q.positions.size(); ++v) {
+    const Vec3u& p = q.positions[v];
+    const float f = v == 7 ? std::numeric_limits<float>::infinity() : float(field(p));
+    const double t = 1e9 + double(p[2]) * 0.25;
+    const uint64_t tb = std::bit_cast<uint64_t>(t);
+    const float u = float(std::round(double(p[0]) / 16384 * 4096) / 4096),
+                w = float(std::round(double(p[1]) / 16384 * 4096) / 4096);
+    q.scalars.insert(q.scalars.end(), {std::bit_cast<uint32_t>(f), uint32_t(tb), uint32_t(tb >> 32),
+                                       uint32_t(v % 5000), std::bit_cast<uint32_t>(u), std::bit_cast<uint32_t>(w)});
+  }
+  const auto word = [&](const QuantizedMesh& m, size_t v, size_t w) { return m.scalars[v * stride + w]; };
+  for (size_t v = 0; v < q.positions.size(); ++v)
+    for (size_t w : {3, 4, 5}) input_values[uint32_t(w)].insert({word(q, v, w)});
+  std::set<std::vector<uint32_t>> input_times;
+  for (size_t v = 0; v < q.positions.size(); ++v) input_times.insert({word(q, v, 1), word(q, v, 2)});
+  std::map<Vec3u, std::vector<uint32_t>> input_rows;
+  for (size_t v = 0; v < q.positions.size(); ++v)
+    input_rows.emplace(q.positions[v], std::vector<uint32_t>(q.scalars.begin() + ptrdiff_t(v * stride),
+                                                             q.scalars.begin() + ptrdiff_t((v + 1) * stride)));
+  const TileContext ctx{14, layout};
+  CodecOptions options;
+  options.prm.grid = 0.03;
+  QuantizedMesh d, staged;
+  ASSERT_NO_FATAL_FAILURE(prmAndRemeshStage(ctx, q, options, d, staged));
+  ASSERT_FALSE(testing::triangleMultiset(staged) == testing::triangleMultiset(q)) << "not remeshed";
+  ASSERT_EQ(staged.scalars.size(), staged.positions.size() * stride);
+  // prm codes the stage's mesh exactly: the same (position, row) pairs.
+  ASSERT_EQ(d.scalars.size(), d.positions.size() * stride);
+  const auto pairs = [&](const QuantizedMesh& m) {
+    std::vector<std::pair<Vec3u, std::vector<uint32_t>>> out;
+    for (size_t v = 0; v < m.positions.size(); ++v)
+      out.push_back({m.positions[v], std::vector<uint32_t>(m.scalars.begin() + ptrdiff_t(v * stride),
+                                                           m.scalars.begin() + ptrdiff_t((v + 1) * stride))});
+    std::sort(out.begin(), out.end());
+    return out;
+  };
+  // prm keeps the smaller of the two codings (here the tile as it is: its 800 added vertices' interpolated values
+  // cost more than remeshing saves); the remeshed one, coded on the lattice, decodes exactly too.
+  EXPECT_TRUE(pairs(d) == pairs(staged) || pairs(d) == pairs(q));
+  {
+    const uint32_t spacing = prmSpacing(options.prm, 14);
+    std::vector<uint8_t> payload;
+    ByteWriter(payload).varint(spacing);
+    TileSummary summary;
+    ASSERT_TRUE(edgebreakerEncodeOnLattice(ctx, staged, spacing, payload, nullptr, &summary).isOk());
+    auto back = prm().decode(ctx, 2, payload, limitsOf(summary));
+    ASSERT_TRUE(back.isOk()) << back.status().toString();
+    EXPECT_TRUE(pairs(*back) == pairs(staged));
+  }
+  size_t added = 0, new_times = 0;
+  for (size_t v = 0; v < staged.positions.size(); ++v) {
+    const std::vector<uint32_t> row(staged.scalars.begin() + ptrdiff_t(v * stride),
+                                    staged.scalars.begin() + ptrdiff_t((v + 1) * stride));
+    const float f = std::bit_cast<float>(row[0]);
+    EXPECT_FALSE(std::isnan(f)) << v;
+    for (size_t w : {3, 4, 5})
+      EXPECT_TRUE(input_values[uint32_t(w)].count({row[w]})) << "vertex " << v << " word " << w;
+    const auto kept = input_rows.find(staged.positions[v]);
+    if (kept != input_rows.end() && kept->second == row) continue;  // a kept input vertex (or one at its point)
+    ++added;
+    new_times += !input_times.count({row[1], row[2]});
+    // Interpolated from the corners of the input triangle under it: within a few lattice steps' change of the field
+    // (the vertex moved by rounding, and lies on the relief, not on the triangle), unless a corner was infinite.
+    if (std::isfinite(f)) {
+      EXPECT_NEAR(f, field(staged.positions[v]), 1e-3 * 3.5 * 4 * double(prmSpacing(options.prm, 14))) << v;
+    }
+  }
+  EXPECT_GT(added, 100u);
+  EXPECT_GT(new_times, added / 2) << "float64 values are interpolated, not copied";
+  // Version 1 payloads carry no scalar channels: refused in this layout.
+  auto enc = prm().encode(ctx, TileView{q, {}}, options);
+  ASSERT_TRUE(enc.isOk());
+  EXPECT_EQ(payloadVersion(prm(), *enc), 2);
+  EXPECT_EQ(prm().decode(ctx, 1, enc->payload, limitsOf(enc->decoded)).status().code(), ErrorCode::kMalformed);
+  QuantizedMesh bare = q;
+  bare.scalars.clear();
+  auto without = prm().encode(TileContext{14, {10, 3}}, TileView{bare, {}}, options);
+  ASSERT_TRUE(without.isOk()) << without.status().toString();
+  EXPECT_EQ(payloadVersion(prm(), *without), 1);
+}
+
 TEST(Prm, LockedBorderIsKept) {
   const TileContext ctx{14, {}};
   const Mesh sphere = icosphere(4);
@@ -384,7 +484,7 @@ TEST(Prm, HostilePayloadsFailCleanly) {
     bytes.insert(bytes.end(), payload.begin() + 1, payload.end());
     EXPECT_EQ(prm().decode(ctx, 1, bytes, lim).status().code(), ErrorCode::kMalformed) << bad;
   }
-  EXPECT_EQ(prm().decode(ctx, 2, payload, lim).status().code(), ErrorCode::kUnknownVersion);
+  EXPECT_EQ(prm().decode(ctx, 3, payload, lim).status().code(), ErrorCode::kUnknownVersion);
   // Another valid spacing decodes the same stream differently or fails, never past the limits.
   std::vector<uint8_t> other = payload;
   other[0] = 14;

@@ -588,6 +588,18 @@ TEST(Texcoords, DroppedBySimplifyingCodecsAndWrittenFromPly) {
     EXPECT_NE(dropped.find(pm ? "obj vt (codec pm keeps no texture seams) x 325" : "obj vt x 325"), std::string::npos)
         << dropped;
   }
+  // --codec auto under a loose target: pm's simplified file would be smaller, but it drops the texture
+  // coordinates, so edgebreaker's result (which keeps them) is kept.
+  {
+    EncodeSettings a = uvSettingsFor(in, dir.file("auto.spz"), "auto");
+    a.target.kind = TargetKind::kMaxError;
+    a.target.metric = ErrorMetric::kRms;
+    a.target.max_error = 1e-3;
+    auto chosen = encodeFile(a);
+    ASSERT_TRUE(chosen.isOk()) << chosen.status().toString();
+    EXPECT_EQ(chosen->codec, "edgebreaker");
+    EXPECT_TRUE(findTexcoords(chosen->layout.scalars).has_value());
+  }
 
   // A PLY with u, v and a third channel, decoded to OBJ and to STL.
   auto sphere = readMeshFile(in);
@@ -800,12 +812,12 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
   enc = encodeFile(s);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
   ASSERT_TRUE(losslessNormalsWord(enc->layout.scalars).has_value());
-  // prm carries none: refused, nothing written.
+  // prm makes new vertices (their normals would be resampled): refused, nothing written.
   s.codec = "prm";
   s.output = dir.file("r.spz");
   enc = encodeFile(s);
   ASSERT_FALSE(enc.isOk());
-  EXPECT_NE(enc.status().message().find("--lossless-normals needs a codec that carries scalar channels"),
+  EXPECT_NE(enc.status().message().find("--lossless-normals needs a codec that keeps the scan's vertices"),
             std::string::npos)
       << enc.status().toString();
   EXPECT_FALSE(std::filesystem::exists(s.output));

@@ -44,7 +44,7 @@ constexpr std::array<CodecInfo, 6> kCodecs = {{
      true, 3},
     {CodecId::kPm, "pm", 4, kPmFloor, &pmEncode, &pmDecode, &pmLevels, &pmDecodeLevel, false, 3, true},
     {CodecId::kEdgebreaker, "edgebreaker", 2, kEdgebreakerFloor, &edgebreakerEncode, &edgebreakerDecode},
-    {CodecId::kPrm, "prm", 1, kEdgebreakerFloor, &prmEncode, &prmDecode},
+    {CodecId::kPrm, "prm", 2, kEdgebreakerFloor, &prmEncode, &prmDecode},
 }};
 
 }  // namespace
@@ -121,12 +121,6 @@ uint64_t PayloadFloor::minPayloadBytes(const AttributeLayout& layout, uint64_t v
 Result<EncodedTile> encodeMesh(const CodecInfo& codec, const TileContext& ctx, const QuantizedMesh& mesh,
                                const CodecOptions& options) {
   return codec.encode(ctx, TileView{mesh, {}}, options);
-}
-
-Status scalarsNotCarried(std::string_view codec) {
-  return makeError(ErrorCode::kInvalidArgument,
-                   std::string(codec) +
-                       " does not carry scalar channels yet (kdtree, octree, edgebreaker and store do)");
 }
 
 DecodeLimits limitsOf(const TileSummary& s) { return DecodeLimits{s.vertices, s.faces}; }

@@ -208,8 +208,6 @@ DecodeLimits limitsOf(const TileSummary& summary);
 Status validateTile(const TileContext& ctx, const QuantizedMesh& mesh);
 // Checks counts a payload claims against the limits, naming `what` (the codec's payload) in the message.
 Status checkLimits(std::string_view what, uint64_t vertices, uint64_t faces, const DecodeLimits& limits);
-// The error of a codec that does not carry scalar channels (yet): the lossy codecs, pm and prm.
-Status scalarsNotCarried(std::string_view codec);
 // The summary of a mesh: counts and bounds.
 TileSummary summarize(const QuantizedMesh& mesh);
 // Coarse-level attributes derived from geometry: area-weighted normals from the triangles, gray colors, scalars 0

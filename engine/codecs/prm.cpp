@@ -31,8 +31,9 @@
 //    than the tile's own triangles makes it larger, and coded as it is it is exact); so is it when remeshing would
 //    break the border contract or exceed the remesher's size limit.
 //
-// Payload v1: varint G (the lattice spacing in grid cells, even, 2..2^24), then an edgebreaker payload (version 2
-// layout) coded on that lattice.
+// Payload v1 and v2: varint G (the lattice spacing in grid cells, even, 2..2^24), then an edgebreaker payload
+// (version 2 layout) coded on that lattice. v2 differs only in carrying scalar channels (the remesh stage resamples
+// them: floats interpolated, integers and texture coordinates from the nearest corner).
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -44,6 +45,10 @@
 namespace scanpress {
 
 namespace {
+
+// Version 2: the layout's scalar channels too (resampled by the remesh stage, coded as edgebreaker codes them); a
+// tile without them is written as version 1 (the same bytes), which older builds read.
+constexpr uint16_t kPrmScalarsFrom = 2;
 
 // The payload's first field, the lattice spacing; `header`: its length in bytes.
 Result<uint32_t> readSpacing(std::span<const uint8_t> payload, size_t& header) {
@@ -72,7 +77,6 @@ uint32_t prmSpacing(const PrmOptions& options, int bits) {
 
 Status prmEncodeWithStats(const TileContext& ctx, const TileView& tile, const CodecOptions& options,
                           std::vector<uint8_t>& out, CodecStats* stats, TileSummary* summary) {
-  if (ctx.layout.hasScalars()) return scalarsNotCarried("prm");
   StageSpec spec;
   spec.kind = StageKind::kRemesh;
   spec.remesh = RemeshStageOptions{.grid = options.prm.grid, .tau = options.prm.tau};
@@ -119,15 +123,18 @@ Status prmEncodeWithStats(const TileContext& ctx, const TileView& tile, const Co
 Result<EncodedTile> prmEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options) {
   EncodedTile e;
   SP_RETURN_IF_ERROR(prmEncodeWithStats(ctx, tile, options, e.payload, nullptr, &e.decoded));
+  e.version = ctx.layout.hasScalars() ? kPrmScalarsFrom : 1;
   return e;
 }
 
 Result<QuantizedMesh> prmDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                 const DecodeLimits& limits) {
-  if (version != 1)
+  if (version < 1 || version > kPrmScalarsFrom)
     return makeError(ErrorCode::kUnknownVersion, "prm payload: unknown version " + std::to_string(version));
-  if (ctx.layout.hasScalars())
-    return makeError(ErrorCode::kMalformed, "prm payload in a container with scalar channels (prm carries none)");
+  if (ctx.layout.hasScalars() && version < kPrmScalarsFrom)
+    return makeError(ErrorCode::kMalformed,
+                     "prm payload of version 1 in a container with scalar channels (it carries "
+                     "none)");
   size_t header = 0;
   SP_ASSIGN_OR_RETURN(const uint32_t spacing, readSpacing(payload, header));
   return edgebreakerDecodeOnLattice(ctx, payload.subspan(header), limits, spacing);

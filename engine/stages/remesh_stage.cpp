@@ -11,10 +11,14 @@
 // two vertices share a point (the coders refuse two corners in one cell, and welding would change the topology);
 // only if all 27 are taken is it welded, and triangles that then repeat a vertex are dropped. Input vertices keep
 // their points and identity, so locked vertices stay.
-// Normals and colors: an input vertex that is kept keeps its own; any other vertex lies on an input triangle and
-// takes the barycentric interpolation of that triangle's corners (normals normalised, colors rounded and snapped to
-// the layout's levels).
+// Normals, colors and scalar channels: an input vertex that is kept keeps its own; any other vertex lies on an input
+// triangle and takes the barycentric interpolation of that triangle's corners (normals normalised, colors rounded and
+// snapped to the layout's levels). Scalar channels (issue 22 part 4): a float channel interpolates (in double,
+// rounded to its type) when its corners and the result are finite; an integer channel (a count, a flag, a label,
+// whose mean may mean nothing), a quantized float (texture coordinates, whose triangle may span a seam) or a
+// non-finite one takes the value of the corner nearest the vertex (the largest weight, the first on ties).
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <map>
 #include <string>
@@ -54,6 +58,40 @@ std::array<double, 3> barycentric(const Vec3d& p, const Vec3d& a, const Vec3d& b
     w /= sum;
   }
   return {1 - v - w, v, w};
+}
+
+// The scalar row at `out` of a point with barycentric weights `w` on input triangle `t` (see the header).
+void interpolateScalars(std::span<const ScalarChannel> channels, const ScalarValues& in, size_t stride,
+                        const Triangle& t, const std::array<double, 3>& w, uint32_t* out) {
+  const int nearest = w[1] > w[0] && w[1] >= w[2] ? 1 : w[2] > w[0] && w[2] > w[1] ? 2 : 0;
+  size_t word = 0;
+  for (const ScalarChannel& c : channels) {
+    const size_t words = size_t(scalarTypeWords(c.type));
+    const uint32_t* corner[3];
+    for (int k = 0; k < 3; ++k) corner[k] = in.data() + size_t(t[size_t(k)]) * stride + word;
+    std::copy_n(corner[nearest], words, out + word);
+    if (c.bits == 0 && isFloatScalar(c.type)) {
+      double value[3];
+      for (int k = 0; k < 3; ++k) {
+        if (c.type == ScalarType::kFloat32) {
+          value[k] = double(std::bit_cast<float>(corner[k][0]));
+        } else {
+          value[k] = std::bit_cast<double>(uint64_t(corner[k][0]) | uint64_t(corner[k][1]) << 32);
+        }
+      }
+      double sum = 0;
+      for (int k = 0; k < 3; ++k) sum += w[size_t(k)] * value[k];
+      const bool finite = std::isfinite(value[0]) && std::isfinite(value[1]) && std::isfinite(value[2]);
+      if (c.type == ScalarType::kFloat32) {
+        const float f = float(sum);
+        if (finite && std::isfinite(f)) out[word] = std::bit_cast<uint32_t>(f);
+      } else if (finite && std::isfinite(sum)) {
+        const uint64_t b = std::bit_cast<uint64_t>(sum);
+        out[word] = uint32_t(b), out[word + 1] = uint32_t(b >> 32);
+      }
+    }
+    word += words;
+  }
 }
 
 }  // namespace
@@ -171,15 +209,23 @@ Result<StagedTile> remeshTile(const TileContext& ctx, const TileView& tile, doub
   // position, of the input triangle it lies on.
   const bool normals = ctx.layout.hasNormals() && in.normals.size() == in.positions.size();
   const bool colors = ctx.layout.hasColors() && in.colors.size() == in.positions.size();
+  const size_t stride = size_t(ctx.layout.scalarStride());
+  if (stride && in.scalars.size() != in.positions.size() * stride)
+    return makeError(ErrorCode::kInvalidArgument, "remesh: the tile lacks the layout's scalar values");
+  const bool scalars = stride > 0;
   if (normals) out.mesh.normals.resize(out.mesh.positions.size());
   if (colors) out.mesh.colors.resize(out.mesh.positions.size());
+  if (scalars) out.mesh.scalars.resize(out.mesh.positions.size() * stride);
   std::vector<u32> first(out.mesh.positions.size(), kNone);  // a remeshed vertex that became each output vertex
   for (u32 v = 0; v < id.size(); ++v)
     if (first[id[v]] == kNone) first[id[v]] = v;
-  for (size_t o = 0; o < out.mesh.positions.size() && (normals || colors); ++o) {
+  for (size_t o = 0; o < out.mesh.positions.size() && (normals || colors || scalars); ++o) {
     if (source[o] != kNone) {
       if (normals) out.mesh.normals[o] = in.normals[source[o]];
       if (colors) out.mesh.colors[o] = in.colors[source[o]];
+      if (scalars)
+        std::copy_n(in.scalars.begin() + ptrdiff_t(size_t(source[o]) * stride), stride,
+                    out.mesh.scalars.begin() + ptrdiff_t(o * stride));
       continue;
     }
     const u32 v = first[o];
@@ -208,6 +254,8 @@ Result<StagedTile> remeshTile(const TileContext& ctx, const TileView& tile, doub
       }
       out.mesh.colors[o] = quantizeColor(c, ctx.layout);
     }
+    if (scalars)
+      interpolateScalars(ctx.layout.scalars, in.scalars, stride, t, w, out.mesh.scalars.data() + o * stride);
   }
   return out;
 }
