@@ -16,7 +16,8 @@ mkdir -p "$out"
 # scan, view (azimuth,elevation), lattice
 while read -r scan view grid; do
   src=$(ls "$data/$scan".* | head -1)
-  "$bin" encode "$src" "$work/$scan.spz" --codec prm --grid "$grid" --bits 12 --no-colors --no-normals --quiet
+  "$bin" encode "$src" "$work/$scan.spz" --codec prm --grid "$grid" --bits 12 --no-colors --no-normals --no-scalars \
+    --quiet
   # Prints the faces and the regular share once.
   "$bin" render "$work/$scan.spz" "$out/prm-$scan-reliefs.png" --color-by reliefs --size 640,480 --view "$view"
   "$bin" render "$work/$scan.spz" "$out/prm-$scan-regularity.png" --color-by regularity --size 640,480 \

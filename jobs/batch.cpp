@@ -269,6 +269,12 @@ std::string settingsFingerprint(const EncodeSettings& s) {
   // earlier runs stay valid.
   if (s.allow_degenerate) key += "|allow_degenerate=1";
   if (s.strict) key += "|strict";
+  // pm, prm and the remesh stage carry scalar channels from this build on (earlier builds' containers of theirs
+  // lack them): written only for those, so other fingerprints stay valid and theirs are encoded again.
+  const bool resamples =
+      std::any_of(s.stages.begin(), s.stages.end(), [](const StageSpec& st) { return st.kind == StageKind::kRemesh; });
+  if (s.keep_scalars && (s.codec == "pm" || s.codec == "prm" || s.codec == "auto" || resamples))
+    key += "|lossy_scalars=1";
   if (s.codec == "prm") {  // prm's remeshing options change the bytes
     char buf[96];
     std::snprintf(buf, sizeof buf, "|prm=%.17g,%.17g", s.codec_options.prm.grid, s.codec_options.prm.tau);

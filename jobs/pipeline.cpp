@@ -654,6 +654,23 @@ class ScanEncoder {
     return Status::ok();
   }
 
+  // After the tiles: the points pm's weld merged into another point at their position with other attributes (a
+  // PLY's duplicated crease or seam vertices, repeated points with other confidence) are listed dropped, and under
+  // `strict` fail the file before it is committed.
+  Status checkMerged() {
+    if (merged_points_ == 0) return Status::ok();
+    const DroppedProperty d{"attributes of points sharing a grid position (codec " + std::string(codec_.name) +
+                                " keeps the first point's)",
+                            merged_points_};
+    result_.read.dropped.push_back(d);
+    if (s_.strict)
+      return makeError(ErrorCode::kUnsupported, s_.input + ": strict: the container would not keep " +
+                                                    describeDropped(std::span(&d, 1)) +
+                                                    " (encode without --strict or /strict to "
+                                                    "drop them, or with a codec that keeps every point)");
+    return Status::ok();
+  }
+
   // Index, footer, sync, rename.
   Status finish() {
     SP_RETURN_IF_ERROR(writer_->finish());
@@ -808,6 +825,7 @@ class ScanEncoder {
       ++result_.failed_tiles;
     } else if (write_status_.isOk()) {
       write_status_ = writer_->addTile(r.tile, codec_, r.encoded);
+      merged_points_ += r.encoded.merged_points;
       rep.bytes = kChunkHeaderSize + r.encoded.payload.size();
       result_.tile_vertices += r.encoded.decoded.vertices;
     }
@@ -826,6 +844,7 @@ class ScanEncoder {
   SurveySink survey_;
   // Tile data: in memory or in scratch files.
   uint64_t storage_budget_ = 0;
+  uint64_t merged_points_ = 0;  // summed over the tiles written (EncodedTile::merged_points)
   bool in_memory_ = true;
   uint64_t target_ = 0;
   std::optional<ScratchDir> scratch_;
@@ -912,6 +931,7 @@ Result<EncodeResult> encodeFileOnce(const EncodeSettings& s, ProgressListener* p
   SP_RETURN_IF_ERROR(encoder.ingest());
   SP_RETURN_IF_ERROR(encoder.tile());
   SP_RETURN_IF_ERROR(encoder.encodeTiles());
+  SP_RETURN_IF_ERROR(encoder.checkMerged());
   SP_RETURN_IF_ERROR(encoder.finish());
   return std::move(encoder.result());
 }

@@ -16,9 +16,9 @@ namespace scanpress {
 namespace {
 
 // Bumped whenever a message's layout changes.
-constexpr uint32_t kWireVersion = 7;  // 2: the layout's color bits; 3: the remesh stage's options; 4: prm's
+constexpr uint32_t kWireVersion = 8;  // 2: the layout's color bits; 3: the remesh stage's options; 4: prm's
 // options; 5: scalar channels (the layout's, and each tile's values); 6: each scalar channel's bits; 7: each
-// result's payload version
+// result's payload version; 8: its merged points
 
 // The wire spells out every field of these structs: a new field must be added to the messages below too (this
 // fails to compile until its size is updated here).
@@ -294,6 +294,7 @@ std::vector<uint8_t> resultMessage(const TileResult& t) {
   putStatus(w, t.status);
   putArray(w, t.encoded.payload);
   w.u16(t.encoded.version);
+  w.u64(t.encoded.merged_points);
   const TileSummary& d = t.encoded.decoded;
   w.u32(d.vertices);
   w.u32(d.faces);
@@ -347,6 +348,7 @@ Result<TileResult> readResult(std::span<const uint8_t> message) {
   SP_RETURN_IF_ERROR(getStatus(r, t.status));
   SP_RETURN_IF_ERROR(getArray(r, t.encoded.payload));
   SP_RETURN_IF_ERROR(r.u16(t.encoded.version));
+  SP_RETURN_IF_ERROR(r.u64(t.encoded.merged_points));
   TileSummary& d = t.encoded.decoded;
   SP_RETURN_IF_ERROR(r.u32(d.vertices));
   SP_RETURN_IF_ERROR(r.u32(d.faces));

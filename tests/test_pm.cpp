@@ -292,6 +292,22 @@ std::map<Vec3u, std::pair<OctNormal, Rgba8>> firstAttributes(const QuantizedMesh
   return out;
 }
 
+// The points that share a position with an earlier point but not its attributes (what pm reports merged).
+uint64_t differingTwins(const QuantizedMesh& m, const AttributeLayout& layout) {
+  const size_t stride = size_t(layout.scalarStride());
+  std::map<Vec3u, size_t> first;
+  uint64_t n = 0;
+  for (size_t v = 0; v < m.positions.size(); ++v) {
+    const auto [it, fresh] = first.emplace(m.positions[v], v);
+    const size_t f = it->second;
+    n += !fresh &&
+         ((layout.hasNormals() && m.normals[v] != m.normals[f]) || (layout.hasColors() && m.colors[v] != m.colors[f]) ||
+          !std::equal(m.scalars.begin() + ptrdiff_t(v * stride), m.scalars.begin() + ptrdiff_t((v + 1) * stride),
+                      m.scalars.begin() + ptrdiff_t(f * stride)));
+  }
+  return n;
+}
+
 // v3: every level shows the tile's own normals and colors. pm's vertex order is fixed by the payload (each split
 // appends its vertex), so vertex i of a level is vertex i of the last level; the last level's attributes are the
 // first input vertex's at each position (lossless), or a kept input vertex's (lossy: no two vertices show the same
@@ -310,6 +326,10 @@ TEST(Pm, EveryLevelShowsTheTilesOwnAttributes) {
       opt.ratio = ratio;
       const Encoded enc = encodeTile(ctx, tile, {}, opt);
       ASSERT_GE(enc.levels.size(), 3u);
+      // Lossless, the twins' other attributes are reported, not silently welded away (simplified, the weld is
+      // part of the simplification).
+      EXPECT_EQ(enc.tile.merged_points, ratio == 1.0 ? differingTwins(tile, layout) : 0u);
+      EXPECT_GT(differingTwins(tile, layout), 0u);
       auto full = pm().decode(ctx, pm().version, enc.tile.payload, limitsOf(enc.tile.decoded));
       ASSERT_TRUE(full.isOk()) << full.status().toString();
       ASSERT_TRUE(validateTile(ctx, *full).isOk());
@@ -453,6 +473,7 @@ TEST(Pm, ScalarChannelsThroughEveryLevel) {
       const Encoded enc = encodeTile(ctx, tile, {}, opt);
       ASSERT_GE(enc.levels.size(), 3u);
       EXPECT_EQ(payloadVersion(pm(), enc.tile), 4);
+      EXPECT_EQ(enc.tile.merged_points, ratio == 1.0 ? differingTwins(tile, layout) : 0u);
       auto full = pm().decode(ctx, 4, enc.tile.payload, limitsOf(enc.tile.decoded));
       ASSERT_TRUE(full.isOk()) << full.status().toString();
       ASSERT_TRUE(validateTile(ctx, *full).isOk());
@@ -525,6 +546,7 @@ TEST(Pm, Version2DerivesAttributes) {
   const TileContext ctx{12, layout};
   const QuantizedMesh tile = attributedPmSphere(AttributeLayout{}, 3);
   const Encoded enc = encodeTile(TileContext{12, {}}, tile, {});  // without attributes: v3's bytes are v2's
+  EXPECT_EQ(enc.tile.merged_points, 0u);                          // twins differ in nothing coded
   auto d = pm().decode(ctx, 2, enc.tile.payload, limitsOf(enc.tile.decoded));
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   EXPECT_EQ(d->normals.size(), d->positions.size());

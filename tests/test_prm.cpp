@@ -323,7 +323,9 @@ TEST(Prm, ScalarChannelsAreResampledAndDecodeExactly) {
     ASSERT_TRUE(back.isOk()) << back.status().toString();
     EXPECT_TRUE(pairs(*back) == pairs(staged));
   }
-  size_t added = 0, new_times = 0;
+  std::set<uint32_t> input_fields;
+  for (size_t v = 0; v < q.positions.size(); ++v) input_fields.insert(word(q, v, 0));
+  size_t added = 0, new_times = 0, new_fields = 0;
   for (size_t v = 0; v < staged.positions.size(); ++v) {
     const std::vector<uint32_t> row(staged.scalars.begin() + ptrdiff_t(v * stride),
                                     staged.scalars.begin() + ptrdiff_t((v + 1) * stride));
@@ -335,6 +337,7 @@ TEST(Prm, ScalarChannelsAreResampledAndDecodeExactly) {
     if (kept != input_rows.end() && kept->second == row) continue;  // a kept input vertex (or one at its point)
     ++added;
     new_times += !input_times.count({row[1], row[2]});
+    new_fields += !input_fields.count(row[0]);
     // Interpolated from the corners of the input triangle under it: within a few lattice steps' change of the field
     // (the vertex moved by rounding, and lies on the relief, not on the triangle), unless a corner was infinite.
     if (std::isfinite(f)) {
@@ -343,6 +346,7 @@ TEST(Prm, ScalarChannelsAreResampledAndDecodeExactly) {
   }
   EXPECT_GT(added, 100u);
   EXPECT_GT(new_times, added / 2) << "float64 values are interpolated, not copied";
+  EXPECT_GT(new_fields, added / 2) << "float32 values are interpolated, not copied";
   // Version 1 payloads carry no scalar channels: refused in this layout.
   auto enc = prm().encode(ctx, TileView{q, {}}, options);
   ASSERT_TRUE(enc.isOk());

@@ -512,6 +512,7 @@ TEST(PrmCodec, ErrorTargetIsMetByChoosingTheSpacing) {
   s.bits = 12;
   s.tile_triangles = 32768;
   s.keep_colors = false;
+  s.keep_scalars = false;  // geometry: with the bunny's noisy channels prm keeps its tiles as they are
   s.output = dir.file("prm.spz");
   s.target.kind = TargetKind::kMaxError;
   s.target.max_error = 2e-4;

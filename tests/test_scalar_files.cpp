@@ -89,9 +89,10 @@ TEST(ScalarFiles, BunnyConfidenceAndIntensityComeBackBitForBit) {
   }
 }
 
-// prm keeps them, resampled where it remeshes (each value within the range of the input's: the bunny's channels are
-// floats, interpolated); --no-scalars drops them on request and writes a version 1 container; decoding to a format
-// without scalars lists them.
+// prm keeps them (resampled where it remeshes; with the bunny's noisy channels it keeps most tiles as they are, so
+// this checks the channels come back within the input's ranges, not the resampling: Prm.ScalarChannels...);
+// --no-scalars drops them on request and writes a version 1 container; decoding to a format without scalars lists
+// them.
 TEST(ScalarFiles, WhatIsDroppedIsSaid) {
   TempDir dir;
   EncodeSettings prm = scalarSettingsFor(dir.file("prm.spz"), "prm");

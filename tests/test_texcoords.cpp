@@ -613,15 +613,47 @@ TEST(Texcoords, DroppedBySimplifyingCodecsAndWrittenFromPly) {
   const std::string ply = dir.file("s.ply");
   ASSERT_TRUE(writePly(ply, m).isOk());
   // Its seam is vertices at one position with other u, v: pm, which welds by position, drops u and v (listed, with
-  // the reason) and keeps the confidence; --codec auto then keeps edgebreaker's result, which drops nothing.
+  // the reason) and keeps the confidence, the first point's at each position: the points whose other confidence it
+  // did not keep are listed too, and fail the encode under --strict (nothing written). --codec auto then keeps
+  // edgebreaker's result, which drops nothing.
+  size_t merged = 0;
+  {
+    std::map<std::array<double, 3>, uint32_t> first;  // position -> the first point's confidence
+    for (size_t i = 0; i < m.positions.size(); ++i) {
+      const auto [it, fresh] =
+          first.emplace(std::array{m.positions[i][0], m.positions[i][1], m.positions[i][2]}, m.scalars[3 * i + 2]);
+      merged += !fresh && it->second != m.scalars[3 * i + 2];
+    }
+  }
+  ASSERT_GT(merged, 20u);
   EncodeSettings p = uvSettingsFor(ply, dir.file("seam.spz"), "pm");
   auto welded = encodeFile(p);
   ASSERT_TRUE(welded.isOk()) << welded.status().toString();
   EXPECT_EQ(welded->failed_tiles, 0u);
   EXPECT_EQ(welded->layout.scalars, (std::vector<ScalarChannel>{{"confidence", ScalarType::kUint8}}));
   const std::string n_in = std::to_string(m.positions.size());
+  const std::string merged_entry =
+      "attributes of points sharing a grid position (codec pm keeps the first point's) x " + std::to_string(merged);
   EXPECT_EQ(describeDropped(welded->read.dropped), "vertex.u (codec pm keeps no texture seams) x " + n_in +
-                                                       ", vertex.v (codec pm keeps no texture seams) x " + n_in);
+                                                       ", vertex.v (codec pm keeps no texture seams) x " + n_in +
+                                                       ", " + merged_entry);
+  {
+    Mesh c = m;  // the confidence alone (u and v would fail --strict first)
+    c.scalar_channels = {{"confidence", ScalarType::kUint8}};
+    c.scalars.clear();
+    for (size_t i = 0; i < m.positions.size(); ++i) c.scalars.push_back(m.scalars[3 * i + 2]);
+    ASSERT_TRUE(writePly(dir.file("c.ply"), c).isOk());
+    EncodeSettings st = uvSettingsFor(dir.file("c.ply"), dir.file("strict.spz"), "pm");
+    st.strict = true;
+    auto refused = encodeFile(st);
+    ASSERT_FALSE(refused.isOk());
+    const std::string refusal = "strict: the container would not keep " + merged_entry;
+    EXPECT_NE(refused.status().message().find(refusal), std::string::npos) << refused.status().toString();
+    EXPECT_FALSE(std::filesystem::exists(st.output));
+    st.keep_scalars = false;  // no point differs then
+    auto plain = encodeFile(st);
+    ASSERT_TRUE(plain.isOk()) << plain.status().toString();
+  }
   p.codec = "auto";
   p.output = dir.file("auto.spz");
   p.target.kind = TargetKind::kMaxError;

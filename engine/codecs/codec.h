@@ -122,6 +122,10 @@ struct EncodedTile {
   // The format version of the payload (0: the codec's, CodecInfo::version): kdtree writes a tile without creases
   // or seams as version 3, which older builds read too. The container records it (ContainerWriter::addTile).
   uint16_t version = 0;
+  // Input points merged into another point at their grid position whose attributes (normal, color or scalar row)
+  // differ: pm's weld keeps the first point's, and where its last level is lossless (it simplifies nothing) the
+  // report lists how many it did not keep.
+  uint64_t merged_points = 0;
 };
 
 // Hard limits on what a decoder may produce, from the container's index entry for the tile (DESIGN.md decision

@@ -799,7 +799,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   // Texture coordinates are one value per position after the weld: a seam (points at one position with different
   // ones) would take one side's across it, so such a tile is refused rather than mapped wrongly.
   const std::optional<TexcoordChannels> texcoords = findTexcoords(layout.scalars);
-  uint64_t seam_positions = 0;
+  uint64_t seam_positions = 0, merged = 0;
   QuantizedMesh welded;
   std::vector<uint8_t> locked;
   {
@@ -816,10 +816,13 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
         if (stride) appendRow(welded.scalars, scalarRow(in.scalars, v));
         locked.push_back(0);
         first = v, seam = false;
-      } else if (texcoords && !seam) {
+      } else {
         const uint32_t *a = in.scalars.data() + size_t(first) * stride, *b = in.scalars.data() + size_t(v) * stride;
-        if (a[texcoords->u_word] != b[texcoords->u_word] || a[texcoords->v_word] != b[texcoords->v_word])
+        if (texcoords && !seam &&
+            (a[texcoords->u_word] != b[texcoords->u_word] || a[texcoords->v_word] != b[texcoords->v_word]))
           seam = true, ++seam_positions;
+        merged += (with_normals && in.normals[v] != in.normals[first]) ||
+                  (with_colors && in.colors[v] != in.colors[first]) || !std::equal(a, a + stride, b);
       }
       map[v] = uint32_t(welded.positions.size() - 1);
       if (!tile.locked.empty() && tile.locked[v]) locked.back() = 1;
@@ -1140,6 +1143,9 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   result.decoded = summarize(final_mesh);
   result.levels = levelsOf(h);
   result.version = stride ? kScalarsFrom : kAttributesFrom;
+  // Reported where the last level is the tile (lossless): a simplified one drops vertices and their attributes
+  // anyway, and the weld is its first step.
+  result.merged_points = opt.max_error < 0 && opt.ratio >= 1 ? merged : 0;
   return result;
 }
 

@@ -70,7 +70,9 @@ void interpolateScalars(std::span<const ScalarChannel> channels, const ScalarVal
     const uint32_t* corner[3];
     for (int k = 0; k < 3; ++k) corner[k] = in.data() + size_t(t[size_t(k)]) * stride + word;
     std::copy_n(corner[nearest], words, out + word);
-    if (c.bits == 0 && isFloatScalar(c.type)) {
+    const bool same = std::equal(corner[0], corner[0] + words, corner[1]) &&
+                      std::equal(corner[0], corner[0] + words, corner[2]);
+    if (c.bits == 0 && isFloatScalar(c.type) && !same) {  // (a constant stays bit for bit, -0 included)
       double value[3];
       for (int k = 0; k < 3; ++k) {
         if (c.type == ScalarType::kFloat32) {
