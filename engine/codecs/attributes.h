@@ -671,15 +671,21 @@ class CoarseAttributes {
     }
     born_.clear();
   }
-  // A coarse level's attributes: its vertex i (of `count`) is vertex id(i) and shows its representative's, from
-  // `normals` and `colors` (by vertex), appended to `m`. False, and nothing appended, while some vertex shows none
-  // (the root level): the caller derives them.
+  // Whether every vertex id(i) of a coarse level (of `count`) shows a representative (not at the root level).
   template <class Id>
-  bool show(u32 count, const Id& id, const std::vector<OctNormal>& normals, const std::vector<Rgba8>& colors,
-            const ScalarValues& scalars, QuantizedMesh& m) const {
+  bool showable(u32 count, const Id& id) const {
     if (!active_) return false;
     for (u32 i = 0; i < count; ++i)
       if (shown_[id(i)] == kNone) return false;
+    return true;
+  }
+  // A coarse level's attributes: its vertex i (of `count`) is vertex id(i) and shows its representative's, from
+  // `normals` and `colors` (by vertex), appended to `m`. False, and nothing appended, unless showable: the caller
+  // derives them.
+  template <class Id>
+  bool show(u32 count, const Id& id, const std::vector<OctNormal>& normals, const std::vector<Rgba8>& colors,
+            const ScalarValues& scalars, QuantizedMesh& m) const {
+    if (!showable(count, id)) return false;
     const size_t stride = size_t(layout_.scalarStride());
     for (u32 i = 0; i < count; ++i) {
       const u32 r = shown_[id(i)];

@@ -93,15 +93,17 @@ class CoarseCreases {
 
   // What a level shows: its triangle keys and, per corner (3 x key + position in the key), the group of the corner
   // within its vertex; per vertex of k >= 2 groups, the groups' values (into values_).
+  using Wedged = std::vector<std::array<u32, 3>>;  // (vertex, first value, groups), by vertex
+  static const std::array<u32, 3>* findWedged(const Wedged& wedged, u32 v) {
+    auto it = std::lower_bound(wedged.begin(), wedged.end(), std::array<u32, 3>{v, 0, 0},
+                               [](const auto& a, const auto& b) { return a[0] < b[0]; });
+    return it != wedged.end() && (*it)[0] == v ? &*it : nullptr;
+  }
   struct Level {
     std::vector<TriKey> keys;
     std::vector<u32> corner_group;
-    std::vector<std::array<u32, 3>> wedged;  // (vertex, first value, groups), by vertex
-    const std::array<u32, 3>* find(u32 v) const {
-      auto it = std::lower_bound(wedged.begin(), wedged.end(), std::array<u32, 3>{v, 0, 0},
-                                 [](const auto& a, const auto& b) { return a[0] < b[0]; });
-      return it != wedged.end() && (*it)[0] == v ? &*it : nullptr;
-    }
+    Wedged wedged;
+    const std::array<u32, 3>* find(u32 v) const { return findWedged(wedged, v); }
   };
   const Level& level() const { return level_; }
 
@@ -276,7 +278,7 @@ class CoarseCreases {
       slots.clear();
       if (show_[v] != kNone) slots.push_back(show_[v]);
       else if (const u32 r = rep(v); r != kNone) slots.push_back(r | kPoint);
-      if (const auto* w = prev_.find(anc_[v]))
+      if (const auto* w = findWedged(prev_wedged_, anc_[v]))
         for (u32 g = 0; g < (*w)[2]; ++g) slots.push_back(prev_values_[(*w)[1] + g]);
       if (k > 1) next.wedged.push_back({v, u32(values_.size()), k});
       for (u32 g = 0; g < k; ++g) {
@@ -342,7 +344,7 @@ class CoarseCreases {
     next.keys = std::move(keys);
     level_ = std::move(next);
     // The previous level's wedged vertices and their values, for the next level's choices.
-    prev_.wedged = level_.wedged;
+    prev_wedged_ = level_.wedged;
     compactPool();
     prev_values_ = values_;
     return Status::ok();
@@ -535,7 +537,8 @@ class CoarseCreases {
   std::vector<u8> mark_, touch_;
   std::vector<u64> prev_edges_, prev_sharp_;
   std::vector<u32> prev_touch_;  // the vertices on a sharp edge at the previous level
-  Level prev_, level_;
+  Level level_;
+  Wedged prev_wedged_;                     // the previous level's
   std::vector<u32> values_, prev_values_;  // the wedged vertices' groups' values (pool indices), by Level::wedged
   Values pool_;                            // the values coded so far (new ones)
   const std::vector<OctNormal>* point_normals_ = nullptr;  // the points' values (endLevel's arrays)

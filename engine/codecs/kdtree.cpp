@@ -343,16 +343,12 @@ class Engine {
           const auto& k = level.keys[t];
           v = index[v] + level.corner_group[3 * t + (k[0] == v ? 0 : k[1] == v ? 1 : 2)];
         }
-      if (!coarse_->show(
-              u32(cells_.size()), [&](u32 i) { return cells_[i].s; }, normals_, colors_, scalars_, m)) {
+      if (!coarse_->showable(u32(cells_.size()), [&](u32 i) { return cells_[i].s; })) {
         deriveAttributes(m, layout);
         return m;
       }
-      // show() gave each cell its representative's values: the wedged cells' groups and the chosen cells show theirs.
-      QuantizedMesh per_cell;
-      per_cell.normals.swap(m.normals);
-      per_cell.colors.swap(m.colors);
-      per_cell.scalars.swap(m.scalars);
+      // A cell shows its representative's values (as show() gives them), a wedged cell its groups' and a chosen
+      // cell the chosen ones.
       const size_t stride = size_t(layout.scalarStride());
       const auto append = [&](OctNormal n, Rgba8 c, const uint32_t* s) {
         if (layout.hasNormals()) m.normals.push_back(n);
@@ -369,8 +365,9 @@ class Engine {
         } else if (const u32 x = creases_->showOverride(v); x != CoarseCreases::kNone) {
           append(creases_->normal(x), creases_->color(x), creases_->scalarsOf(x));
         } else {
-          append(layout.hasNormals() ? per_cell.normals[i] : OctNormal{0, 0},
-                 layout.hasColors() ? per_cell.colors[i] : Rgba8{0, 0, 0, 255}, per_cell.scalars.data() + i * stride);
+          const u32 r = coarse_->shown(v);
+          append(layout.hasNormals() ? normals_[r] : OctNormal{0, 0},
+                 layout.hasColors() ? colors_[r] : Rgba8{0, 0, 0, 255}, scalars_.data() + size_t(r) * stride);
         }
       }
       return m;
