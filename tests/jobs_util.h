@@ -12,6 +12,8 @@
 #include <vector>
 
 #include "engine/mesh.h"
+#include "jobs/commands.h"
+#include "jobs/mesh_io/mesh_reader.h"
 #include "jobs/pipeline.h"
 
 #include "test_util.h"
@@ -108,6 +110,22 @@ inline EncodeSettings encodeSettings(const std::string& input, const std::string
   s.codec = codec;
   s.threads = 2;
   return s;
+}
+
+// A target of RMS error `max_error` (relative to the diagonal) on `s`.
+inline void setRmsTarget(EncodeSettings& s, double max_error) {
+  s.target.kind = TargetKind::kMaxError;
+  s.target.metric = ErrorMetric::kRms;
+  s.target.max_error = max_error;
+}
+
+// `spz` decoded whole to the mesh file `out` (its extension says the format), and read back as in the file.
+inline Result<Mesh> decodeAndReadBack(const std::string& spz, const std::string& out) {
+  DecodeSettings d;
+  d.input = spz;
+  d.output = out;
+  SP_RETURN_IF_ERROR(decodeFile(d).status());
+  return readMeshFile(out);
 }
 
 inline std::string sharedDataDir() {

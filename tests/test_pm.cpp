@@ -101,6 +101,13 @@ Encoded encodeTile(const TileContext& ctx, const QuantizedMesh& m, std::span<con
   return Encoded{std::move(e).value(), levels.isOk() ? *levels : std::vector<CodecLevel>{}};
 }
 
+// Options that simplify to `ratio` of the tile's faces (1: lossless).
+PmOptions ratioOptions(double ratio) {
+  PmOptions opt;
+  opt.ratio = ratio;
+  return opt;
+}
+
 // Checks every level against the replay of the simplifications (lossless when opt.max_error < 0).
 void expectLevelsReplay(const TileContext& ctx, const QuantizedMesh& tile, std::span<const uint8_t> locked,
                         const PmOptions& opt) {
@@ -322,9 +329,7 @@ TEST(Pm, EveryLevelShowsTheTilesOwnAttributes) {
     const auto first = firstAttributes(tile, layout);
     for (const double ratio : {1.0, 0.2}) {
       SCOPED_TRACE(ratio);
-      PmOptions opt;
-      opt.ratio = ratio;
-      const Encoded enc = encodeTile(ctx, tile, {}, opt);
+      const Encoded enc = encodeTile(ctx, tile, {}, ratioOptions(ratio));
       ASSERT_GE(enc.levels.size(), 3u);
       // Lossless, the twins' other attributes are reported, not silently welded away (simplified, the weld is
       // part of the simplification).
@@ -468,9 +473,7 @@ TEST(Pm, ScalarChannelsThroughEveryLevel) {
     }
     for (const double ratio : {1.0, 0.2}) {
       SCOPED_TRACE(ratio);
-      PmOptions opt;
-      opt.ratio = ratio;
-      const Encoded enc = encodeTile(ctx, tile, {}, opt);
+      const Encoded enc = encodeTile(ctx, tile, {}, ratioOptions(ratio));
       ASSERT_GE(enc.levels.size(), 3u);
       EXPECT_EQ(payloadVersion(pm(), enc.tile), 4);
       EXPECT_EQ(enc.tile.merged_points, ratio == 1.0 ? differingTwins(tile, layout) : 0u);

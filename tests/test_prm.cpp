@@ -199,6 +199,14 @@ void prmAndRemeshStage(const TileContext& ctx, const QuantizedMesh& q, const Cod
   staged = std::move(remeshed->mesh);
 }
 
+// prmAndRemeshStage with a lattice of 0.03 of the grid (`options`), which remeshes `q` (asserted).
+void prmAndRemeshStageAtFineLattice(const TileContext& ctx, const QuantizedMesh& q, CodecOptions& options,
+                                    QuantizedMesh& decoded, QuantizedMesh& staged) {
+  options.prm.grid = 0.03;
+  ASSERT_NO_FATAL_FAILURE(prmAndRemeshStage(ctx, q, options, decoded, staged));
+  ASSERT_FALSE(testing::triangleMultiset(staged) == testing::triangleMultiset(q)) << "not remeshed";
+}
+
 TEST(Prm, SphereAndTorusRemeshNearTheirSurfaces) {
   struct Shape {
     const char* name;
@@ -248,10 +256,8 @@ TEST(Prm, RemeshedAttributesDecodeExactly) {
   const QuantizedMesh q = testing::quantized(testing::coloredIcosphere(4), 14, layout);
   const TileContext ctx{14, layout};
   CodecOptions options;
-  options.prm.grid = 0.03;
   QuantizedMesh d, staged;
-  ASSERT_NO_FATAL_FAILURE(prmAndRemeshStage(ctx, q, options, d, staged));
-  ASSERT_FALSE(testing::triangleMultiset(staged) == testing::triangleMultiset(q)) << "not remeshed";
+  ASSERT_NO_FATAL_FAILURE(prmAndRemeshStageAtFineLattice(ctx, q, options, d, staged));
   ASSERT_EQ(staged.normals.size(), staged.positions.size());
   ASSERT_EQ(staged.colors.size(), staged.positions.size());
   EXPECT_TRUE(testing::cornerMultiset(d, layout.normal_bits) == testing::cornerMultiset(staged, layout.normal_bits));
@@ -295,10 +301,8 @@ TEST(Prm, ScalarChannelsAreResampledAndDecodeExactly) {
                                                              q.scalars.begin() + ptrdiff_t((v + 1) * stride)));
   const TileContext ctx{14, layout};
   CodecOptions options;
-  options.prm.grid = 0.03;
   QuantizedMesh d, staged;
-  ASSERT_NO_FATAL_FAILURE(prmAndRemeshStage(ctx, q, options, d, staged));
-  ASSERT_FALSE(testing::triangleMultiset(staged) == testing::triangleMultiset(q)) << "not remeshed";
+  ASSERT_NO_FATAL_FAILURE(prmAndRemeshStageAtFineLattice(ctx, q, options, d, staged));
   ASSERT_EQ(staged.scalars.size(), staged.positions.size() * stride);
   // prm codes the stage's mesh exactly: the same (position, row) pairs.
   ASSERT_EQ(d.scalars.size(), d.positions.size() * stride);

@@ -109,12 +109,8 @@ TEST(ScalarFiles, WhatIsDroppedIsSaid) {
       const float f = std::bit_cast<float>(input->scalars[i]);
       lo[i % 2] = std::min(lo[i % 2], f), hi[i % 2] = std::max(hi[i % 2], f);
     }
-    DecodeSettings d;
-    d.input = prm.output;
-    d.output = dir.file("prm.ply");
-    ASSERT_TRUE(decodeFile(d).isOk());
-    auto back = readMeshFile(d.output);
-    ASSERT_TRUE(back.isOk());
+    auto back = testing::decodeAndReadBack(prm.output, dir.file("prm.ply"));
+    ASSERT_TRUE(back.isOk()) << back.status().toString();
     ASSERT_EQ(back->scalar_channels, input->scalar_channels);
     ASSERT_EQ(back->scalars.size(), 2 * back->positions.size());
     for (size_t i = 0; i < back->scalars.size(); ++i) {
@@ -197,9 +193,7 @@ TEST(ScalarFiles, AutoUnderStrictKeepsTheScalars) {
   TempDir dir;
   EncodeSettings s = scalarSettingsFor(dir.file("auto.spz"), "auto");
   s.strict = true;
-  s.target.kind = TargetKind::kMaxError;
-  s.target.metric = ErrorMetric::kRms;
-  s.target.max_error = 1e-3;
+  testing::setRmsTarget(s, 1e-3);
   auto r = encodeFile(s);
   ASSERT_TRUE(r.isOk()) << r.status().toString();
   EXPECT_EQ(r->codec, "pm");

@@ -592,9 +592,7 @@ TEST(Texcoords, DroppedBySimplifyingCodecsAndWrittenFromPly) {
   // coordinates, so edgebreaker's result (which keeps them) is kept.
   {
     EncodeSettings a = uvSettingsFor(in, dir.file("auto.spz"), "auto");
-    a.target.kind = TargetKind::kMaxError;
-    a.target.metric = ErrorMetric::kRms;
-    a.target.max_error = 1e-3;
+    testing::setRmsTarget(a, 1e-3);
     auto chosen = encodeFile(a);
     ASSERT_TRUE(chosen.isOk()) << chosen.status().toString();
     EXPECT_EQ(chosen->codec, "edgebreaker");
@@ -656,9 +654,7 @@ TEST(Texcoords, DroppedBySimplifyingCodecsAndWrittenFromPly) {
   }
   p.codec = "auto";
   p.output = dir.file("auto.spz");
-  p.target.kind = TargetKind::kMaxError;
-  p.target.metric = ErrorMetric::kRms;
-  p.target.max_error = 1e-3;
+  testing::setRmsTarget(p, 1e-3);
   auto fallback = encodeFile(p);
   ASSERT_TRUE(fallback.isOk()) << fallback.status().toString();
   EXPECT_EQ(fallback->codec, "edgebreaker");
@@ -939,19 +935,12 @@ TEST(LosslessNormals, EveryBitPatternComesBack) {
     EncodeSettings a = kRunCases[0].settings(in, dir.file("pm.spz"));
     a.codec = target ? "auto" : "pm";
     a.lossless_normals = true;
-    if (target) {
-      a.target.kind = TargetKind::kMaxError;
-      a.target.metric = ErrorMetric::kRms;
-      a.target.max_error = 1e-3;
-    }
+    if (target) testing::setRmsTarget(a, 1e-3);
     auto chosen = encodeFile(a);
     ASSERT_TRUE(chosen.isOk()) << chosen.status().toString();
     ASSERT_TRUE(losslessNormalsWord(chosen->layout.scalars).has_value());
-    d.input = a.output;
-    d.output = dir.file("pm.ply");
-    ASSERT_TRUE(decodeFile(d).isOk());
-    auto back = readMeshFile(d.output);
-    ASSERT_TRUE(back.isOk());
+    auto back = testing::decodeAndReadBack(a.output, dir.file("pm.ply"));
+    ASSERT_TRUE(back.isOk()) << back.status().toString();
     ASSERT_EQ(back->normals.size(), back->positions.size());
     ASSERT_EQ(back->scalars.size(), back->positions.size());
     std::map<Vec3u, std::array<uint32_t, 4>> first;
