@@ -132,9 +132,7 @@ Result<QuantizedMesh> prmDecode(const TileContext& ctx, uint16_t version, std::s
   if (version < 1 || version > kPrmScalarsFrom)
     return makeError(ErrorCode::kUnknownVersion, "prm payload: unknown version " + std::to_string(version));
   if (ctx.layout.hasScalars() && version < kPrmScalarsFrom)
-    return makeError(ErrorCode::kMalformed,
-                     "prm payload of version 1 in a container with scalar channels (it carries "
-                     "none)");
+    return makeError(ErrorCode::kMalformed, "prm payload of version 1 in a container with scalar channels");
   size_t header = 0;
   SP_ASSIGN_OR_RETURN(const uint32_t spacing, readSpacing(payload, header));
   return edgebreakerDecodeOnLattice(ctx, payload.subspan(header), limits, spacing);
