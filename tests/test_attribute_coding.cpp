@@ -365,9 +365,12 @@ void expectCoarseLevelsShowTheTilesOwnAttributes(const CodecInfo& codec, const A
     ASSERT_EQ(d->colors.size(), layout.hasColors() ? d->positions.size() : 0u);
     if (d->positions.size() <= limit) last_coded = int(l.level);
     ASSERT_GE(last_coded, 0) << "the first levels are coded";
-    EXPECT_EQ(testing::verticesShowingNoPointOfTheirCell(q, *d, 12, last_coded), 0u)
+    // Version 4 (the sphere's twins differ: cut edges; creases.h): a vertex by a crease or seam may show a value
+    // chosen among its ancestors' (one within the range of its corners' points' values), a point of the tile's.
+    const int within = payloadVersion(codec, *enc) >= 4 ? 0 : last_coded;
+    EXPECT_EQ(testing::verticesShowingNoPointOfTheirCell(q, *d, 12, within), 0u)
         << "of " << d->positions.size() << " vertices show a normal and color of no point in their cell at level "
-        << last_coded;
+        << within;
     checked += d->positions.size();
   }
   EXPECT_GT(checked, 1000u);

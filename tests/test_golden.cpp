@@ -307,9 +307,10 @@ TEST_P(GoldenStream, CoarseLevelsShowTheGoldenMeshsAttributes) {
       if (!own) continue;
       if (m->positions.size() <= limit) last_coded = int(level);
       ASSERT_GE(last_coded, 0);
-      // kdtree v4 (creases.h): a vertex by a crease or seam may show a value chosen among its ancestors' (one
-      // within the range of its corners' points' values): a point of the tile's, not always of its cell's.
-      const bool chosen = codec.id == CodecId::kKdtree && version >= 4;
+      // kdtree and octree v4 (creases.h): a vertex by a crease or seam may show a value chosen among its
+      // ancestors' (one within the range of its corners' points' values): a point of the tile's, not always of its
+      // cell's.
+      const bool chosen = (codec.id == CodecId::kKdtree || codec.id == CodecId::kOctree) && version >= 4;
       EXPECT_EQ(testing::verticesShowingNoPointOfTheirCell(g.mesh, *m, g.grid.bits, chosen ? 0 : last_coded), 0u)
           << "level " << level;
       ++own_levels;

@@ -40,7 +40,7 @@ constexpr std::array<CodecInfo, 6> kCodecs = {{
     {CodecId::kStore, "store", 1, kStoreFloor, &storeEncode, &storeDecode},
     {CodecId::kKdtree, "kdtree", 4, kHierarchyFloor, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel,
      true, 3},
-    {CodecId::kOctree, "octree", 3, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel,
+    {CodecId::kOctree, "octree", 4, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel,
      true, 3},
     {CodecId::kPm, "pm", 4, kPmFloor, &pmEncode, &pmDecode, &pmLevels, &pmDecodeLevel, false, 3, true},
     {CodecId::kEdgebreaker, "edgebreaker", 2, kEdgebreakerFloor, &edgebreakerEncode, &edgebreakerDecode},

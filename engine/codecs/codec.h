@@ -307,6 +307,6 @@ Result<uint32_t> prmPayloadSpacing(std::span<const uint8_t> payload);
 uint32_t prmSpacing(const PrmOptions& options, int bits);
 
 Status octreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
-                             CodecStats* stats, const OctreeOptions& options = {});
+                             CodecStats* stats, const OctreeOptions& options = {}, uint16_t* version = nullptr);
 
 }  // namespace scanpress

@@ -1,4 +1,4 @@
-// Creases and texture seams through kdtree's coarse levels (payload version 4; issue 22 part 2). After
+// Creases and texture seams through the coarse levels of kdtree and octree (payload version 4; issue 22 part 2). After
 // ../shared/papers/attributes-selective-refinement.md §3 (the corner graph and its sharp edges), adapted to a
 // hierarchy of cells:
 //
@@ -19,6 +19,13 @@
 //   colors and scalars from the representative's. The encoder reuses a slot whose point lies at one of the group's
 //   corners.
 //
+// Octree (version 4) shows every three-clique of a level's edges, so its levels carry three more things (Rules):
+// which triangles around a crease are the tile's (a clique that is not, a *ghost*, would join groups across the
+// crease), which groups of a vertex are one (a vertex's fan cut by a gap into pieces between the same sharp edges:
+// without merging, a fine level of a tile cut by its border shows more vertices than the tile has points, and kdtree
+// then codes the tile as version 3), and a level that would still show too many shows fewer groups rather than
+// failing. Kdtree's version 4 predates these rules and keeps its bytes.
+//
 // Where we depart from the paper: it codes edge types with every vertex split and merges the attributes of a
 // contraction into new values; we code the types per level (only where the parent does not decide them) and show
 // the scan's own values, as version 3 does. Semi-sharp edges (normals apart, colors not) are sharp here: a group
@@ -28,6 +35,8 @@
 
 #include <algorithm>
 #include <numeric>
+#include <string>
+#include <string_view>
 
 #include "engine/codecs/attributes.h"
 
@@ -66,8 +75,19 @@ class CoarseCreases {
   static constexpr u32 kNone = UINT32_MAX;
   static constexpr u32 kPoint = 1u << 31;  // a value that is a point's (points are fewer than 2^26)
 
-  CoarseCreases(const AttributeLayout& layout, u32 n)
-      : layout_(layout), models_(layout), stride_(size_t(layout.scalarStride())), n_(n) {}
+  // What differs between the codecs' formats (kdtree: neither; octree: both).
+  struct Rules {
+    // A level's triangles are every three-clique of its edges, not only the projections of the tile's triangles:
+    // a level codes which of the triangles around its creases are projections.
+    bool cliques = false;
+    // A level codes, for each group after the first at a vertex, whether it is one of the vertex's earlier groups
+    // (mergeGroups).
+    bool merges = false;
+    // A level that would show more vertices than the tile has shows fewer groups (endLevel), instead of failing.
+    bool fit = false;
+  };
+  CoarseCreases(const AttributeLayout& layout, u32 n, std::string_view codec, Rules rules)
+      : layout_(layout), models_(layout), stride_(size_t(layout.scalarStride())), n_(n), codec_(codec), rules_(rules) {}
 
   // At the start of the first segment of a version 4 payload with attributes.
   void begin() {
@@ -160,7 +180,7 @@ class CoarseCreases {
         if (truth && truly != known_sharp) {
           for (u32 v : born_) mark_[v] = mark_[anc_[v]] = 0;
           failed_ = true;
-          return makeError(ErrorCode::kInternal, "kdtree encoder: an edge's sharpness changed without a split");
+          return makeError(ErrorCode::kInternal, codec_ + " encoder: an edge's sharpness changed without a split");
         }
         if (known_sharp) sharp.push_back(e);
         continue;
@@ -181,6 +201,30 @@ class CoarseCreases {
     };
     // Only around a vertex on a sharp edge: any other is one group (a non-manifold vertex is not split).
     for (u64 e : sharp) touch_[u32(e >> 32)] = touch_[u32(e)] = 1;
+    // Cliques (octree): a flag per triangle with a corner on a sharp edge, whether it is the projection of one of the
+    // tile's triangles. One that is not (a *ghost*: three edges of the surface closing a triangle it does not have)
+    // would join groups across a crease; it joins none, and each of its corners takes the group of a triangle
+    // beside it.
+    std::vector<u8> ghost;
+    if (rules_.cliques) {
+      ghost.assign(nk, 0);
+      std::vector<u8> projected;
+      if (truth) {
+        projected.assign(nk, 0);
+        for (const TriKey& f : truth->tri_keys) {
+          TriKey k{cell_of(f[0]), cell_of(f[1]), cell_of(f[2])};
+          if (!touch_[k[0]] && !touch_[k[1]] && !touch_[k[2]]) continue;
+          std::sort(k.begin(), k.end());
+          if (k[0] == k[1] || k[1] == k[2]) continue;
+          const auto it = std::lower_bound(keys.begin(), keys.end(), k);
+          if (it != keys.end() && *it == k) projected[size_t(it - keys.begin())] = 1;
+        }
+      }
+      for (u32 t = 0; t < nk; ++t)
+        if (touch_[keys[t][0]] || touch_[keys[t][1]] || touch_[keys[t][2]])
+          ghost[t] = !io.bit(projection_, truth ? projected[t] : 0);
+    }
+    const auto isGhost = [&](u32 t) { return !ghost.empty() && ghost[t]; };
     for (size_t i = 0, j = 0; i < on_edge.size(); i = j) {
       const u64 e = on_edge[i].first;
       while (j < on_edge.size() && on_edge[j].first == e) ++j;
@@ -188,9 +232,43 @@ class CoarseCreases {
       if (std::binary_search(sharp.begin(), sharp.end(), e)) continue;
       for (u32 v : {u32(e >> 32), u32(e)}) {
         if (!touch_[v]) continue;
-        const u32 r0 = find(corner(on_edge[i].second, v));
-        for (auto it = on_edge.begin() + ptrdiff_t(i + 1); it != on_edge.begin() + ptrdiff_t(j); ++it)
-          parent[find(corner(it->second, v))] = r0;
+        u32 r0 = kNone;
+        for (auto it = on_edge.begin() + ptrdiff_t(i); it != on_edge.begin() + ptrdiff_t(j); ++it) {
+          if (isGhost(it->second)) continue;
+          if (r0 == kNone) r0 = find(corner(it->second, v));
+          else parent[find(corner(it->second, v))] = r0;
+        }
+      }
+    }
+    if (!ghost.empty()) {
+      // Per vertex on a sharp edge, its first corner of a triangle that is not a ghost, else its first corner.
+      std::vector<std::pair<u32, u32>> first_corner;  // (vertex, corner), sorted
+      for (u32 c = 0; c < 3 * nk; ++c)
+        if (touch_[keys[c / 3][c % 3]]) first_corner.push_back({keys[c / 3][c % 3], ghost[c / 3] ? 3 * nk + c : c});
+      std::sort(first_corner.begin(), first_corner.end());
+      for (u32 t = 0; t < nk; ++t) {
+        if (!ghost[t]) continue;
+        for (u32 v : keys[t]) {
+          if (!touch_[v]) continue;
+          // The first triangle that is not a ghost on one of its two edges at v (smooth or not), else v's first
+          // corner as above: no group of its own.
+          u32 beside = kNone;
+          for (u32 o : keys[t]) {
+            if (o == v || beside != kNone) continue;
+            const u64 e = edgeKey(v, o);
+            auto it = std::lower_bound(on_edge.begin(), on_edge.end(), std::pair<u64, u32>{e, 0});
+            for (; it != on_edge.end() && it->first == e && beside == kNone; ++it)
+              if (!ghost[it->second]) beside = it->second;
+          }
+          u32 to = kNone;
+          if (beside != kNone) {
+            to = corner(beside, v);
+          } else {
+            const auto it = std::lower_bound(first_corner.begin(), first_corner.end(), std::pair<u32, u32>{v, 0});
+            to = it->second >= 3 * nk ? it->second - 3 * nk : it->second;
+          }
+          parent[find(corner(t, v))] = find(to);
+        }
       }
     }
     Level next;
@@ -211,17 +289,29 @@ class CoarseCreases {
       next.corner_group[c] = number[r];
     }
     std::sort(touched.begin(), touched.end());
+    if (rules_.merges) mergeGroups(io, keys, touched, next.corner_group, cell_of, truth);
     u64 shown = cells;
     for (u32 v : touched) shown += count_[v] - 1;
     for (u64 e : sharp) touch_[u32(e >> 32)] = touch_[u32(e)] = 0;
     const auto reset = [&] {
       for (u32 v : touched) count_[v] = 0;
     };
+    if (shown > max_vertices && rules_.fit) {
+      // A vertex's corners may be several groups without a crease between them (its fan cut by the tile's border
+      // into pieces): a level can show more vertices than the tile has points. The last vertices of several groups
+      // then show one each, until the level shows at most the tile's count (at worst one vertex per cell).
+      std::vector<u32> merged;
+      for (auto it = touched.rbegin(); it != touched.rend() && shown > max_vertices; ++it)
+        if (count_[*it] > 1) shown -= count_[*it] - 1, count_[*it] = 1, merged.push_back(*it), mark_[*it] = 1;
+      for (u32 c = 0; c < 3 * nk; ++c)
+        if (mark_[keys[c / 3][c % 3]]) next.corner_group[c] = 0;
+      for (u32 v : merged) mark_[v] = 0;
+    }
     if (shown > max_vertices) {
       reset();
       failed_ = true;
       return makeError(truth ? ErrorCode::kInternal : ErrorCode::kMalformed,
-                       "kdtree payload: a coarse level with its creases shows " + std::to_string(shown) +
+                       codec_ + " payload: a coarse level with its creases shows " + std::to_string(shown) +
                            " vertices, more than the tile's " + std::to_string(max_vertices));
     }
     // The vertices whose values are chosen here: the wedged ones and those of the cells that split at this level
@@ -233,8 +323,9 @@ class CoarseCreases {
     values_.clear();
     for (u32 v : born_) mark_[v] = mark_[anc_[v]] = 1;
     std::vector<u32> chosen;
+    // (With merges, also a vertex whose groups became one: what it showed were its groups' values.)
     for (u32 v : touched)
-      if (count_[v] > 1 || mark_[v]) chosen.push_back(v);
+      if (count_[v] > 1 || mark_[v] || (rules_.merges && findWedged(prev_wedged_, v))) chosen.push_back(v);
     for (u32 v : born_) mark_[v] = mark_[anc_[v]] = 0;
     for (u32 v : chosen) mark_[v] = 1;
     const auto unmark = [&] {
@@ -255,7 +346,7 @@ class CoarseCreases {
           reset();
           unmark();
           failed_ = true;
-          return makeError(ErrorCode::kInternal, "kdtree encoder: a coarse triangle without its fine one");
+          return makeError(ErrorCode::kInternal, codec_ + " encoder: a coarse triangle without its fine one");
         }
         const u32 t = u32(it - keys.begin());
         for (int j = 0; j < 3; ++j)
@@ -369,6 +460,71 @@ class CoarseCreases {
   }
 
  private:
+  // The groups of a vertex are the pieces of its fan between sharp edges; a fan cut by a gap (the tile's border, a
+  // hole) has more pieces than the vertex has values, and a fine level would show more vertices than the tile has
+  // points. So, per vertex of k >= 2 groups, each group g >= 1 codes whether it is one with an earlier group
+  // (a bit) and which (uniform over the g before it); the encoder says so when both groups' corners are one point.
+  template <class Io, class CellOf>
+  void mergeGroups(Io& io, const std::vector<TriKey>& keys, const std::vector<u32>& touched,
+                   std::vector<u32>& corner_group, const CellOf& cell_of, const Points* truth) {
+    const u32 nk = u32(keys.size());
+    std::vector<std::pair<u32, u32>> corners;  // (vertex, corner) of the vertices of several groups
+    for (u32 c = 0; c < 3 * nk; ++c)
+      if (count_[keys[c / 3][c % 3]] > 1) corners.push_back({keys[c / 3][c % 3], c});
+    if (corners.empty()) return;
+    std::sort(corners.begin(), corners.end());
+    // Encoder: per (vertex, group), the point at all its corners (kNone: several), sorted.
+    std::vector<std::array<u32, 3>> point_of;
+    if (truth) {
+      for (const TriKey& f : truth->tri_keys) {
+        std::array<std::pair<u32, u32>, 3> cp;
+        for (int j = 0; j < 3; ++j) cp[j] = {cell_of(f[j]), f[j]};
+        std::sort(cp.begin(), cp.end());
+        if (cp[0].first == cp[1].first || cp[1].first == cp[2].first) continue;
+        if (count_[cp[0].first] < 2 && count_[cp[1].first] < 2 && count_[cp[2].first] < 2) continue;
+        const TriKey k{cp[0].first, cp[1].first, cp[2].first};
+        const auto it = std::lower_bound(keys.begin(), keys.end(), k);
+        if (it == keys.end() || *it != k) continue;  // (endLevel fails on it)
+        const u32 t = u32(it - keys.begin());
+        for (int j = 0; j < 3; ++j)
+          if (count_[k[j]] > 1) point_of.push_back({k[j], corner_group[3 * t + j], cp[j].second});
+      }
+      std::sort(point_of.begin(), point_of.end());
+      point_of.erase(std::unique(point_of.begin(), point_of.end()), point_of.end());
+    }
+    const auto pointOf = [&](u32 v, u32 g) {
+      auto it = std::lower_bound(point_of.begin(), point_of.end(), std::array<u32, 3>{v, g, 0});
+      if (it == point_of.end() || (*it)[0] != v || (*it)[1] != g) return kNone;
+      const u32 p = (*it)[2];
+      return ++it != point_of.end() && (*it)[0] == v && (*it)[1] == g ? kNone : p;
+    };
+    std::vector<u32> to;
+    size_t at = 0;
+    for (u32 v : touched) {
+      const u32 k = count_[v];
+      if (k < 2) continue;
+      to.assign(k, 0);
+      u32 groups = 1;
+      for (u32 g = 1; g < k; ++g) {
+        u32 same = kNone;
+        if (truth)
+          if (const u32 p = pointOf(v, g); p != kNone)
+            for (u32 h = 0; h < g && same == kNone; ++h)
+              if (pointOf(v, h) == p) same = h;
+        if (io.bit(merge_[std::min<u32>(g, 2) - 1], same != kNone ? 1 : 0)) {
+          const u32 h = g > 1 ? std::min(io.uniform(same == kNone ? 0 : same, g), g - 1) : 0;
+          to[g] = to[h];
+        } else {
+          to[g] = groups++;
+        }
+      }
+      count_[v] = groups;
+      while (at < corners.size() && corners[at].first < v) ++at;
+      for (; at < corners.size() && corners[at].first == v; ++at)
+        corner_group[corners[at].second] = to[corner_group[corners[at].second]];
+    }
+  }
+
   // A new value in the pool: the attributes of `truth_point` (encoder), the normal predicted from the group's
   // triangles (`sum`, with a flip bit) else from `base` (a pool value or kNone), colors and scalars from `base`.
   template <class Io>
@@ -529,10 +685,12 @@ class CoarseCreases {
   AttributeModels models_;
   size_t stride_;
   u32 n_;
+  std::string codec_;
+  Rules rules_;
   bool on_ = false, failed_ = false, floors_known_ = false;
   // Sharp flags by context: inside a cell that split (0; 3: a cell on a sharp edge), under a sharp edge (1), without
   // a parent (2).
-  BitModel flag_[4], predicted_[3], reuse_[3], flip_;
+  BitModel flag_[4], predicted_[3], reuse_[3], flip_, projection_, merge_[2];
   std::vector<u32> anc_, count_, born_, show_;
   std::vector<u8> mark_, touch_;
   std::vector<u64> prev_edges_, prev_sharp_;
@@ -546,5 +704,53 @@ class CoarseCreases {
   const ScalarValues* point_scalars_ = nullptr;
   std::vector<double> floor_, lo_, hi_, x_;  // encoder: rangeOf's floors, the range, scratch
 };
+
+// A coarse level with its creases (CoarseCreases on, its level's keys not empty), appended to `m` (empty): cell i
+// (of `cells`) is vertex name(i) of the n the codec names, at position(i); a cell of several groups is a vertex per
+// group, each triangle corner the vertex of its group. A cell shows its representative's values (coarse.shown,
+// from `normals`, `colors`, `scalars`, by point), a wedged cell its groups' and a chosen cell the chosen ones.
+// False, with the attributes left empty, when the level shows no representatives yet (the caller derives them).
+template <class Name, class Position>
+bool showCreasedLevel(const CoarseCreases& creases, const CoarseAttributes& coarse, u32 n, u32 cells, const Name& name,
+                      const Position& position, const AttributeLayout& layout, const std::vector<OctNormal>& normals,
+                      const std::vector<Rgba8>& colors, const ScalarValues& scalars, QuantizedMesh& m) {
+  const auto& level = creases.level();
+  std::vector<u32> index(n, UINT32_MAX);
+  for (u32 i = 0; i < cells; ++i) {
+    const u32 v = name(i);
+    index[v] = u32(m.positions.size());
+    const auto* w = level.find(v);
+    m.positions.insert(m.positions.end(), w ? (*w)[2] : 1, position(i));
+  }
+  m.triangles = orientedTriangles(level.keys);
+  for (size_t t = 0; t < m.triangles.size(); ++t)
+    for (u32& v : m.triangles[t]) {
+      const auto& k = level.keys[t];
+      v = index[v] + level.corner_group[3 * t + (k[0] == v ? 0 : k[1] == v ? 1 : 2)];
+    }
+  if (!coarse.showable(cells, name)) return false;
+  const size_t stride = size_t(layout.scalarStride());
+  const auto append = [&](OctNormal nrm, Rgba8 c, const uint32_t* s) {
+    if (layout.hasNormals()) m.normals.push_back(nrm);
+    if (layout.hasColors()) m.colors.push_back(c);
+    m.scalars.insert(m.scalars.end(), s, s + stride);
+  };
+  for (u32 i = 0; i < cells; ++i) {
+    const u32 v = name(i);
+    if (const auto* w = level.find(v)) {
+      for (u32 g = 0; g < (*w)[2]; ++g) {
+        const u32 x = creases.groupValue((*w)[1] + g);
+        append(creases.normal(x), creases.color(x), creases.scalarsOf(x));
+      }
+    } else if (const u32 x = creases.showOverride(v); x != CoarseCreases::kNone) {
+      append(creases.normal(x), creases.color(x), creases.scalarsOf(x));
+    } else {
+      const u32 r = coarse.shown(v);
+      append(layout.hasNormals() ? normals[r] : OctNormal{0, 0}, layout.hasColors() ? colors[r] : Rgba8{0, 0, 0, 255},
+             scalars.data() + size_t(r) * stride);
+    }
+  }
+  return true;
+}
 
 }  // namespace scanpress::hierarchy

@@ -169,7 +169,7 @@ void writeHeader(const HeaderFormat& f, const Header& h, int bits, const Attribu
 }
 
 Status checkVersion(std::string_view codec, uint16_t version) {
-  // 2: predicted attributes; 3: coarse levels with their own (attributes.h); kdtree 4: with their creases (creases.h).
+  // 2: predicted attributes; 3: coarse levels with their own (attributes.h); 4: with their creases (creases.h).
   const CodecInfo* info = findCodec(codec);
   const uint16_t known = info ? info->version : 3;
   if (version < 1 || version > known)

@@ -269,7 +269,7 @@ class Engine {
     if (n_ == 0) return Status::ok();
     coarse_ = std::make_unique<CoarseAttributes>(layout, version, n_);
     coarse_->birth(0, CoarseAttributes::kNone);
-    creases_ = std::make_unique<CoarseCreases>(layout, n_);
+    creases_ = std::make_unique<CoarseCreases>(layout, n_, "kdtree", CoarseCreases::Rules{});
     for (int k = k0_; k < bits_ && k < target; ++k) {
       SP_RETURN_IF_ERROR(io_.begin());
       if (k == k0_ && version >= kCoarseCreases && coarse_->active()) creases_->begin();
@@ -324,60 +324,30 @@ class Engine {
       m.scalars = std::move(scalars_);
       return m;
     }
-    std::vector<u32> index(n_, UINT32_MAX);
+    const auto position = [&](u32 i) {
+      Vec3u p = lo_[cells_[i].s];
+      for (int a = 0; a < 3; ++a) p[a] += (1u << (bits_ - splitsAlong(depth_[cells_[i].s], a))) >> 1;
+      return p;
+    };
+    const auto name = [&](u32 i) { return cells_[i].s; };
     // Version 4: a cell of several groups of corners (its creases and seams) shows a vertex per group, and a cell
     // may show a value chosen for it instead of its representative's (creases.h).
-    const bool creased = creases_ && creases_->on() && !creases_->level().keys.empty();
-    for (const auto& c : cells_) {
-      index[c.s] = static_cast<u32>(m.positions.size());
-      Vec3u p = lo_[c.s];
-      for (int a = 0; a < 3; ++a) p[a] += (1u << (bits_ - splitsAlong(depth_[c.s], a))) >> 1;
-      const auto* w = creased ? creases_->level().find(c.s) : nullptr;
-      m.positions.insert(m.positions.end(), w ? (*w)[2] : 1, p);
-    }
-    if (creased) {
-      const auto& level = creases_->level();
-      m.triangles = orientedTriangles(level.keys);
-      for (size_t t = 0; t < m.triangles.size(); ++t)
-        for (u32& v : m.triangles[t]) {
-          const auto& k = level.keys[t];
-          v = index[v] + level.corner_group[3 * t + (k[0] == v ? 0 : k[1] == v ? 1 : 2)];
-        }
-      if (!coarse_->showable(u32(cells_.size()), [&](u32 i) { return cells_[i].s; })) {
+    if (creases_ && creases_->on() && !creases_->level().keys.empty()) {
+      if (!showCreasedLevel(*creases_, *coarse_, n_, u32(cells_.size()), name, position, layout, normals_, colors_,
+                            scalars_, m))
         deriveAttributes(m, layout);
-        return m;
-      }
-      // A cell shows its representative's values (as show() gives them), a wedged cell its groups' and a chosen
-      // cell the chosen ones.
-      const size_t stride = size_t(layout.scalarStride());
-      const auto append = [&](OctNormal n, Rgba8 c, const uint32_t* s) {
-        if (layout.hasNormals()) m.normals.push_back(n);
-        if (layout.hasColors()) m.colors.push_back(c);
-        m.scalars.insert(m.scalars.end(), s, s + stride);
-      };
-      for (size_t i = 0; i < cells_.size(); ++i) {
-        const u32 v = cells_[i].s;
-        if (const auto* w = level.find(v)) {
-          for (u32 g = 0; g < (*w)[2]; ++g) {
-            const u32 x = creases_->groupValue((*w)[1] + g);
-            append(creases_->normal(x), creases_->color(x), creases_->scalarsOf(x));
-          }
-        } else if (const u32 x = creases_->showOverride(v); x != CoarseCreases::kNone) {
-          append(creases_->normal(x), creases_->color(x), creases_->scalarsOf(x));
-        } else {
-          const u32 r = coarse_->shown(v);
-          append(layout.hasNormals() ? normals_[r] : OctNormal{0, 0},
-                 layout.hasColors() ? colors_[r] : Rgba8{0, 0, 0, 255}, scalars_.data() + size_t(r) * stride);
-        }
-      }
       return m;
+    }
+    std::vector<u32> index(n_, UINT32_MAX);
+    for (u32 i = 0; i < cells_.size(); ++i) {
+      index[cells_[i].s] = static_cast<u32>(m.positions.size());
+      m.positions.push_back(position(i));
     }
     m.triangles = orientedTriangles(triangleKeys());
     for (auto& t : m.triangles)
       for (auto& v : t) v = index[v];
     // Version 3: each cell shows its representative's attributes (attributes.h, CoarseAttributes).
-    if (!coarse_ || !coarse_->show(
-                        u32(cells_.size()), [&](u32 i) { return cells_[i].s; }, normals_, colors_, scalars_, m))
+    if (!coarse_ || !coarse_->show(u32(cells_.size()), name, normals_, colors_, scalars_, m))
       deriveAttributes(m, layout);
     return m;
   }

@@ -37,21 +37,28 @@
 //  - Attributes (normals, colors) are coded per vertex in the final segment: raw in v1, predicted in v2
 //    (attributes.h). In v2 coarse levels get normals from their triangles and gray colors; from v3 each coarse
 //    vertex shows the attributes of a point of its cell, those of the first levels coded at the end of their
-//    segments (attributes.h, CoarseAttributes).
+//    segments (attributes.h, CoarseAttributes); v4 (written only for a tile with creases or texture seams, else v3)
+//    keeps them at every coarse level as kdtree v4 does (creases.h), with what a level of cliques needs: a flag per
+//    triangle around a crease saying whether it is one of the tile's (a clique that is not, a ghost, joins no
+//    corners), a merge flag per extra group of a vertex (its fan cut into pieces by a gap), and a level that would
+//    show more vertices than the tile has shows fewer groups instead of failing.
 //
-// Payload v1, v2 and v3 (hierarchy.h's header with the axis order byte; they differ in the attributes' coding):
+// Payload v1 to v4 (hierarchy.h's header with the axis order byte; they differ in the attributes' coding):
 //   varint N (points), varint T (triangles, with multiplicity); if N == 0 nothing follows.
 //   u8 k0 (root level), u8 axis order (0..5: xyz xzy yxz yzx zxy zyx, decoder order), 3 x varint root cell index,
 //   varint S (= bits - k0 + 1), S x varint segment length, then the segments, each one range-coder stream.
 //   Segment i < S-1: the root's next split (i = 0 only), then the three split steps from level k0+i to k0+i+1,
-//   then (v3) the attributes of the vertices they created while there are few.
+//   then (v3) the attributes of the vertices they created while there are few, then (v4) the level's sharp flags,
+//   projection flags, merges and chosen values.
 //   Segment S-1: (the root's next split if k0 = bits) the rounds of coincident-vertex splits, face flags of the
 //   cliques, orientation and multiplicity, attributes.
 #include <algorithm>
+#include <span>
 #include <string>
 
 #include "engine/codecs/codec.h"
 #include "engine/codecs/attributes.h"
+#include "engine/codecs/creases.h"
 #include "engine/codecs/hierarchy.h"
 
 namespace scanpress {
@@ -90,6 +97,8 @@ struct Truth {
   std::vector<Key> keys;        // Morton key per point
   const Plan* plan = nullptr;   // null while planning
   Points by_id;                 // triangles and attributes over the decoder's vertex ids
+  std::vector<u32> first;       // per vertex id, its point (Morton order)
+  std::vector<u64> cut;         // version 4: the cut edges over vertex ids (creases.h, cutEdges)
 };
 
 // The planning pass codes nothing: it only follows the truth.
@@ -142,13 +151,17 @@ class Engine {
     if (n_ == 0) return Status::ok();
     coarse_ = std::make_unique<CoarseAttributes>(layout, version, n_);
     coarse_->birth(0, CoarseAttributes::kNone);
+    creases_ = std::make_unique<CoarseCreases>(layout, n_, kCodec,
+                                               CoarseCreases::Rules{.cliques = true, .merges = true, .fit = true});
     for (int k = k0_; k < bits_ && k < target; ++k) {
       SP_RETURN_IF_ERROR(io_.begin());
       if (k == k0_) SP_RETURN_IF_ERROR(codeNext(0, -1, 2));
+      if (k == k0_ && version >= kCoarseCreases && coarse_->active() && !planning()) creases_->begin();
       for (int j = 0; j < 3; ++j) SP_RETURN_IF_ERROR(step(3 * (k - k0_) + j));
       io_.meter(&CodecStats::attribute_bits);
       coarse_->endLevel(io_, u32(lo_.size()), bits_ - (k + 1), truth_ ? &truth_->by_id : nullptr, normals_, colors_,
                         scalars_, [&](u32 v) -> const std::vector<u32>& { return nb_[v]; });
+      if (creases_->on()) SP_RETURN_IF_ERROR(endCreasedLevel(k + 1));
       SP_RETURN_IF_ERROR(io_.end());
       level_ = k + 1;
     }
@@ -187,12 +200,52 @@ class Engine {
       return m;
     }
     const u32 half = (1u << (bits_ - level_)) >> 1;
+    // Version 4: a vertex of several groups of corners (its creases and seams) shows a vertex per group, and a
+    // vertex may show a value chosen for it instead of its representative's (creases.h).
+    if (creases_ && creases_->on() && !creases_->level().keys.empty()) {
+      const auto position = [&](u32 v) { return Vec3u{lo_[v][0] + half, lo_[v][1] + half, lo_[v][2] + half}; };
+      if (!showCreasedLevel(
+              *creases_, *coarse_, n_, u32(lo_.size()), [](u32 v) { return v; }, position, layout, normals_, colors_,
+              scalars_, m))
+        deriveAttributes(m, layout);
+      return m;
+    }
     m.positions = lo_;
     for (auto& p : m.positions)
       for (auto& c : p) c += half;
-    auto lists = nb_;
-    for (auto& l : lists) std::sort(l.begin(), l.end());
     std::vector<TriKey> keys;
+    SP_RETURN_IF_ERROR(levelCliques(keys));
+    m.triangles = orientedTriangles(keys);
+    // Version 3: each vertex shows its representative's attributes (attributes.h, CoarseAttributes).
+    if (!coarse_ || !coarse_->show(
+                        u32(m.positions.size()), [](u32 i) { return i; }, normals_, colors_, scalars_, m))
+      deriveAttributes(m, layout);
+    return m;
+  }
+
+  bool creasesFailed() const { return creases_ && creases_->failed(); }
+
+  AttributeLayout layout;             // set by the caller before run()
+  uint16_t version = kCoarseCreases;  // the payload's (attribute coding)
+  u64 max_cliques_ = kMaxTriangles;   // coarse levels' triangles (set by the decoder from the index)
+  bool flat_ = false;                 // one model per symbol kind (measuring the contexts' gain)
+  u64 splits_ = 0;
+  std::vector<std::array<u32, 2>> range_;   // encoder: the points [s, e) of each vertex
+  std::vector<std::array<u32, 2>> events_;  // planning: the splits in order
+
+ private:
+  bool planning() const { return truth_ && !truth_->plan; }
+
+  // The coarse level's triangles: every three-clique of its vertex graph (sorted keys), at most max_cliques_.
+  Status levelCliques(std::vector<TriKey>& keys) const {
+    SortedLists lists;  // the lists sorted, in one array (a copy per vertex cost more than the cliques)
+    lists.start.reserve(nb_.size() + 1);
+    for (const auto& l : nb_) {
+      lists.start.push_back(u32(lists.items.size()));
+      lists.items.insert(lists.items.end(), l.begin(), l.end());
+      std::sort(lists.items.end() - ptrdiff_t(l.size()), lists.items.end());
+    }
+    lists.start.push_back(u32(lists.items.size()));
     Status status = Status::ok();
     forEachClique(lists, [&](u32 a, u32 b, u32 c, int) {
       if (keys.size() >= max_cliques_) {
@@ -204,25 +257,25 @@ class Engine {
       keys.push_back({a, b, c});
       return 1;
     });
-    SP_RETURN_IF_ERROR(status);
-    m.triangles = orientedTriangles(keys);
-    // Version 3: each vertex shows its representative's attributes (attributes.h, CoarseAttributes).
-    if (!coarse_ || !coarse_->show(
-                        u32(m.positions.size()), [](u32 i) { return i; }, normals_, colors_, scalars_, m))
-      deriveAttributes(m, layout);
-    return m;
+    return status;
   }
 
-  AttributeLayout layout;                // set by the caller before run()
-  uint16_t version = kCoarseAttributes;  // the payload's (attribute coding)
-  u64 max_cliques_ = kMaxTriangles;      // coarse levels' triangles (set by the decoder from the index)
-  bool flat_ = false;                    // one model per symbol kind (measuring the contexts' gain)
-  u64 splits_ = 0;
-  std::vector<std::array<u32, 2>> range_;   // encoder: the points [s, e) of each vertex
-  std::vector<std::array<u32, 2>> events_;  // planning: the splits in order
-
- private:
-  bool planning() const { return truth_ && !truth_->plan; }
+  // Version 4: the end of level `level`'s segment codes its sharp edges and its groups' values (creases.h).
+  Status endCreasedLevel(int level) {
+    level_ = level;
+    std::vector<TriKey> keys;
+    SP_RETURN_IF_ERROR(levelCliques(keys));
+    if (truth_) {  // each vertex id's vertex at the level: the one whose points hold its point
+      morton_vertex_.resize(n_);
+      for (u32 v = 0; v < lo_.size(); ++v)
+        std::fill(morton_vertex_.begin() + range_[v][0], morton_vertex_.begin() + range_[v][1], v);
+    }
+    const auto cell_of = [&](u32 id) { return morton_vertex_[truth_->first[id]]; };
+    return creases_->endLevel(
+        io_, std::move(keys), u32(lo_.size()), cell_of, [&](u32 v) -> const Vec3u& { return c2_[v]; },
+        [&](u32 v) { return coarse_->shown(v); }, normals_, colors_, scalars_, truth_ ? &truth_->cut : nullptr,
+        truth_ ? &truth_->by_id : nullptr, n_);
+  }
 
   void addVertex(Vec3u lo, Vec3u c2) {
     lo_.push_back(lo);
@@ -328,7 +381,7 @@ class Engine {
       range_[v] = {s, m};
       range_.push_back({m, e});
     }
-    if (axis >= 0) coarse_->birth(w, v);
+    if (axis >= 0) coarse_->birth(w, v), creases_->birth(w, v);
     if (planning()) events_.push_back({v, w});
     else SP_RETURN_IF_ERROR(splitEdges(v, w, axis, plane2, half));
     SP_RETURN_IF_ERROR(codeNext(v, t, 0));
@@ -426,15 +479,24 @@ class Engine {
     }
   }
 
+  // Sorted neighbour lists in one array: vertex v's are items[start[v], start[v + 1]).
+  struct SortedLists {
+    std::vector<u32> start, items;
+    size_t size() const { return start.size() - 1; }
+    std::span<const u32> operator[](size_t v) const {
+      return std::span<const u32>(items).subspan(start[v], start[v + 1] - start[v]);
+    }
+  };
+
   // Calls f(a, b, c, faces so far on edge ab) for every three-clique a < b < c of the sorted lists, in order;
   // f returns -1 to stop, 1 when (a, b, c) counts as a face, 0 otherwise.
-  template <class F>
-  static void forEachClique(const std::vector<std::vector<u32>>& lists, F f) {
+  template <class Lists, class F>
+  static void forEachClique(const Lists& lists, F f) {
     for (u32 a = 0; a < lists.size(); ++a) {
-      const auto& la = lists[a];
+      const std::span<const u32> la = lists[a];
       for (u32 b : la) {
         if (b <= a) continue;
-        const auto& lb = lists[b];
+        const std::span<const u32> lb = lists[b];
         auto ia = std::upper_bound(la.begin(), la.end(), b);
         auto ib = std::upper_bound(lb.begin(), lb.end(), b);
         int faces = 0;
@@ -504,6 +566,8 @@ class Engine {
   std::vector<Rgba8> colors_;
   ScalarValues scalars_;  // by vertex id
   std::unique_ptr<CoarseAttributes> coarse_;
+  std::unique_ptr<CoarseCreases> creases_;
+  std::vector<u32> morton_vertex_;  // encoder, version 4: per point (Morton order), its vertex at the level
 };
 
 // Decoder axis order: the tile's longest extent first (the encoder merges along the shortest first).
@@ -589,7 +653,8 @@ Plan planCodes(const Points& by_id, const std::vector<std::array<u32, 2>>& event
 }
 
 Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<u8>& out, CodecStats* stats,
-                  bool contexts) {
+                  bool contexts, uint16_t* version) {
+  if (version) *version = kCoarseAttributes;
   const Axes axes = axisOrder(mesh);
   Points pts;
   SP_RETURN_IF_ERROR(collectPoints(kCodec, ctx, mesh, axes, pts));
@@ -620,20 +685,44 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
     Engine<NullIo> planner(nio, ctx.bits, h, &truth);
     SP_RETURN_IF_ERROR(planner.run(ctx.bits));
     renameToIds(pts, planner.range_, truth.by_id);
+    truth.first.resize(h.n);
+    for (u32 v = 0; v < h.n; ++v) truth.first[v] = planner.range_[v][0];
     events = std::move(planner.events_);
   }
   const Plan plan = planCodes(truth.by_id, events);
   truth.plan = &plan;
 
+  // Version 4 (creases through the coarse levels) when the tile has cut edges, else version 3.
+  const AttributeLayout& layout = ctx.layout;
+  if (layout.hasNormals() || layout.hasColors() || layout.hasScalars()) {
+    std::vector<u32> id(h.n);
+    for (u32 v = 0; v < h.n; ++v) id[truth.first[v]] = v;
+    for (u64 e : cutEdges(pts)) truth.cut.push_back(edgeKey(id[u32(e >> 32)], id[u32(e)]));
+    std::sort(truth.cut.begin(), truth.cut.end());
+  }
+  const auto encode = [&](EncodeIo& io, uint16_t v) {
+    io.stats = stats;
+    auto engine = std::make_unique<Engine<EncodeIo>>(io, ctx.bits, h, &truth);
+    engine->layout = layout;
+    engine->flat_ = !contexts;
+    engine->version = v;
+    return engine;
+  };
   EncodeIo io;
-  io.stats = stats;
-  Engine<EncodeIo> engine(io, ctx.bits, h, &truth);
-  engine.layout = ctx.layout;
-  engine.flat_ = !contexts;
-  SP_RETURN_IF_ERROR(engine.run(ctx.bits));
+  auto engine = encode(io, truth.cut.empty() ? kCoarseAttributes : kCoarseCreases);
+  if (Status st = engine->run(ctx.bits); !st.isOk()) {
+    // A coarse level whose creases would show more vertices than the tile has, or cut edges that do not map onto
+    // a level as they should (neither seen): the tile is coded without creases, as version 3.
+    if (!engine->creasesFailed()) return st;
+    io = EncodeIo{};
+    if (stats) *stats = CodecStats{.points = h.n, .triangles = h.t};
+    engine = encode(io, kCoarseAttributes);
+    SP_RETURN_IF_ERROR(engine->run(ctx.bits));
+  }
+  if (version) *version = engine->version;
   writeHeader(kFormat, h, ctx.bits, ctx.layout, io.segments, out);
   if (stats) {
-    stats->splits = engine.splits_;
+    stats->splits = engine->splits_;
     stats->payload_bytes = out.size() - start;
   }
   return Status::ok();
@@ -662,13 +751,16 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
 
 Result<EncodedTile> octreeEncode(const TileContext& ctx, const TileView& tile, const CodecOptions& options) {
   std::vector<u8> out;
-  SP_RETURN_IF_ERROR(encodeImpl(ctx, tile.mesh, out, nullptr, options.octree.contexts));
-  return encodedTile(kFormat, ctx, tile.mesh, std::move(out));
+  uint16_t version = 0;
+  SP_RETURN_IF_ERROR(encodeImpl(ctx, tile.mesh, out, nullptr, options.octree.contexts, &version));
+  SP_ASSIGN_OR_RETURN(EncodedTile e, encodedTile(kFormat, ctx, tile.mesh, std::move(out)));
+  e.version = version;
+  return e;
 }
 
 Status octreeEncodeWithStats(const TileContext& ctx, const QuantizedMesh& mesh, std::vector<uint8_t>& out,
-                             CodecStats* stats, const OctreeOptions& options) {
-  return encodeImpl(ctx, mesh, out, stats, options.contexts);
+                             CodecStats* stats, const OctreeOptions& options, uint16_t* version) {
+  return encodeImpl(ctx, mesh, out, stats, options.contexts, version);
 }
 
 Result<QuantizedMesh> octreeDecode(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
