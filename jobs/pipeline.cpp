@@ -664,11 +664,15 @@ class ScanEncoder {
                             merged_points_};
     result_.read.dropped.push_back(d);
     if (s_.strict)
-      return makeError(ErrorCode::kUnsupported, s_.input + ": strict: the container would not keep " +
-                                                    describeDropped(std::span(&d, 1)) +
-                                                    " (encode without --strict or /strict to "
-                                                    "drop them, or with a codec that keeps every point)");
+      return strictRefusal(std::span(&d, 1),
+                           "encode without --strict or /strict to drop them, or with a codec that keeps every point");
     return Status::ok();
+  }
+
+  // Under `strict`: the file refused for what the container would not keep, with how to go on.
+  Status strictRefusal(std::span<const DroppedProperty> dropped, const std::string& remedy) const {
+    return makeError(ErrorCode::kUnsupported, s_.input + ": strict: the container would not keep " +
+                                                  describeDropped(dropped) + " (" + remedy + ")");
   }
 
   // Index, footer, sync, rename.
@@ -713,11 +717,10 @@ class ScanEncoder {
                                         survey_.vertex_count});
     }
     if (s_.strict && !result_.read.dropped.empty())
-      return makeError(ErrorCode::kUnsupported,
-                       s_.input + ": strict: the container would not keep " + describeDropped(result_.read.dropped) +
-                           " (scanpress keeps positions, triangles, normals, colors and per-vertex scalars; texture "
+      return strictRefusal(result_.read.dropped,
+                           "scanpress keeps positions, triangles, normals, colors and per-vertex scalars; texture "
                            "coordinates and normals per corner with store, kdtree, octree and edgebreaker; encode "
-                           "without --strict or /strict to drop them)");
+                           "without --strict or /strict to drop them");
     return Status::ok();
   }
 

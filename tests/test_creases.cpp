@@ -1,4 +1,4 @@
-// Creases and seams through the coarse levels of kdtree and octree (version 4, engine/codecs/creases.h): a cube
+// Creases and seams through the coarse levels of kdtree (v5) and octree (v4; engine/codecs/creases.h): a cube
 // with a normal per face (every edge a crease, every corner three wedges), fandisk split at its sharp edges (whole,
 // and with holes cutting its fans into pieces) and a UV-mapped sphere (a seam), against what the scan says at each
 // level; the cut edges against a brute force; version 3 for tiles without creases; hostile payloads.
@@ -119,16 +119,16 @@ QuantizedMesh onePerPosition(QuantizedMesh m) {
   return m;
 }
 
-// The coarse levels of `q` coded by `codec` (version 4), each decoded from the payload cut at its end and valid; the
-// root level (one cell) and the last level left out.
+// The coarse levels of `q` coded by `codec` (its version with creases), each decoded from the payload cut at its end
+// and valid; the root level (one cell) and the last level left out.
 std::vector<std::pair<uint32_t, QuantizedMesh>> coarseLevels(const CodecInfo& codec, const TileContext& ctx,
                                                              const QuantizedMesh& q) {
   std::vector<std::pair<uint32_t, QuantizedMesh>> out;
   auto enc = encodeMesh(codec, ctx, q);
   EXPECT_TRUE(enc.isOk()) << enc.status().toString();
   if (!enc.isOk()) return out;
-  EXPECT_EQ(enc->version, 4);
-  std::printf("%s v4 payload: %zu bytes\n", std::string(codec.name).c_str(), enc->payload.size());
+  EXPECT_EQ(enc->version, codec.version);
+  std::printf("%s v%d payload: %zu bytes\n", std::string(codec.name).c_str(), int(enc->version), enc->payload.size());
   auto levels = codec.levels(ctx, enc->version, enc->payload, limitsOf(enc->decoded));
   EXPECT_TRUE(levels.isOk());
   if (!levels.isOk()) return out;
@@ -260,8 +260,9 @@ TEST_P(Creases, FandiskCreasesSurviveEveryLevel) {
 
 // A tile whose crease vertices' fans are cut into pieces (every fifth triangle of fandisk left out, as a tile's
 // border cuts them): a vertex's corners are then more groups than it has points, and a fine level would show more
-// vertices than the tile has. Octree shows fewer groups at such levels (creases.h, Rules::fit) and keeps version 4,
-// every level within the tile's count; kdtree (its version 4 fixed before this rule) codes the tile as version 3.
+// vertices than the tile has. The groups that are one point merge (creases.h, Rules::merges; a level that still
+// shows too many shows fewer groups, Rules::fit): the creases are kept, every level within the tile's count (kdtree
+// v4, without these rules, coded such a tile as version 3).
 TEST_P(Creases, FansCutIntoPiecesFitTheTile) {
   const std::string path = testing::sharedDataDir() + "/fandisk.obj";
   if (!std::filesystem::exists(path)) GTEST_SKIP() << "shared data not found: " << path;
@@ -288,10 +289,7 @@ TEST_P(Creases, FansCutIntoPiecesFitTheTile) {
   const QuantizedMesh q = testing::quantized(cut, 14, layout);
   auto enc = encodeMesh(codec(), ctx, q);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-  if (GetParam() == CodecId::kKdtree) {
-    EXPECT_EQ(enc->version, 3);
-    return;
-  }
+  EXPECT_EQ(enc->version, codec().version);
   const auto levels = coarseLevels(codec(), ctx, q);
   ASSERT_GE(levels.size(), 5u);
   EXPECT_TRUE(testing::cornerMultiset(levels.back().second, 12) == testing::cornerMultiset(q, 12));
@@ -386,12 +384,12 @@ TEST_P(Creases, HostilePayloadsFailCleanly) {
   const TileContext ctx{12, layout};
   auto enc = encodeMesh(codec(), ctx, q);
   ASSERT_TRUE(enc.isOk());
-  ASSERT_EQ(enc->version, 4);
+  ASSERT_EQ(enc->version, codec().version);
   const DecodeLimits lim = limitsOf(enc->decoded);
   const std::vector<uint8_t>& bytes = enc->payload;
   for (size_t n = 0; n < bytes.size(); n += testing::sampleStride()) {
     for (uint32_t level : {3u, 6u, 12u}) {
-      auto d = codec().decode_level(ctx, 4, std::span(bytes).first(n), level, lim);
+      auto d = codec().decode_level(ctx, enc->version, std::span(bytes).first(n), level, lim);
       if (d.isOk()) {
         EXPECT_TRUE(validateTile(ctx, *d).isOk());
         EXPECT_LE(d->positions.size(), lim.vertices);
@@ -404,7 +402,7 @@ TEST_P(Creases, HostilePayloadsFailCleanly) {
     std::vector<uint8_t> b = bytes;
     for (int f = 0; f < 1 + trial % 3; ++f) b[rng() % b.size()] ^= uint8_t(1 + rng() % 255);
     const uint32_t level = 1 + uint32_t(rng() % 12);
-    auto d = codec().decode_level(ctx, 4, b, level, lim);
+    auto d = codec().decode_level(ctx, enc->version, b, level, lim);
     if (!d.isOk()) continue;
     ++decoded;
     ASSERT_TRUE(validateTile(ctx, *d).isOk()) << trial;
@@ -425,7 +423,7 @@ TEST_P(Creases, TileWithoutCreasesIsVersion3) {
   EXPECT_EQ(enc->version, 3);
   auto creased = encodeMesh(codec(), TileContext{12, layout}, testing::quantized(creasedCube(4), 12, layout));
   ASSERT_TRUE(creased.isOk());
-  EXPECT_EQ(creased->version, 4);
+  EXPECT_EQ(creased->version, codec().version);
 }
 
 INSTANTIATE_TEST_SUITE_P(Codecs, Creases, ::testing::Values(CodecId::kKdtree, CodecId::kOctree),

@@ -24,7 +24,7 @@ void expectEdgebreakerRoundTrip(const TileContext& ctx, const QuantizedMesh& q) 
   auto enc = encodeMesh(codec(), ctx, q);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
   EXPECT_TRUE(codec().floor.admits(ctx.layout, enc->decoded.vertices, enc->decoded.faces, enc->payload.size()));
-  auto d = codec().decode(ctx, codec().version, enc->payload, limitsOf(enc->decoded));
+  auto d = codec().decode(ctx, payloadVersion(codec(), *enc), enc->payload, limitsOf(enc->decoded));
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   EXPECT_EQ(d->triangles.size(), q.triangles.size());
   EXPECT_TRUE(testing::cornerMultiset(*d, ctx.layout.normal_bits) ==

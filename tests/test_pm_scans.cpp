@@ -59,7 +59,7 @@ TEST(PmScans, EveryLevelOfRealScansDecodes) {
         EXPECT_GE(l.vertices, prev);
         prev = l.vertices;
       }
-      auto d = pm.decode(ctx, pm.version, enc->payload, limits);
+      auto d = pm.decode(ctx, payloadVersion(pm, *enc), enc->payload, limits);
       ASSERT_TRUE(d.isOk()) << d.status().toString();
       if (ratio == 1.0) {
         EXPECT_TRUE(weldedTriangles(*d) == weldedTriangles(*q)) << "the last level is not the scan";

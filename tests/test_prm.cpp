@@ -191,7 +191,7 @@ void prmAndRemeshStage(const TileContext& ctx, const QuantizedMesh& q, const Cod
                        QuantizedMesh& decoded, QuantizedMesh& staged) {
   auto enc = prm().encode(ctx, TileView{q, {}}, options);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-  auto d = prm().decode(ctx, prm().version, enc->payload, limitsOf(enc->decoded));
+  auto d = prm().decode(ctx, payloadVersion(prm(), *enc), enc->payload, limitsOf(enc->decoded));
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   auto remeshed = remeshTile(ctx, TileView{q, {}}, 0.2, prmSpacing(options.prm, ctx.bits));
   ASSERT_TRUE(remeshed.isOk()) << remeshed.status().toString();
@@ -372,7 +372,7 @@ TEST(Prm, LockedBorderIsKept) {
   options.prm.spacing = 300;
   auto enc = prm().encode(ctx, TileView{cap.mesh, cap.locked}, options);
   ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-  auto d = prm().decode(ctx, prm().version, enc->payload, limitsOf(enc->decoded));
+  auto d = prm().decode(ctx, payloadVersion(prm(), *enc), enc->payload, limitsOf(enc->decoded));
   ASSERT_TRUE(d.isOk()) << d.status().toString();
   const std::set<Vec3u> decoded(d->positions.begin(), d->positions.end());
   std::map<std::pair<Vec3u, Vec3u>, int> edges;
@@ -404,7 +404,7 @@ TEST(Prm, KnobFloorTooFineLatticesAndTheSmallerCodingKeepTheTile) {
     options.prm.spacing = spacing;  // 0: the knob's floor; 2 cells: 64 and more pieces per triangle
     auto enc = prm().encode(ctx, TileView{q, {}}, options);
     ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-    auto d = prm().decode(ctx, prm().version, enc->payload, limitsOf(enc->decoded));
+    auto d = prm().decode(ctx, payloadVersion(prm(), *enc), enc->payload, limitsOf(enc->decoded));
     ASSERT_TRUE(d.isOk());
     EXPECT_TRUE(testing::triangleMultiset(*d) == testing::triangleMultiset(q));
   }
@@ -419,7 +419,7 @@ TEST(Prm, KnobFloorTooFineLatticesAndTheSmallerCodingKeepTheTile) {
     options.prm.spacing = spacing;
     auto enc = prm().encode(ctx, TileView{coarse, {}}, options);
     ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-    auto d = prm().decode(ctx, prm().version, enc->payload, limitsOf(enc->decoded));
+    auto d = prm().decode(ctx, payloadVersion(prm(), *enc), enc->payload, limitsOf(enc->decoded));
     ASSERT_TRUE(d.isOk());
     auto staged = remeshTile(ctx, TileView{coarse, {}}, options.prm.tau, uint32_t(spacing));
     ASSERT_TRUE(staged.isOk());

@@ -191,7 +191,12 @@ TEST(StreamDecodeScalars, ChannelsAndLosslessNormalsSameBytesAsInMemory) {
       for (size_t c = 0; c < cases.size(); ++c) {
         SCOPED_TRACE("case " + std::to_string(c));
         if (uv) {
+#if defined(__SANITIZE_ADDRESS__)
+          // ASan: PLY only (the streaming is the same for every format; the Release lane runs all three).
+          for (const char* ext : {".ply"})
+#else
           for (const char* ext : {".ply", ".ply.zst", ".off"})
+#endif
             expectSameDecode(dir, e.output, cases[c], ext, c == 2 ? kSmallBudget / 2 : kSmallBudget);
           auto back = readMeshFile(dir.file("streamed.ply"));
           ASSERT_TRUE(back.isOk()) << back.status().toString();

@@ -38,7 +38,7 @@ constexpr PayloadFloor kPmFloor{4.0 / 1024, 4.0 / (1024 * 64), 1024, false};
 // prm: edgebreaker's coding, where a regular point codes one coordinate instead of three: the same floor.
 constexpr std::array<CodecInfo, 6> kCodecs = {{
     {CodecId::kStore, "store", 1, kStoreFloor, &storeEncode, &storeDecode},
-    {CodecId::kKdtree, "kdtree", 4, kHierarchyFloor, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel,
+    {CodecId::kKdtree, "kdtree", 5, kHierarchyFloor, &kdtreeEncode, &kdtreeDecode, &kdtreeLevels, &kdtreeDecodeLevel,
      true, 3},
     {CodecId::kOctree, "octree", 4, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel,
      true, 3},

@@ -24,7 +24,8 @@
 // crease), which groups of a vertex are one (a vertex's fan cut by a gap into pieces between the same sharp edges:
 // without merging, a fine level of a tile cut by its border shows more vertices than the tile has points, and kdtree
 // then codes the tile as version 3), and a level that would still show too many shows fewer groups rather than
-// failing. Kdtree's version 4 predates these rules and keeps its bytes.
+// failing. Kdtree's version 4 predates the last two rules and keeps its bytes; its version 5 has them (a kdtree level
+// has only the projections of the tile's triangles: no ghosts).
 //
 // Where we depart from the paper: it codes edge types with every vertex split and merges the attributes of a
 // contraction into new values; we code the types per level (only where the parent does not decide them) and show
@@ -43,6 +44,8 @@
 namespace scanpress::hierarchy {
 
 constexpr uint16_t kCoarseCreases = 4;
+// kdtree v5: v4 with Rules::merges and Rules::fit (octree v4 has them from the start).
+constexpr uint16_t kCreaseMerges = 5;
 
 inline u64 edgeKey(u32 a, u32 b) { return a < b ? (u64(a) << 32) | b : (u64(b) << 32) | a; }
 
@@ -75,7 +78,7 @@ class CoarseCreases {
   static constexpr u32 kNone = UINT32_MAX;
   static constexpr u32 kPoint = 1u << 31;  // a value that is a point's (points are fewer than 2^26)
 
-  // What differs between the codecs' formats (kdtree: neither; octree: both).
+  // What differs between the codecs' formats (kdtree v4: none; kdtree v5: merges and fit; octree v4: all three).
   struct Rules {
     // A level's triangles are every three-clique of its edges, not only the projections of the tile's triangles:
     // a level codes which of the triangles around its creases are projections.
@@ -100,6 +103,8 @@ class CoarseCreases {
     touch_.assign(n_, 0);
   }
   bool on() const { return on_; }
+  // The encoder's: a level it cannot code with its creases (the tile is then coded without them).
+  void fail() { failed_ = true; }
   // Whether endLevel failed: a level would show more vertices than allowed, or (encoder) the tile's cut edges do
   // not map onto the level as they should (not seen); the encoder then codes the tile as version 3.
   bool failed() const { return failed_; }
@@ -246,6 +251,13 @@ class CoarseCreases {
       for (u32 c = 0; c < 3 * nk; ++c)
         if (touch_[keys[c / 3][c % 3]]) first_corner.push_back({keys[c / 3][c % 3], ghost[c / 3] ? 3 * nk + c : c});
       std::sort(first_corner.begin(), first_corner.end());
+      // Per edge (at the index of its first entry in on_edge), its first triangle that is not a ghost (kNone).
+      std::vector<u32> first_kept(on_edge.size(), kNone);
+      for (size_t i = 0, j = 0; i < on_edge.size(); i = j) {
+        while (j < on_edge.size() && on_edge[j].first == on_edge[i].first) ++j;
+        for (size_t x = i; x < j && first_kept[i] == kNone; ++x)
+          if (!ghost[on_edge[x].second]) first_kept[i] = on_edge[x].second;
+      }
       for (u32 t = 0; t < nk; ++t) {
         if (!ghost[t]) continue;
         for (u32 v : keys[t]) {
@@ -256,9 +268,8 @@ class CoarseCreases {
           for (u32 o : keys[t]) {
             if (o == v || beside != kNone) continue;
             const u64 e = edgeKey(v, o);
-            auto it = std::lower_bound(on_edge.begin(), on_edge.end(), std::pair<u64, u32>{e, 0});
-            for (; it != on_edge.end() && it->first == e && beside == kNone; ++it)
-              if (!ghost[it->second]) beside = it->second;
+            const auto it = std::lower_bound(on_edge.begin(), on_edge.end(), std::pair<u64, u32>{e, 0});
+            if (it != on_edge.end() && it->first == e) beside = first_kept[size_t(it - on_edge.begin())];
           }
           u32 to = kNone;
           if (beside != kNone) {

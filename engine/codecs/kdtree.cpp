@@ -35,18 +35,19 @@
 //  - Attributes (normals, colors) are coded per vertex in the final segment: raw in v1, predicted from the decoded
 //    positions, triangles and neighbours in v2 (attributes.h). In v2 coarse levels get normals computed from their
 //    triangles and gray colors; from v3 each coarse vertex shows the attributes of a point of its cell, those of
-//    the first levels coded at the end of their segments (attributes.h, CoarseAttributes); v4 (written only for a
-//    tile with creases or texture seams, else v3) keeps them at every coarse level: sharp edges, a vertex per group
-//    of corners between them, and the groups' values (creases.h).
+//    the first levels coded at the end of their segments (attributes.h, CoarseAttributes); v4 keeps them at every
+//    coarse level: sharp edges, a vertex per group of corners between them, and the groups' values (creases.h);
+//    v5 (written only for a tile with creases or texture seams, else v3) also merges a vertex's groups that are one
+//    point (a fan cut into pieces by a gap: the tile's border), where v4 fell back to v3.
 //
-// Payload v1 to v4 (the same layout; they differ in the attributes' coding):
+// Payload v1 to v5 (the same layout; they differ in the attributes' coding):
 //   varint N (points), varint T (triangles, with multiplicity); if N == 0 nothing follows.
 //   u8 k0 (root level), 3 x varint root cell index (coordinate >> (bits - k0)),
 //   varint S (= bits - k0 + 1 segments), S x varint segment length, then the segments.
 //   Segment i < S-1 holds the splits from level k0+i to k0+i+1 (x, y, z), then (v3) the attributes of the cells it
-//   created while there are few, then (v4) the level's sharp flags and chosen values; segment S-1 the unit splits
-//   of coincident vertices, orientation and multiplicity,
-//   and the attributes (v3: of the points not coded yet). Each is one range-coder stream.
+//   created while there are few, then (v4) the level's sharp flags, (v5) its merges, (v4) its chosen values;
+//   segment S-1 the unit splits of coincident vertices, orientation and multiplicity, and the attributes (v3: of
+//   the points not coded yet). Each is one range-coder stream.
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -269,10 +270,16 @@ class Engine {
     if (n_ == 0) return Status::ok();
     coarse_ = std::make_unique<CoarseAttributes>(layout, version, n_);
     coarse_->birth(0, CoarseAttributes::kNone);
-    creases_ = std::make_unique<CoarseCreases>(layout, n_, "kdtree", CoarseCreases::Rules{});
+    // v5: a vertex's groups may merge, and a level that would show too many shows fewer (creases.h, Rules).
+    creases_ = std::make_unique<CoarseCreases>(layout, n_, "kdtree",
+                                               version >= kCreaseMerges
+                                                   ? CoarseCreases::Rules{.merges = true, .fit = true}
+                                                   : CoarseCreases::Rules{});
     for (int k = k0_; k < bits_ && k < target; ++k) {
       SP_RETURN_IF_ERROR(io_.begin());
-      if (k == k0_ && version >= kCoarseCreases && coarse_->active()) creases_->begin();
+      // The creases come last in each level's segment and only coarse levels show them: a decoder going to the
+      // last level reads none of them (its segments end there, unread).
+      if (k == k0_ && version >= kCoarseCreases && coarse_->active() && (truth_ || target < bits_)) creases_->begin();
       for (int axis = 0; axis < 3; ++axis) {
         const int d = 3 * k + axis;
         next_.clear();
@@ -354,8 +361,8 @@ class Engine {
 
   bool creasesFailed() const { return creases_ && creases_->failed(); }
 
-  AttributeLayout layout;             // set by the caller before run()
-  uint16_t version = kCoarseCreases;  // the payload's (attribute coding)
+  AttributeLayout layout;            // set by the caller before run()
+  uint16_t version = kCreaseMerges;  // the payload's (attribute coding)
 
  private:
   struct Cell {
@@ -889,14 +896,14 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
     truth.code_start.push_back(u32(truth.codes.size()));
   }
 
-  // Version 4 (creases through the coarse levels) when the tile has cut edges, else version 3.
+  // Version 5 (creases through the coarse levels) when the tile has cut edges, else version 3.
   const AttributeLayout& layout = ctx.layout;
   if (layout.hasNormals() || layout.hasColors() || layout.hasScalars()) truth.cut = cutEdges(truth);
   EncodeIo io;
   io.stats = stats;
   auto engine = std::make_unique<Engine<EncodeIo>>(io, ctx.bits, n, k0, root, &truth);
   engine->layout = layout;
-  engine->version = truth.cut.empty() ? kCoarseAttributes : kCoarseCreases;
+  engine->version = truth.cut.empty() ? kCoarseAttributes : kCreaseMerges;
   if (Status st = engine->run(ctx.bits); !st.isOk()) {
     // A coarse level whose creases would show more vertices than the tile has, or cut edges that do not map onto
     // a level as they should (neither seen): the tile is coded without creases, as version 3.

@@ -156,7 +156,10 @@ class Engine {
     for (int k = k0_; k < bits_ && k < target; ++k) {
       SP_RETURN_IF_ERROR(io_.begin());
       if (k == k0_) SP_RETURN_IF_ERROR(codeNext(0, -1, 2));
-      if (k == k0_ && version >= kCoarseCreases && coarse_->active() && !planning()) creases_->begin();
+      // The creases come last in each level's segment and only coarse levels show them: a decoder going to the
+      // last level reads none of them (its segments end there, unread).
+      if (k == k0_ && version >= kCoarseCreases && coarse_->active() && !planning() && (truth_ || target < bits_))
+        creases_->begin();
       for (int j = 0; j < 3; ++j) SP_RETURN_IF_ERROR(step(3 * (k - k0_) + j));
       io_.meter(&CodecStats::attribute_bits);
       coarse_->endLevel(io_, u32(lo_.size()), bits_ - (k + 1), truth_ ? &truth_->by_id : nullptr, normals_, colors_,
@@ -264,7 +267,10 @@ class Engine {
   Status endCreasedLevel(int level) {
     level_ = level;
     std::vector<TriKey> keys;
-    SP_RETURN_IF_ERROR(levelCliques(keys));
+    if (Status st = levelCliques(keys); !st.isOk()) {
+      if (truth_) creases_->fail();  // (a level the decoder would refuse: the tile is coded as v3)
+      return st;
+    }
     if (truth_) {  // each vertex id's vertex at the level: the one whose points hold its point
       morton_vertex_.resize(n_);
       for (u32 v = 0; v < lo_.size(); ++v)
@@ -704,6 +710,9 @@ Status encodeImpl(const TileContext& ctx, const QuantizedMesh& mesh, std::vector
     io.stats = stats;
     auto engine = std::make_unique<Engine<EncodeIo>>(io, ctx.bits, h, &truth);
     engine->layout = layout;
+    // Version 4 lists every coarse level's cliques, within the decoder's bound (the tile's own counts).
+    engine->max_cliques_ =
+        std::min<u64>(kMaxTriangles, coarseTriangleLimit(DecodeLimits{h.n, u32(std::min<u64>(h.t, UINT32_MAX))}));
     engine->flat_ = !contexts;
     engine->version = v;
     return engine;
