@@ -209,6 +209,28 @@ std::vector<bool> projections(const QuantizedMesh& q, const QuantizedMesh& m, ui
   return out;
 }
 
+// Fandisk with its normals per corner split at its sharp edges (30 degrees), a vertex per distinct normal of its
+// corners (a wedge); every `leave_out`-th triangle left out (0: none).
+Mesh fandiskWedged(const Mesh& base, size_t leave_out) {
+  const auto split = testing::cornerNormalsSplitAt(base, 30);
+  Mesh wedged;
+  std::map<std::pair<uint32_t, Vec3f>, uint32_t> wedge;
+  for (size_t f = 0; f < base.triangles.size(); ++f) {
+    if (leave_out && f % leave_out == leave_out - 1) continue;
+    Triangle t;
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t v = base.triangles[f][size_t(k)];
+      const auto& c = split[3 * f + size_t(k)];
+      const Vec3f n{float(c[0]), float(c[1]), float(c[2])};
+      const auto [it, added] = wedge.try_emplace({v, n}, uint32_t(wedged.positions.size()));
+      if (added) wedged.positions.push_back(base.positions[v]), wedged.normals.push_back(n);
+      t[size_t(k)] = it->second;
+    }
+    wedged.triangles.push_back(t);
+  }
+  return wedged;
+}
+
 // Fandisk with a normal per corner split at its sharp edges (30 degrees), each vertex one wedge per distinct
 // normal: at every coarse level the corners' normals come from their own side of the creases. Measured against the
 // same levels with one normal per position, which is what version 3 showed.
@@ -217,21 +239,7 @@ TEST_P(Creases, FandiskCreasesSurviveEveryLevel) {
   if (!std::filesystem::exists(path)) GTEST_SKIP() << "shared data not found: " << path;
   auto base = readMeshFile(path);
   ASSERT_TRUE(base.isOk());
-  const auto split = testing::cornerNormalsSplitAt(*base, 30);
-  Mesh wedged;
-  std::map<std::pair<uint32_t, Vec3f>, uint32_t> wedge;
-  for (size_t f = 0; f < base->triangles.size(); ++f) {
-    Triangle t;
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t v = base->triangles[f][size_t(k)];
-      const auto& c = split[3 * f + size_t(k)];
-      const Vec3f n{float(c[0]), float(c[1]), float(c[2])};
-      const auto [it, added] = wedge.try_emplace({v, n}, uint32_t(wedged.positions.size()));
-      if (added) wedged.positions.push_back(base->positions[v]), wedged.normals.push_back(n);
-      t[size_t(k)] = it->second;
-    }
-    wedged.triangles.push_back(t);
-  }
+  const Mesh wedged = fandiskWedged(*base, 0);
   ASSERT_GT(wedged.positions.size(), base->positions.size() + 500);
   const AttributeLayout layout{12, 0};
   const QuantizedMesh q = testing::quantized(wedged, 14, layout);
@@ -268,22 +276,7 @@ TEST_P(Creases, FansCutIntoPiecesFitTheTile) {
   if (!std::filesystem::exists(path)) GTEST_SKIP() << "shared data not found: " << path;
   auto base = readMeshFile(path);
   ASSERT_TRUE(base.isOk());
-  const auto split = testing::cornerNormalsSplitAt(*base, 30);
-  Mesh cut;
-  std::map<std::pair<uint32_t, Vec3f>, uint32_t> wedge;
-  for (size_t f = 0; f < base->triangles.size(); ++f) {
-    if (f % 5 == 4) continue;
-    Triangle t;
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t v = base->triangles[f][size_t(k)];
-      const auto& c = split[3 * f + size_t(k)];
-      const Vec3f n{float(c[0]), float(c[1]), float(c[2])};
-      const auto [it, added] = wedge.try_emplace({v, n}, uint32_t(cut.positions.size()));
-      if (added) cut.positions.push_back(base->positions[v]), cut.normals.push_back(n);
-      t[size_t(k)] = it->second;
-    }
-    cut.triangles.push_back(t);
-  }
+  const Mesh cut = fandiskWedged(*base, 5);
   const AttributeLayout layout{12, 0};
   const TileContext ctx{14, layout};
   const QuantizedMesh q = testing::quantized(cut, 14, layout);
