@@ -92,10 +92,14 @@ void expectLosslessAfterQuantization(const Scan& scan, CodecId codec, std::initi
   if (scan.triangles > 60000)
     GTEST_SKIP() << "large scan skipped in the unoptimized sanitizer build; the Release suite round-trips it";
 #endif
+  std::vector<int> depths(bit_depths);
+#if defined(__SANITIZE_ADDRESS__)
+  depths.resize(1);  // the first grid depth only: the same code at each (the Release suite runs them all)
+#endif
   auto mesh = readMeshFile(path);
   ASSERT_TRUE(mesh.isOk()) << mesh.status().toString();
   const AttributeLayout layout = layoutOf(*mesh);
-  for (int bits : bit_depths) {
+  for (int bits : depths) {
     SCOPED_TRACE(bits);
     QuantizeStats qs;
     auto r = quantizedAndDecoded(*mesh, bits, layout, codec, scan.file, &qs);
