@@ -216,14 +216,12 @@ class CoarseCreases {
       std::vector<u8> projected;
       if (truth) {
         projected.assign(nk, 0);
-        for (const TriKey& f : truth->tri_keys) {
-          TriKey k{cell_of(f[0]), cell_of(f[1]), cell_of(f[2])};
-          if (!touch_[k[0]] && !touch_[k[1]] && !touch_[k[2]]) continue;
-          std::sort(k.begin(), k.end());
-          if (k[0] == k[1] || k[1] == k[2]) continue;
-          const auto it = std::lower_bound(keys.begin(), keys.end(), k);
-          if (it != keys.end() && *it == k) projected[size_t(it - keys.begin())] = 1;
-        }
+        Corners cp;
+        u32 t = 0;
+        for (const TriKey& f : truth->tri_keys)
+          if (project(
+                  f, cell_of, keys, [&](u32 v) { return touch_[v] != 0; }, cp, t) == Projection::kFound)
+            projected[t] = 1;
       }
       for (u32 t = 0; t < nk; ++t)
         if (touch_[keys[t][0]] || touch_[keys[t][1]] || touch_[keys[t][2]])
@@ -346,22 +344,19 @@ class CoarseCreases {
     std::vector<std::array<u32, 3>> at_corner;
     if (truth && !chosen.empty())
       for (const TriKey& f : truth->tri_keys) {
-        std::array<std::pair<u32, u32>, 3> cp;
-        for (int j = 0; j < 3; ++j) cp[j] = {cell_of(f[j]), f[j]};
-        if (!mark_[cp[0].first] && !mark_[cp[1].first] && !mark_[cp[2].first]) continue;
-        std::sort(cp.begin(), cp.end());
-        if (cp[0].first == cp[1].first || cp[1].first == cp[2].first) continue;
-        const TriKey k{cp[0].first, cp[1].first, cp[2].first};
-        const auto it = std::lower_bound(keys.begin(), keys.end(), k);
-        if (it == keys.end() || *it != k) {
+        Corners cp;
+        u32 t = 0;
+        const Projection found = project(
+            f, cell_of, keys, [&](u32 v) { return mark_[v] != 0; }, cp, t);
+        if (found == Projection::kSkip) continue;
+        if (found == Projection::kMissing) {
           reset();
           unmark();
           failed_ = true;
           return makeError(ErrorCode::kInternal, codec_ + " encoder: a coarse triangle without its fine one");
         }
-        const u32 t = u32(it - keys.begin());
         for (int j = 0; j < 3; ++j)
-          if (mark_[k[j]]) at_corner.push_back({k[j], next.corner_group[3 * t + j], cp[j].second});
+          if (mark_[cp[j].first]) at_corner.push_back({cp[j].first, next.corner_group[3 * t + j], cp[j].second});
       }
     std::sort(at_corner.begin(), at_corner.end());
     // Per chosen vertex and group, its triangles (for the normal's prediction): (v, group, triangle), sorted.
@@ -471,6 +466,25 @@ class CoarseCreases {
   }
 
  private:
+  // A tile's triangle f at a level (encoder): its corners' cells with their points, by cell (`cp`), and the index of
+  // its key in `keys` (`t`). kSkip when two of its corners share a cell or none of its cells is `wanted`; kMissing
+  // when its key is not among the level's.
+  using Corners = std::array<std::pair<u32, u32>, 3>;
+  enum class Projection { kFound, kSkip, kMissing };
+  template <class CellOf, class Wanted>
+  static Projection project(const TriKey& f, const CellOf& cell_of, const std::vector<TriKey>& keys,
+                            const Wanted& wanted, Corners& cp, u32& t) {
+    for (int j = 0; j < 3; ++j) cp[j] = {cell_of(f[j]), f[j]};
+    if (!wanted(cp[0].first) && !wanted(cp[1].first) && !wanted(cp[2].first)) return Projection::kSkip;
+    std::sort(cp.begin(), cp.end());
+    if (cp[0].first == cp[1].first || cp[1].first == cp[2].first) return Projection::kSkip;
+    const TriKey k{cp[0].first, cp[1].first, cp[2].first};
+    const auto it = std::lower_bound(keys.begin(), keys.end(), k);
+    if (it == keys.end() || *it != k) return Projection::kMissing;
+    t = u32(it - keys.begin());
+    return Projection::kFound;
+  }
+
   // The groups of a vertex are the pieces of its fan between sharp edges; a fan cut by a gap (the tile's border, a
   // hole) has more pieces than the vertex has values, and a fine level would show more vertices than the tile has
   // points. So, per vertex of k >= 2 groups, each group g >= 1 codes whether it is one with an earlier group
@@ -487,19 +501,13 @@ class CoarseCreases {
     // Encoder: per (vertex, group), the point at all its corners (kNone: several), sorted.
     std::vector<std::array<u32, 3>> point_of;
     if (truth) {
-      for (const TriKey& f : truth->tri_keys) {
-        std::array<std::pair<u32, u32>, 3> cp;
-        for (int j = 0; j < 3; ++j) cp[j] = {cell_of(f[j]), f[j]};
-        std::sort(cp.begin(), cp.end());
-        if (cp[0].first == cp[1].first || cp[1].first == cp[2].first) continue;
-        if (count_[cp[0].first] < 2 && count_[cp[1].first] < 2 && count_[cp[2].first] < 2) continue;
-        const TriKey k{cp[0].first, cp[1].first, cp[2].first};
-        const auto it = std::lower_bound(keys.begin(), keys.end(), k);
-        if (it == keys.end() || *it != k) continue;  // (endLevel fails on it)
-        const u32 t = u32(it - keys.begin());
-        for (int j = 0; j < 3; ++j)
-          if (count_[k[j]] > 1) point_of.push_back({k[j], corner_group[3 * t + j], cp[j].second});
-      }
+      Corners cp;
+      u32 t = 0;
+      for (const TriKey& f : truth->tri_keys)
+        if (project(
+                f, cell_of, keys, [&](u32 v) { return count_[v] > 1; }, cp, t) == Projection::kFound)
+          for (int j = 0; j < 3; ++j)  // (a missing key: endLevel fails on it)
+            if (count_[cp[j].first] > 1) point_of.push_back({cp[j].first, corner_group[3 * t + j], cp[j].second});
       std::sort(point_of.begin(), point_of.end());
       point_of.erase(std::unique(point_of.begin(), point_of.end()), point_of.end());
     }
