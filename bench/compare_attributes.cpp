@@ -329,8 +329,9 @@ void runAttributes(const std::string& scan, const Mesh& mesh, int bits, std::vec
       }
       r.bytes = e->payload.size();
       auto d = codec.decode(ctx, payloadVersion(codec, *e), e->payload, limitsOf(e->decoded));
-      if (d.isOk()) {                                // exact: the same (position, normal code, color) vertices
-        const bool welds = !codec.keeps_attributes;  // pm: one vertex per position, the first's attributes
+      if (d.isOk()) {  // exact: the same (position, normal code, color) vertices
+        // pm before v5: one vertex per position, the first's attributes.
+        const bool welds = !codec.keepsAttributes(payloadVersion(codec, *e));
         auto key = [&](const QuantizedMesh& m) {
           std::vector<std::tuple<Vec3u, OctNormal, Rgba8>> v;
           for (size_t i = 0; i < m.positions.size(); ++i)

@@ -417,8 +417,8 @@ class ScanEncoder {
     }
     if (s_.keep_scalars) {
       result_.layout.scalars = survey_.scalar_channels;
-      // pm welds by position, and prm and the remesh stage resample: they keep no texture seam, so texture
-      // coordinates are dropped (checkDrops lists them), the other channels kept.
+      // prm and the remesh stage resample: they keep no texture seam, so texture coordinates are dropped (checkDrops
+      // lists them), the other channels kept.
       if (!codecKeepsWedges()) {
         const std::vector<bool> texcoords = texcoordChannels(result_.layout.scalars);
         for (size_t i = texcoords.size(); i-- > 0;)
@@ -654,13 +654,13 @@ class ScanEncoder {
     return Status::ok();
   }
 
-  // After the tiles: the points pm's weld merged into another point at their position with other attributes (a
-  // PLY's duplicated crease or seam vertices, repeated points with other confidence) are listed dropped, and under
-  // `strict` fail the file before it is committed.
+  // After the tiles: the points pm's weld merged into another point at their position with other attributes (v5:
+  // points no triangle uses at a position whose other points they do not match; v3 and v4 merged every crease and
+  // seam) are listed dropped, and under `strict` fail the file before it is committed.
   Status checkMerged() {
     if (merged_points_ == 0) return Status::ok();
     const DroppedProperty d{"attributes of points sharing a grid position (codec " + std::string(codec_.name) +
-                                " keeps the first point's)",
+                                " keeps those its triangles use)",
                             merged_points_};
     result_.read.dropped.push_back(d);
     if (s_.strict)
@@ -719,8 +719,8 @@ class ScanEncoder {
     if (s_.strict && !result_.read.dropped.empty())
       return strictRefusal(result_.read.dropped,
                            "scanpress keeps positions, triangles, normals, colors and per-vertex scalars; texture "
-                           "coordinates and normals per corner with store, kdtree, octree and edgebreaker; encode "
-                           "without --strict or /strict to drop them");
+                           "coordinates and normals per corner with store, kdtree, octree, edgebreaker and pm; "
+                           "encode without --strict or /strict to drop them");
     return Status::ok();
   }
 
@@ -734,10 +734,9 @@ class ScanEncoder {
       if (st.kind == StageKind::kRemesh) return false;
     return codec_.id != CodecId::kPrm;
   }
-  // ... and the wedges of texture seams and creases: not pm either, which welds by position before it simplifies
-  // (one value per position; `auto` is one of pm and edgebreaker, and its search keeps edgebreaker's result when pm
-  // dropped texture coordinates, jobs/targets.cpp).
-  bool codecKeepsWedges() const { return keepsScanVertices() && codec_.id != CodecId::kPm; }
+  // ... and the wedges of texture seams and creases: every codec that keeps the scan's vertices does (pm since its
+  // version 5: its simplifier moves a corner only to a wedge on its own side).
+  bool codecKeepsWedges() const { return keepsScanVertices(); }
   // What drops wedges (or lossless normals), as the report names it.
   std::string droppedBy() const {
     for (const StageSpec& st : s_.stages)

@@ -75,7 +75,8 @@ struct EncodeSettings {
   bool lossless_normals = false;
   bool keep_colors = true;
   // Per-vertex scalar properties (a PLY's confidence, intensity, quality, ...), kept losslessly at their type by
-  // the codecs that carry them (store, kdtree, octree, edgebreaker); pm and prm drop them, and the report says so.
+  // the codecs that carry them (store, kdtree, octree, edgebreaker, pm); prm and the remesh stage resample them and
+  // drop texture coordinates, and the report says so.
   bool keep_scalars = true;
   bool allow_degenerate = false;     // quantization may drop more than kMaxDegenerateShare of the triangles
   uint64_t tile_triangles = 131072;  // target triangles per tile (tiles adapt to density around it)

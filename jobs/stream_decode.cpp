@@ -450,7 +450,7 @@ Result<StreamDecodeResult> streamDecode(const ContainerFile& file, const std::ve
       const TileEntry& e = *chosen[i];
       if (e.vertices > 0) bounds[i] = Bounds{e.lo, e.hi};
       const CodecInfo* codec = findCodec(e.codec);
-      all_complete &= !codec || codec->keeps_attributes;
+      all_complete &= !codec || codec->keepsAttributes(e.codec_version);
       own[i] = !codec || codec->showsOwnAttributes(e.codec_version, false, false);
       total_faces += e.faces;
     }

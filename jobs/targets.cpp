@@ -393,9 +393,8 @@ Result<EncodeResult> encodeToTargetAuto(const EncodeSettings& settings, Progress
     TargetSearch search(c, progress, device, hooks);
     search.keepInPlace();
     auto r = search.run();
-    // Under strict, pm refuses a scan whose texture coordinates or corner normals it would drop: edgebreaker alone
-    // competes. (A tile pm refuses, such as one with texture seams in per-vertex coordinates, is a failed tile: its
-    // result misses the target, and edgebreaker's is kept.)
+    // Under strict, a codec that refuses what it would drop leaves the other alone to compete (pm keeps texture
+    // coordinates and corner normals since its version 5, so this is a safeguard).
     if (!r.isOk() && settings.strict && r.status().code() == ErrorCode::kUnsupported && c.codec == "pm") continue;
     if (!r.isOk()) {
       for (auto& d : done) discard(d.kept);
@@ -407,10 +406,10 @@ Result<EncodeResult> encodeToTargetAuto(const EncodeSettings& settings, Progress
   auto metOf = [](const Candidate& c) { return c.result.target && c.result.target->met; };
   auto better = [&](const Candidate& a, const Candidate& b) {  // a is better than b
     if (metOf(a) != metOf(b)) return metOf(a);
-    // pm drops texture coordinates and keeps one normal per vertex where an OBJ's corners name several (the report
-    // lists them): of two that meet the target, the one that keeps more scalar channels wins whatever the sizes,
-    // then the one whose read dropped less (a count of entries: an OBJ read with wedges may list other `vt` records
-    // than the one entry a read without them lists, so the channels come first).
+    // Of two that meet the target, the one that keeps more scalar channels wins whatever the sizes, then the one
+    // whose read dropped less (a count of entries: an OBJ read with wedges may list other `vt` records than the one
+    // entry a read without them lists, so the channels come first). Both keep what the other keeps today (pm
+    // before its version 5 dropped texture coordinates and corner normals); the rule stays for codecs that drop.
     if (a.result.layout.scalars.size() != b.result.layout.scalars.size())
       return a.result.layout.scalars.size() > b.result.layout.scalars.size();
     if (a.result.read.dropped.size() != b.result.read.dropped.size())

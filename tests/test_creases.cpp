@@ -422,6 +422,103 @@ TEST_P(Creases, TileWithoutCreasesIsVersion3) {
 INSTANTIATE_TEST_SUITE_P(Codecs, Creases, ::testing::Values(CodecId::kKdtree, CodecId::kOctree),
                          [](const auto& info) { return std::string(findCodec(info.param)->name); });
 
+// pm (v5) keeps a crease's or a seam's wedges through its simplified levels: a collapse moves a corner only to the
+// wedge on its own side (simplify.h, corner_wedges), and a wedge a split adds shows its parent's values, which lie
+// on the same side. Every level of `q` coded by pm (the last level simplified to `ratio` of the faces), each decoded
+// from the payload cut at its end and valid.
+std::vector<std::pair<uint32_t, QuantizedMesh>> pmLevels(const TileContext& ctx, const QuantizedMesh& q, double ratio) {
+  std::vector<std::pair<uint32_t, QuantizedMesh>> out;
+  const CodecInfo& pm = *findCodec(CodecId::kPm);
+  CodecOptions o;
+  o.pm.ratio = ratio;
+  auto enc = encodeMesh(pm, ctx, q, o);
+  EXPECT_TRUE(enc.isOk()) << enc.status().toString();
+  if (!enc.isOk()) return out;
+  EXPECT_EQ(enc->version, 5);
+  std::printf("pm v%d payload (ratio %.2f): %zu bytes\n", int(enc->version), ratio, enc->payload.size());
+  auto levels = pm.levels(ctx, enc->version, enc->payload, limitsOf(enc->decoded));
+  EXPECT_TRUE(levels.isOk());
+  if (!levels.isOk()) return out;
+  for (const CodecLevel& l : *levels) {
+    auto m = pm.decode_level(ctx, enc->version, std::span(enc->payload).first(l.end_bytes), l.level,
+                             limitsOf(enc->decoded));
+    EXPECT_TRUE(m.isOk()) << "level " << l.level << ": " << m.status().toString();
+    if (!m.isOk()) continue;
+    EXPECT_TRUE(validateTile(ctx, *m).isOk()) << "level " << l.level;
+    EXPECT_EQ(m->positions.size(), l.vertices) << "level " << l.level;
+    out.push_back({l.level, std::move(m).value()});
+  }
+  return out;
+}
+
+// The cube: every flat triangle shows its face's normal at every level of pm, lossless and simplified.
+TEST(PmCreases, CubeEdgesSurviveEveryLevel) {
+  const AttributeLayout layout{12, 0};
+  const QuantizedMesh q = testing::quantized(creasedCube(24), 12, layout);
+  for (const double ratio : {1.0, 0.1}) {
+    SCOPED_TRACE(ratio);
+    const auto levels = pmLevels(TileContext{12, layout}, q, ratio);
+    ASSERT_GE(levels.size(), 3u);
+    if (ratio == 1.0) EXPECT_TRUE(testing::cornerMultiset(levels.back().second, 12) == testing::cornerMultiset(q, 12));
+    size_t seen = 0;
+    for (const auto& [level, m] : levels) {
+      SCOPED_TRACE("level " + std::to_string(level));
+      const LevelCheck c = checkCube(m, 12);
+      std::printf("level %u: %zu triangles, %zu flat, %zu wrong, %zu wedge vertices\n", level, c.triangles, c.flat,
+                  c.wrong, c.wedged);
+      EXPECT_EQ(c.wrong, 0u);
+      EXPECT_GT(c.wedged, 0u);
+      seen += checkCube(onePerPosition(m), 12).wrong;
+    }
+    EXPECT_GT(seen, 0u) << "the check sees one normal per position";
+  }
+}
+
+// Fandisk split at 30 degrees: no corner shows a normal from across a crease at any level of pm (a coarse triangle
+// is a simplified one, not a cell's: it lies on one side), lossless and simplified to a fifth.
+TEST(PmCreases, FandiskCreasesSurviveEveryLevel) {
+  const std::string path = testing::sharedDataDir() + "/fandisk.obj";
+  if (!std::filesystem::exists(path)) GTEST_SKIP() << "shared data not found: " << path;
+  auto base = readMeshFile(path);
+  ASSERT_TRUE(base.isOk());
+  const AttributeLayout layout{12, 0};
+  const QuantizedMesh q = testing::quantized(fandiskWedged(*base, 0), 14, layout);
+  for (const double ratio : {1.0, 0.2}) {
+    SCOPED_TRACE(ratio);
+    const auto levels = pmLevels(TileContext{14, layout}, q, ratio);
+    ASSERT_GE(levels.size(), 3u);
+    if (ratio == 1.0) EXPECT_TRUE(testing::cornerMultiset(levels.back().second, 12) == testing::cornerMultiset(q, 12));
+    size_t total = 0, total_merged = 0;
+    for (const auto& [level, m] : levels) {
+      const size_t across = cornersAcrossACrease(m, 12);
+      const size_t merged = cornersAcrossACrease(onePerPosition(m), 12);
+      std::printf("level %u: %zu corners, %zu across a crease (one normal per position: %zu)\n", level,
+                  3 * m.triangles.size(), across, merged);
+      total += across, total_merged += merged;
+    }
+    EXPECT_GT(total_merged, 300u);
+    EXPECT_LE(total * 50, total_merged);
+  }
+}
+
+// The UV sphere's seam: no triangle interpolates u across it at any level of pm.
+TEST(PmCreases, TextureSeamSurvivesEveryLevel) {
+  AttributeLayout layout;
+  layout.scalars = {{"u", ScalarType::kFloat32, 12}, {"v", ScalarType::kFloat32, 12}};
+  const QuantizedMesh q = seamedSphere(32, 64, layout);
+  for (const double ratio : {1.0, 0.1}) {
+    SCOPED_TRACE(ratio);
+    const auto levels = pmLevels(TileContext{12, layout}, q, ratio);
+    ASSERT_GE(levels.size(), 3u);
+    size_t merged_total = 0;
+    for (const auto& [level, m] : levels) {
+      EXPECT_EQ(trianglesAcrossTheSeam(m), 0u) << "level " << level;
+      merged_total += trianglesAcrossTheSeam(onePerPosition(m));
+    }
+    EXPECT_GT(merged_total, 10u);
+  }
+}
+
 // The cut edges against a brute force over every pair of triangles on random meshes with wedges.
 TEST(CutEdges, MatchABruteForce) {
   std::mt19937 rng(9);

@@ -82,6 +82,7 @@ std::vector<std::vector<PosTriangle>> replayPasses(const QuantizedMesh& mesh, co
 struct Encoded {
   EncodedTile tile;
   std::vector<CodecLevel> levels;
+  uint16_t version = 0;  // the payload's (pm writes v5 only for a tile with wedges)
 };
 
 Encoded encodeTile(const TileContext& ctx, const QuantizedMesh& m, std::span<const uint8_t> locked,
@@ -91,14 +92,15 @@ Encoded encodeTile(const TileContext& ctx, const QuantizedMesh& m, std::span<con
   auto e = pm().encode(ctx, TileView{m, locked}, o);
   EXPECT_TRUE(e.isOk()) << e.status().toString();
   if (!e.isOk()) return {};
-  auto levels = pm().levels(ctx, pm().version, e->payload, limitsOf(e->decoded));
+  const uint16_t version = payloadVersion(pm(), *e);
+  auto levels = pm().levels(ctx, version, e->payload, limitsOf(e->decoded));
   EXPECT_TRUE(levels.isOk()) << levels.status().toString();
   EXPECT_EQ(levels->size(), e->levels.size());
   for (size_t i = 0; i < levels->size() && i < e->levels.size(); ++i) {
     EXPECT_EQ((*levels)[i].end_bytes, e->levels[i].end_bytes);
     EXPECT_EQ((*levels)[i].vertices, e->levels[i].vertices);
   }
-  return Encoded{std::move(e).value(), levels.isOk() ? *levels : std::vector<CodecLevel>{}};
+  return Encoded{std::move(e).value(), levels.isOk() ? *levels : std::vector<CodecLevel>{}, version};
 }
 
 // Options that simplify to `ratio` of the tile's faces (1: lossless).
@@ -127,7 +129,7 @@ void expectLevelsReplay(const TileContext& ctx, const QuantizedMesh& tile, std::
     ASSERT_TRUE(s1.isOk());
     auto passes = replayPasses(welded, *s1);
     const std::vector<PosTriangle> expect_last = passes.empty() ? triangleMultiset(welded) : passes.back();
-    auto d = pm().decode(ctx, pm().version, enc.tile.payload, limitsOf(enc.tile.decoded));
+    auto d = pm().decode(ctx, enc.version, enc.tile.payload, limitsOf(enc.tile.decoded));
     ASSERT_TRUE(d.isOk()) << d.status().toString();
     EXPECT_TRUE(triangleMultiset(*d) == expect_last) << "the last level is not the simplified tile";
     return;  // the coarser levels are checked on lossless encodes (the same code path from the last level on)
@@ -150,7 +152,7 @@ void expectLevelsReplay(const TileContext& ctx, const QuantizedMesh& tile, std::
   uint64_t prev_vertices = 0;
   for (const CodecLevel& l : enc.levels) {
     SCOPED_TRACE(l.level);
-    auto d = pm().decode_level(ctx, pm().version, std::span(enc.tile.payload).first(l.end_bytes), l.level,
+    auto d = pm().decode_level(ctx, enc.version, std::span(enc.tile.payload).first(l.end_bytes), l.level,
                                limitsOf(enc.tile.decoded));
     ASSERT_TRUE(d.isOk()) << d.status().toString();
     EXPECT_TRUE(validateTile(ctx, *d).isOk());
@@ -163,7 +165,7 @@ void expectLevelsReplay(const TileContext& ctx, const QuantizedMesh& tile, std::
     for (const auto& p : locked_positions) EXPECT_TRUE(have.count(p)) << "a locked vertex is missing";
   }
   EXPECT_TRUE(enc.levels.back().complete);
-  auto full = pm().decode(ctx, pm().version, enc.tile.payload, limitsOf(enc.tile.decoded));
+  auto full = pm().decode(ctx, enc.version, enc.tile.payload, limitsOf(enc.tile.decoded));
   ASSERT_TRUE(full.isOk()) << full.status().toString();
   EXPECT_TRUE(weldedTriangles(*full) == weldedTriangles(tile)) << "the last level is not the tile";
   const TileSummary got = summarize(*full);
@@ -206,7 +208,7 @@ TEST(Pm, LockedVerticesSurviveEveryLevel) {
   opt.ratio = 0.1;
   const Encoded enc = encodeTile(ctx, sphere, locked, opt);
   for (const CodecLevel& l : enc.levels) {
-    auto d = pm().decode_level(ctx, pm().version, enc.tile.payload, l.level, limitsOf(enc.tile.decoded));
+    auto d = pm().decode_level(ctx, enc.version, enc.tile.payload, l.level, limitsOf(enc.tile.decoded));
     ASSERT_TRUE(d.isOk());
     std::set<Vec3u> have(d->positions.begin(), d->positions.end());
     for (size_t v = 0; v < locked.size(); ++v)
@@ -261,7 +263,7 @@ TEST(Pm, UglyMeshesRoundTrip) {
 
 // A sphere with normals (its own directions, jittered) and 8-bit RGBA colors that name their vertex (so a decoded
 // color says which input vertex it came from), plus a twin of every 7th vertex at its position with other
-// attributes, its color naming it too (pm welds by position: the first vertex's attributes stay).
+// attributes, its color naming it too, used by every other triangle around the vertex (pm keeps both: wedges, v5).
 QuantizedMesh attributedPmSphere(const AttributeLayout& layout, int subdivisions) {
   Mesh s = icosphere(subdivisions);
   std::mt19937 rng(5);
@@ -288,14 +290,24 @@ QuantizedMesh attributedPmSphere(const AttributeLayout& layout, int subdivisions
   return *q;
 }
 
-// Per position, the attributes of the first input vertex there: what pm keeps (RGB colors decode with alpha 255).
-std::map<Vec3u, std::pair<OctNormal, Rgba8>> firstAttributes(const QuantizedMesh& m, const AttributeLayout& layout) {
-  std::map<Vec3u, std::pair<OctNormal, Rgba8>> out;
-  for (size_t v = 0; v < m.positions.size(); ++v) {
-    Rgba8 c = m.colors.empty() ? Rgba8{} : m.colors[v];
-    if (layout.color_channels == 3) c[3] = 255;
-    out.emplace(m.positions[v], std::pair{m.normals.empty() ? OctNormal{} : m.normals[v], c});
+// Per triangle its corners' positions and attributes (normal, the layout's color channels, scalar row), rotated to
+// start at its least corner, sorted: what a lossless decode gives back corner for corner.
+std::vector<std::array<std::vector<uint32_t>, 3>> cornerRows(const QuantizedMesh& m, const AttributeLayout& layout) {
+  const size_t stride = size_t(layout.scalarStride());
+  auto corner = [&](uint32_t v) {
+    std::vector<uint32_t> c(m.positions[v].begin(), m.positions[v].end());
+    if (layout.hasNormals()) c.insert(c.end(), {m.normals[v][0], m.normals[v][1]});
+    for (int k = 0; k < layout.color_channels; ++k) c.push_back(m.colors[v][k]);
+    c.insert(c.end(), m.scalars.begin() + ptrdiff_t(v * stride), m.scalars.begin() + ptrdiff_t((v + 1) * stride));
+    return c;
+  };
+  std::vector<std::array<std::vector<uint32_t>, 3>> out;
+  for (const Triangle& t : m.triangles) {
+    std::array<std::vector<uint32_t>, 3> c{corner(t[0]), corner(t[1]), corner(t[2])};
+    std::rotate(c.begin(), std::min_element(c.begin(), c.end()), c.end());
+    out.push_back(std::move(c));
   }
+  std::sort(out.begin(), out.end());
   return out;
 }
 
@@ -316,9 +328,9 @@ uint64_t differingTwins(const QuantizedMesh& m, const AttributeLayout& layout) {
 }
 
 // v3: every level shows the tile's own normals and colors. pm's vertex order is fixed by the payload (each split
-// appends its vertex), so vertex i of a level is vertex i of the last level; the last level's attributes are the
-// first input vertex's at each position (lossless), or a kept input vertex's (lossy: no two vertices show the same
-// one).
+// appends its wedges), so vertex i of a level is vertex i of the last level; the last level gives every corner its
+// input vertex's attributes (lossless: the twins are wedges, v5), or a kept input vertex's (lossy: no two vertices
+// show the same one).
 TEST(Pm, EveryLevelShowsTheTilesOwnAttributes) {
   for (const AttributeLayout& layout :
        {AttributeLayout{10, 4}, AttributeLayout{12, 0}, AttributeLayout{0, 4}, AttributeLayout{6, 3, 5}}) {
@@ -326,39 +338,29 @@ TEST(Pm, EveryLevelShowsTheTilesOwnAttributes) {
                                       << int(layout.color_bits));
     const TileContext ctx{12, layout};
     const QuantizedMesh tile = attributedPmSphere(layout, 4);
-    const auto first = firstAttributes(tile, layout);
+    std::set<Rgba8> input_colors(tile.colors.begin(), tile.colors.end());
     for (const double ratio : {1.0, 0.2}) {
       SCOPED_TRACE(ratio);
       const Encoded enc = encodeTile(ctx, tile, {}, ratioOptions(ratio));
       ASSERT_GE(enc.levels.size(), 3u);
-      // Lossless, the twins' other attributes are reported, not silently welded away (simplified, the weld is
-      // part of the simplification).
-      EXPECT_EQ(enc.tile.merged_points, ratio == 1.0 ? differingTwins(tile, layout) : 0u);
+      // The twins' other attributes are kept as wedges, nothing merged.
+      EXPECT_EQ(enc.version, 5);
+      EXPECT_EQ(enc.tile.merged_points, 0u);
       EXPECT_GT(differingTwins(tile, layout), 0u);
-      auto full = pm().decode(ctx, pm().version, enc.tile.payload, limitsOf(enc.tile.decoded));
+      auto full = pm().decode(ctx, enc.version, enc.tile.payload, limitsOf(enc.tile.decoded));
       ASSERT_TRUE(full.isOk()) << full.status().toString();
       ASSERT_TRUE(validateTile(ctx, *full).isOk());
       ASSERT_EQ(full->normals.size(), layout.hasNormals() ? full->positions.size() : 0u);
       ASSERT_EQ(full->colors.size(), layout.hasColors() ? full->positions.size() : 0u);
       if (ratio == 1.0) {
         EXPECT_TRUE(weldedTriangles(*full) == weldedTriangles(tile));
-        for (size_t v = 0; v < full->positions.size(); ++v) {
-          const auto& [normal, color] = first.at(full->positions[v]);
-          if (layout.hasNormals()) {
-            EXPECT_EQ(full->normals[v], normal) << v;
-          }
-          if (layout.hasColors()) {
-            EXPECT_EQ(full->colors[v], color) << v;
-          }
-        }
-      } else if (layout.hasColors() && layout.color_bits == 8) {
-        // The colors name input vertices: each shown once, and never a twin's (welded away).
+        EXPECT_TRUE(cornerRows(*full, layout) == cornerRows(tile, layout));
+      } else if (layout.hasColors() && layout.color_bits == 8 && layout.color_channels == 4) {
+        // The colors name input vertices: each shown once.
         std::set<Rgba8> seen;
-        std::set<Rgba8> firsts;
-        for (const auto& [p, a] : first) firsts.insert(a.second);
         for (const Rgba8& c : full->colors) {
           EXPECT_TRUE(seen.insert(c).second) << "two vertices show one input vertex's color";
-          EXPECT_TRUE(firsts.count(c)) << "a color that no kept input vertex has";
+          EXPECT_TRUE(input_colors.count(c)) << "a color that no input vertex has";
         }
       }
       // The base's vertices show their own at every level; a vertex a later level adds shows, until the last
@@ -370,7 +372,7 @@ TEST(Pm, EveryLevelShowsTheTilesOwnAttributes) {
                            layout.hasColors() ? full->colors[v] : Rgba8{}});
       std::map<size_t, std::pair<OctNormal, Rgba8>> deferred;  // what a vertex past the base shows before the last
       for (const CodecLevel& l : enc.levels) {
-        auto d = pm().decode_level(ctx, pm().version, std::span(enc.tile.payload).first(l.end_bytes), l.level,
+        auto d = pm().decode_level(ctx, enc.version, std::span(enc.tile.payload).first(l.end_bytes), l.level,
                                    limitsOf(enc.tile.decoded));
         ASSERT_TRUE(d.isOk()) << d.status().toString();
         ASSERT_TRUE(validateTile(ctx, *d).isOk());
@@ -453,9 +455,10 @@ std::span<const uint32_t> rowOf(const QuantizedMesh& m, size_t v, size_t stride)
 }
 
 // v4: scalar channels through every level as normals and colors go (bit for bit: lossless at their type, texture
-// coordinates at their levels). The last level shows, per position, the first input vertex's row (lossless) or a
-// kept input vertex's, each once (lossy); every level shows the base's own rows at base vertices and, elsewhere,
-// until the last level, a base vertex's row that does not change from level to level.
+// coordinates at their levels). The last level gives every corner its input vertex's row (lossless; the twins,
+// whose rows differ, are wedges: v5) or a kept input vertex's, each once (lossy); every level shows the base's own
+// rows at base vertices and, elsewhere, until the last level, a base vertex's row that does not change from level
+// to level.
 TEST(Pm, ScalarChannelsThroughEveryLevel) {
   for (const bool uv : {false, true}) {
     SCOPED_TRACE(uv);
@@ -464,30 +467,27 @@ TEST(Pm, ScalarChannelsThroughEveryLevel) {
     const TileContext ctx{12, layout};
     const QuantizedMesh tile = scalarPmSphere(layout, 4, false);
     ASSERT_TRUE(validateTile(ctx, tile).isOk());
-    std::map<Vec3u, std::vector<uint32_t>> first;
     std::set<std::vector<uint32_t>> rows;
     for (size_t v = 0; v < tile.positions.size(); ++v) {
       const auto r = rowOf(tile, v, stride);
-      first.emplace(tile.positions[v], std::vector<uint32_t>(r.begin(), r.end()));
       rows.insert(std::vector<uint32_t>(r.begin(), r.end()));
     }
     for (const double ratio : {1.0, 0.2}) {
       SCOPED_TRACE(ratio);
       const Encoded enc = encodeTile(ctx, tile, {}, ratioOptions(ratio));
       ASSERT_GE(enc.levels.size(), 3u);
-      EXPECT_EQ(payloadVersion(pm(), enc.tile), 4);
-      EXPECT_EQ(enc.tile.merged_points, ratio == 1.0 ? differingTwins(tile, layout) : 0u);
-      auto full = pm().decode(ctx, 4, enc.tile.payload, limitsOf(enc.tile.decoded));
+      EXPECT_EQ(payloadVersion(pm(), enc.tile), 5);
+      EXPECT_EQ(enc.tile.merged_points, 0u);
+      auto full = pm().decode(ctx, 5, enc.tile.payload, limitsOf(enc.tile.decoded));
       ASSERT_TRUE(full.isOk()) << full.status().toString();
       ASSERT_TRUE(validateTile(ctx, *full).isOk());
       ASSERT_EQ(full->scalars.size(), full->positions.size() * stride);
       std::set<std::vector<uint32_t>> shown;
+      if (ratio == 1.0) EXPECT_TRUE(cornerRows(*full, layout) == cornerRows(tile, layout));
       for (size_t v = 0; v < full->positions.size(); ++v) {
         const auto r = rowOf(*full, v, stride);
         const std::vector<uint32_t> row(r.begin(), r.end());
-        if (ratio == 1.0) {
-          EXPECT_EQ(row, first.at(full->positions[v])) << v;
-        } else {
+        if (ratio != 1.0) {
           EXPECT_TRUE(rows.count(row)) << "vertex " << v << " shows a row no input vertex has";
           EXPECT_TRUE(shown.insert(row).second) << "two vertices show one input vertex's row";
         }
@@ -500,7 +500,7 @@ TEST(Pm, ScalarChannelsThroughEveryLevel) {
       }
       std::map<size_t, std::vector<uint32_t>> deferred;
       for (const CodecLevel& l : enc.levels) {
-        auto d = pm().decode_level(ctx, 4, std::span(enc.tile.payload).first(l.end_bytes), l.level,
+        auto d = pm().decode_level(ctx, 5, std::span(enc.tile.payload).first(l.end_bytes), l.level,
                                    limitsOf(enc.tile.decoded));
         ASSERT_TRUE(d.isOk()) << d.status().toString();
         ASSERT_TRUE(validateTile(ctx, *d).isOk());
@@ -526,21 +526,38 @@ TEST(Pm, ScalarChannelsThroughEveryLevel) {
   }
 }
 
-// Texture coordinates that differ at one position (a seam carried as duplicated vertices) would be welded into one
-// value and map one side's texture across the seam: the tile is refused with the count, not coded wrongly.
-TEST(Pm, TextureSeamsAreRefusedNotWelded) {
+// Texture coordinates that differ at one position (a seam carried as duplicated vertices) are wedges (v5): every
+// corner gets its own back, lossless, and a simplified last level shows a kept input vertex's row at each corner.
+TEST(Pm, TextureSeamsAreKeptAsWedges) {
   const AttributeLayout layout = scalarLayout(true);
   const TileContext ctx{12, layout};
   const QuantizedMesh tile = scalarPmSphere(layout, 3, true);
   ASSERT_TRUE(validateTile(ctx, tile).isOk());
-  auto e = pm().encode(ctx, TileView{tile, {}}, CodecOptions{});
-  ASSERT_FALSE(e.isOk());
-  EXPECT_EQ(e.status().code(), ErrorCode::kUnsupported);
-  EXPECT_NE(e.status().message().find("texture seams"), std::string::npos) << e.status().toString();
-  // Without texture coordinates the same twins' other channels differ too, and are welded (the first's kept).
-  AttributeLayout no_uv = scalarLayout(false);
-  const QuantizedMesh plain = scalarPmSphere(no_uv, 3, true);
-  EXPECT_TRUE(pm().encode(TileContext{12, no_uv}, TileView{plain, {}}, CodecOptions{}).isOk());
+  for (const double ratio : {1.0, 0.3}) {
+    SCOPED_TRACE(ratio);
+    const Encoded enc = encodeTile(ctx, tile, {}, ratioOptions(ratio));
+    ASSERT_GE(enc.levels.size(), 2u);
+    EXPECT_EQ(enc.version, 5);
+    auto full = pm().decode(ctx, enc.version, enc.tile.payload, limitsOf(enc.tile.decoded));
+    ASSERT_TRUE(full.isOk()) << full.status().toString();
+    if (ratio == 1.0) {
+      EXPECT_TRUE(cornerRows(*full, layout) == cornerRows(tile, layout));
+    } else {
+      // Each vertex shows an input vertex's row, each once (kept vertices may move: QEM placements).
+      std::set<std::vector<uint32_t>> input, shown;
+      const size_t stride = size_t(layout.scalarStride());
+      for (size_t v = 0; v < tile.positions.size(); ++v) {
+        const auto r = rowOf(tile, v, stride);
+        input.insert(std::vector<uint32_t>(r.begin(), r.end()));
+      }
+      for (size_t v = 0; v < full->positions.size(); ++v) {
+        const auto r = rowOf(*full, v, stride);
+        const std::vector<uint32_t> row(r.begin(), r.end());
+        EXPECT_TRUE(input.count(row)) << v;
+        EXPECT_TRUE(shown.insert(row).second) << v;
+      }
+    }
+  }
 }
 
 // Version 2 payloads (no attributes coded) still decode, with attributes derived from the triangles.
@@ -610,9 +627,9 @@ TEST(Pm, HostileCountsAreRefusedBeforeAllocating) {
   const QuantizedMesh sphere = quantized(icosphere(3), 12);
   const Encoded enc = encodeTile(ctx, sphere, {});
   const TileSummary s = enc.tile.decoded;
-  EXPECT_EQ(pm().decode(ctx, pm().version, enc.tile.payload, DecodeLimits{s.vertices - 1, s.faces}).status().code(),
+  EXPECT_EQ(pm().decode(ctx, enc.version, enc.tile.payload, DecodeLimits{s.vertices - 1, s.faces}).status().code(),
             ErrorCode::kMalformed);
-  EXPECT_EQ(pm().decode(ctx, pm().version, enc.tile.payload, DecodeLimits{s.vertices, s.faces - 1}).status().code(),
+  EXPECT_EQ(pm().decode(ctx, enc.version, enc.tile.payload, DecodeLimits{s.vertices, s.faces - 1}).status().code(),
             ErrorCode::kMalformed);
   // A header claiming 2^40 base vertices, and one claiming a level of 2^33 faces, within a few bytes.
   auto varint = [](std::vector<uint8_t>& out, uint64_t v) {
@@ -623,14 +640,22 @@ TEST(Pm, HostileCountsAreRefusedBeforeAllocating) {
   varint(h1, 1), varint(h1, 0), varint(h1, uint64_t(1) << 40), varint(h1, 10);
   auto r1 = pm().decode(ctx, pm().version, h1, DecodeLimits{1000, 2000});
   EXPECT_EQ(r1.status().code(), ErrorCode::kMalformed) << r1.status().toString();
-  std::vector<uint8_t> h2 = {2};
-  varint(h2, 1), varint(h2, 0), varint(h2, 4), varint(h2, 4);
-  for (int i = 0; i < 4; ++i) h2.push_back(0);
-  varint(h2, 1), varint(h2, 1), varint(h2, 5), varint(h2, uint64_t(1) << 33);
-  for (int i = 0; i < 4; ++i) h2.push_back(0);
-  varint(h2, 3);
-  auto r2 = pm().decode(ctx, pm().version, h2, DecodeLimits{1000, 2000});
-  EXPECT_EQ(r2.status().code(), ErrorCode::kMalformed) << r2.status().toString();
+  // v5 level entries carry a wedge count after the vertex count: one claiming 2^33 wedges too.
+  for (const uint16_t version : {uint16_t(4), uint16_t(5)})
+    for (const bool huge_wedges : {false, true}) {
+      if (version < 5 && huge_wedges) continue;
+      SCOPED_TRACE(::testing::Message() << version << " " << huge_wedges);
+      std::vector<uint8_t> h2 = {2};
+      varint(h2, 1), varint(h2, 0), varint(h2, 4), varint(h2, 4);
+      for (int i = 0; i < 4; ++i) h2.push_back(0);
+      varint(h2, 1), varint(h2, 1), varint(h2, 5);
+      if (version >= 5) varint(h2, huge_wedges ? uint64_t(1) << 33 : 6);
+      varint(h2, huge_wedges ? 6 : uint64_t(1) << 33);
+      for (int i = 0; i < 4; ++i) h2.push_back(0);
+      varint(h2, 3);
+      auto r2 = pm().decode(ctx, version, h2, DecodeLimits{1000, 2000});
+      EXPECT_EQ(r2.status().code(), ErrorCode::kMalformed) << r2.status().toString();
+    }
   // An unknown version.
   EXPECT_EQ(pm().decode(ctx, pm().version + 1, enc.tile.payload, limitsOf(s)).status().code(),
             ErrorCode::kUnknownVersion);

@@ -53,7 +53,8 @@ TEST(PmScans, EveryLevelOfRealScansDecodes) {
       const DecodeLimits limits = limitsOf(enc->decoded);
       uint64_t prev = 0;
       for (const CodecLevel& l : enc->levels) {
-        auto d = pm.decode_level(ctx, pm.version, std::span(enc->payload).first(l.end_bytes), l.level, limits);
+        auto d = pm.decode_level(ctx, payloadVersion(pm, *enc), std::span(enc->payload).first(l.end_bytes), l.level,
+                                 limits);
         ASSERT_TRUE(d.isOk()) << d.status().toString();
         EXPECT_EQ(d->positions.size(), l.vertices);
         EXPECT_GE(l.vertices, prev);

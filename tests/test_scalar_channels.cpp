@@ -466,8 +466,8 @@ TEST(ScalarChannels, HostileChannelTablesFailCleanly) {
 
 // Golden containers of version 2 (tests/golden/scalars-<codec>.spz, kept forever): each build decodes them to the
 // sphere they were made from, and the writer must still produce them byte for byte (the scalar channels' coding
-// is part of the format). SCANPRESS_WRITE_GOLDEN=1 writes the missing ones. pm (v4) welds the sphere's twins: it
-// decodes to the first vertex's row at each position; prm (v2) to what it coded.
+// is part of the format). SCANPRESS_WRITE_GOLDEN=1 writes the missing ones. pm v4 welded the sphere's twins: it
+// decodes to the first vertex's row at each position (v5 keeps them); prm (v2) to what it coded.
 TEST(ScalarChannels, GoldenContainersDecodeAndAreReproduced) {
   AttributeLayout layout;
   layout.scalars = kEveryType;
@@ -498,8 +498,10 @@ TEST(ScalarChannels, GoldenContainersDecodeAndAreReproduced) {
     // scalars differ: cut edges) since creases went through their coarse levels (kdtree v4 coded it as v3); their
     // version 3 containers stay, decoded below.
     const std::string prefix = std::string(SCANPRESS_GOLDEN) + "/scalars-" + std::string(codec.name);
+    // pm writes version 5 (wedges: the twins kept) since it keeps creases and seams; its version 4 container stays.
     const bool creased = id == CodecId::kKdtree || id == CodecId::kOctree;
-    const std::string path = creased ? prefix + "-v" + std::to_string(codec.version) + ".spz" : prefix + ".spz";
+    const bool versioned = creased || id == CodecId::kPm;
+    const std::string path = versioned ? prefix + "-v" + std::to_string(codec.version) + ".spz" : prefix + ".spz";
     auto bytes = encodeContainer(grid, layout, codec, std::vector<QuantizedMesh>{q});
     ASSERT_TRUE(bytes.isOk()) << bytes.status().toString();
     if (!std::filesystem::exists(path) && std::getenv("SCANPRESS_WRITE_GOLDEN")) {
@@ -509,7 +511,7 @@ TEST(ScalarChannels, GoldenContainersDecodeAndAreReproduced) {
     ASSERT_FALSE(golden.empty()) << path << " missing (SCANPRESS_WRITE_GOLDEN=1 writes it)";
     EXPECT_TRUE(golden == *bytes) << "the writer no longer reproduces " << path;
     std::vector<std::string> paths{path};
-    if (creased) paths.push_back(prefix + ".spz");
+    if (versioned) paths.push_back(prefix + ".spz");
     for (const std::string& kept : paths) {
       SCOPED_TRACE(kept);
       const std::vector<uint8_t> container = testing::readBytes(kept);
@@ -529,10 +531,11 @@ TEST(ScalarChannels, GoldenContainersDecodeAndAreReproduced) {
         EXPECT_TRUE(vertexRows(*d, size_t(layout.scalarStride())) == vertexRows(q, size_t(layout.scalarStride())));
         continue;
       }
+      const bool pm_welds = id == CodecId::kPm && kept != path;  // v4
       EXPECT_TRUE(vertexRows(*d, size_t(layout.scalarStride())) ==
-                  vertexRows(id == CodecId::kPm ? welded : q, size_t(layout.scalarStride())));
+                  vertexRows(pm_welds ? welded : q, size_t(layout.scalarStride())));
       if (id == CodecId::kPm) {
-        EXPECT_EQ(e.codec_version, 4);
+        EXPECT_EQ(e.codec_version, kept == path ? 5 : 4);
       }
       if (creased) {
         EXPECT_EQ(e.codec_version, kept == path ? codec.version : 3);

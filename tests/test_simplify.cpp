@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <map>
 #include <set>
 
 #include "engine/shapes.h"
@@ -394,6 +395,78 @@ TEST(Simplify, RandomlyDamagedMeshesKeepTheContracts) {
       EXPECT_TRUE(st.isOk()) << st.toString();
     }
   }
+}
+
+// Corner wedges (simplify.h): the sphere cut by two seams, the planes x = 0 and y = 0 through its center, into four
+// sides (a triangle's side: the signs of its centroid's x and y); a vertex has one wedge per side its triangles lie
+// on (four at the poles). Simplified to a tenth: every output corner names a wedge of its own vertex, every
+// triangle's three wedges are of one side (no triangle across a seam), and the mesh is still valid and simplified.
+// With one wedge per vertex (its own id) the rules bind nothing: the same collapses as without wedges.
+TEST(Simplify, CornerWedgesKeepEachSideOnItsSide) {
+  const QuantizedMesh m = quantizedSphere(4);
+  auto sideOf = [&](const Triangle& t) {
+    int64_t x = 0, y = 0;
+    for (uint32_t v : t) x += int64_t(m.positions[v][0]) - 32768, y += int64_t(m.positions[v][1]) - 32768;
+    return (x < 0 ? 0 : 1) + (y < 0 ? 0 : 2);
+  };
+  std::map<std::pair<uint32_t, int>, uint32_t> id;  // (vertex, side) -> wedge
+  std::vector<uint32_t> wedge_vertex;
+  std::vector<int> wedge_side;
+  std::vector<uint32_t> corners;
+  for (const Triangle& t : m.triangles) {
+    const int side = sideOf(t);
+    for (uint32_t v : t) {
+      const auto [it, fresh] = id.try_emplace({v, side}, uint32_t(wedge_vertex.size()));
+      if (fresh) wedge_vertex.push_back(v), wedge_side.push_back(side);
+      corners.push_back(it->second);
+    }
+  }
+  ASSERT_GT(wedge_vertex.size(), m.positions.size() + 60) << "the seams split vertices";
+  SimplifyOptions o;
+  o.target_faces = m.triangles.size() / 10;
+  auto r = simplify(m, {}, o, corners);
+  ASSERT_TRUE(r.isOk()) << r.status().toString();
+  expectValidSimplification(m, {}, *r);
+  EXPECT_LE(r->mesh.triangles.size(), m.triangles.size() / 5);
+  ASSERT_EQ(r->corner_wedges.size(), 3 * r->mesh.triangles.size());
+  size_t seam_triangles = 0;
+  for (size_t f = 0; f < r->mesh.triangles.size(); ++f) {
+    const Triangle& t = r->mesh.triangles[f];
+    std::set<int> sides;
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t w = r->corner_wedges[3 * f + size_t(k)];
+      ASSERT_LT(w, wedge_vertex.size());
+      EXPECT_EQ(wedge_vertex[w], t[size_t(k)]) << "a corner names another vertex's wedge";
+      sides.insert(wedge_side[w]);
+    }
+    EXPECT_EQ(sides.size(), 1u) << "triangle " << f << " lies across a seam";
+    std::set<int> geometric;  // where the triangle lies, by its corners' wedges having more than one side
+    for (uint32_t v : t) {
+      int n = 0;
+      for (int sd = 0; sd < 4; ++sd) n += id.count({v, sd});
+      geometric.insert(n);
+    }
+    seam_triangles += *geometric.rbegin() > 1;
+  }
+  EXPECT_GT(seam_triangles, 20u) << "triangles along the seams remain";
+  // One wedge per vertex: the same simplification.
+  std::vector<uint32_t> own;
+  for (const Triangle& t : m.triangles) own.insert(own.end(), t.begin(), t.end());
+  auto with = simplify(m, {}, o, own);
+  auto without = simplify(m, {}, o);
+  ASSERT_TRUE(with.isOk() && without.isOk());
+  ASSERT_EQ(with->collapses.size(), without->collapses.size());
+  for (size_t i = 0; i < with->collapses.size(); ++i) {
+    EXPECT_EQ(with->collapses[i].kept, without->collapses[i].kept) << i;
+    EXPECT_EQ(with->collapses[i].removed, without->collapses[i].removed) << i;
+  }
+  EXPECT_EQ(with->corner_wedges, [&] {
+    std::vector<uint32_t> c;
+    for (const Triangle& t : without->mesh.triangles) c.insert(c.end(), t.begin(), t.end());
+    return c;
+  }());
+  // Corner wedges of the wrong count are refused.
+  EXPECT_EQ(simplify(m, {}, o, std::span(own).first(5)).status().code(), ErrorCode::kInvalidArgument);
 }
 
 }  // namespace

@@ -537,8 +537,14 @@ TEST(Materials, MtllibAndOneUsemtlAreKept) {
     back = decodeFile(td);
     ASSERT_TRUE(back.isOk());
     EXPECT_EQ(describeDropped(back->dropped), "ply comment TextureFile bark 2.jpg x 1");
-    // pm keeps no texture coordinates, so not their image either; a nameless comment is no texture.
+    // pm keeps the texture coordinates and so their image (v5); prm keeps no texture coordinates, so not their
+    // image either; a nameless comment is no texture.
     t.codec = "pm";
+    e = encodeFile(t);
+    ASSERT_TRUE(e.isOk()) << e.status().toString();
+    EXPECT_TRUE(e->read.dropped.empty()) << describeDropped(e->read.dropped);
+    EXPECT_EQ(ContainerFile::open(t.output)->header().materials.texture, "bark 2.jpg");
+    t.codec = "prm";
     e = encodeFile(t);
     ASSERT_TRUE(e.isOk()) << e.status().toString();
     const std::string unkept = "ply comment TextureFile (its texture coordinates are not kept) x 1";
@@ -569,10 +575,11 @@ TEST(Materials, MtllibAndOneUsemtlAreKept) {
             "bytes, control characters or not UTF-8: not kept) x 1");
 }
 
-// pm simplifies (it would open the seams): the vertices are read as they are and `vt` is listed dropped; --no-scalars
-// likewise. A PLY's u and v are dropped by pm too (listed), its other channels kept; --codec auto keeps edgebreaker.
-// PLY's u and v are the same channels: an OBJ output writes them as `vt`, and lists only the others.
-TEST(Texcoords, DroppedBySimplifyingCodecsAndWrittenFromPly) {
+// pm (v5) keeps texture seams as wedges through its simplification: an OBJ's `vt` and a PLY's u, v (a seam as
+// points at one position with other u, v) are kept, with nothing dropped or merged, under --strict too; --no-scalars
+// drops them on request. --codec auto keeps them whichever codec it chooses. PLY's u and v are the same channels:
+// an OBJ output writes them as `vt`, and lists only the others.
+TEST(Texcoords, KeptBySimplifyingCodecsAndWrittenFromPly) {
   TempDir dir;
   const std::string in = dir.file("sphere.obj");
   testing::writeBytes(in, uvSphereObj(12, 24));
@@ -581,22 +588,48 @@ TEST(Texcoords, DroppedBySimplifyingCodecsAndWrittenFromPly) {
     s.keep_scalars = pm;
     auto enc = encodeFile(s);
     ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-    EXPECT_TRUE(enc->layout.scalars.empty());
-    EXPECT_EQ(enc->read.source_vertices, enc->read.vertices);
-    // pm: dropped with the reason; --no-scalars: on request.
-    const std::string dropped = describeDropped(pm ? enc->read.dropped : enc->dropped_on_request);
-    EXPECT_NE(dropped.find(pm ? "obj vt (codec pm keeps no texture seams) x 325" : "obj vt x 325"), std::string::npos)
-        << dropped;
+    EXPECT_EQ(findTexcoords(enc->layout.scalars).has_value(), pm);
+    if (pm) {
+      EXPECT_EQ(describeDropped(enc->read.dropped), "obj vt unused x 2");  // the file's own, for every codec
+      EXPECT_GT(enc->read.vertices, enc->read.source_vertices) << "the seam's wedges";
+    } else {
+      EXPECT_EQ(enc->read.source_vertices, enc->read.vertices);
+      const std::string dropped = describeDropped(enc->dropped_on_request);
+      EXPECT_NE(dropped.find("obj vt x 325"), std::string::npos) << dropped;
+    }
   }
-  // --codec auto under a loose target: pm's simplified file would be smaller, but it drops the texture
-  // coordinates, so edgebreaker's result (which keeps them) is kept.
+  // pm simplified to 30% of the faces and decoded to OBJ: no triangle spans the seam (u from 0 to 1).
+  {
+    EncodeSettings a = uvSettingsFor(in, dir.file("lossy.spz"), "pm");
+    a.codec_options.pm.ratio = 0.3;
+    ASSERT_TRUE(encodeFile(a).isOk());
+    DecodeSettings d;
+    d.input = a.output;
+    d.output = dir.file("lossy.obj");
+    ASSERT_TRUE(decodeFile(d).isOk());
+    auto back = readMeshFile(d.output);
+    ASSERT_TRUE(back.isOk());
+    const auto tc = findTexcoords(back->scalar_channels);
+    ASSERT_TRUE(tc.has_value());
+    const size_t stride = back->scalars.size() / back->positions.size();
+    ASSERT_GT(back->triangles.size(), 50u);
+    for (const Triangle& t : back->triangles) {
+      float lo = 2, hi = -1;
+      for (uint32_t v : t) {
+        const float u = std::bit_cast<float>(back->scalars[v * stride + tc->u_word]);
+        lo = std::min(lo, u), hi = std::max(hi, u);
+      }
+      EXPECT_LT(hi - lo, 0.5f) << "a triangle across the seam";
+    }
+  }
+  // --codec auto under a loose target keeps the texture coordinates, whichever codec wins.
   {
     EncodeSettings a = uvSettingsFor(in, dir.file("auto.spz"), "auto");
     testing::setRmsTarget(a, 1e-3);
     auto chosen = encodeFile(a);
     ASSERT_TRUE(chosen.isOk()) << chosen.status().toString();
-    EXPECT_EQ(chosen->codec, "edgebreaker");
-    EXPECT_TRUE(findTexcoords(chosen->layout.scalars).has_value());
+    EXPECT_TRUE(findTexcoords(chosen->layout.scalars).has_value()) << chosen->codec;
+    EXPECT_EQ(describeDropped(chosen->read.dropped), "obj vt unused x 2");
   }
 
   // A PLY with u, v and a third channel, decoded to OBJ and to STL.
@@ -610,55 +643,54 @@ TEST(Texcoords, DroppedBySimplifyingCodecsAndWrittenFromPly) {
   m.scalars = words;
   const std::string ply = dir.file("s.ply");
   ASSERT_TRUE(writePly(ply, m).isOk());
-  // Its seam is vertices at one position with other u, v: pm, which welds by position, drops u and v (listed, with
-  // the reason) and keeps the confidence, the first point's at each position: the points whose other confidence it
-  // did not keep are listed too, and fail the encode under --strict (nothing written). --codec auto then keeps
-  // edgebreaker's result, which drops nothing.
-  size_t merged = 0;
-  {
-    std::map<std::array<double, 3>, uint32_t> first;  // position -> the first point's confidence
-    for (size_t i = 0; i < m.positions.size(); ++i) {
-      const auto [it, fresh] =
-          first.emplace(std::array{m.positions[i][0], m.positions[i][1], m.positions[i][2]}, m.scalars[3 * i + 2]);
-      merged += !fresh && it->second != m.scalars[3 * i + 2];
-    }
-  }
-  ASSERT_GT(merged, 20u);
+  // Its seam is points at one position with other u, v (and other confidences): pm keeps every point, lossless and
+  // under --strict.
   EncodeSettings p = uvSettingsFor(ply, dir.file("seam.spz"), "pm");
-  auto welded = encodeFile(p);
-  ASSERT_TRUE(welded.isOk()) << welded.status().toString();
-  EXPECT_EQ(welded->failed_tiles, 0u);
-  EXPECT_EQ(welded->layout.scalars, (std::vector<ScalarChannel>{{"confidence", ScalarType::kUint8}}));
-  const std::string n_in = std::to_string(m.positions.size());
-  const std::string merged_entry =
-      "attributes of points sharing a grid position (codec pm keeps the first point's) x " + std::to_string(merged);
-  EXPECT_EQ(describeDropped(welded->read.dropped), "vertex.u (codec pm keeps no texture seams) x " + n_in +
-                                                       ", vertex.v (codec pm keeps no texture seams) x " + n_in +
-                                                       ", " + merged_entry);
+  p.strict = true;
+  auto kept = encodeFile(p);
+  ASSERT_TRUE(kept.isOk()) << kept.status().toString();
+  EXPECT_EQ(kept->failed_tiles, 0u);
+  EXPECT_EQ(kept->layout.scalars.size(), 3u);
+  EXPECT_TRUE(kept->read.dropped.empty()) << describeDropped(kept->read.dropped);
   {
-    Mesh c = m;  // the confidence alone (u and v would fail --strict first)
-    c.scalar_channels = {{"confidence", ScalarType::kUint8}};
-    c.scalars.clear();
-    for (size_t i = 0; i < m.positions.size(); ++i) c.scalars.push_back(m.scalars[3 * i + 2]);
-    ASSERT_TRUE(writePly(dir.file("c.ply"), c).isOk());
-    EncodeSettings st = uvSettingsFor(dir.file("c.ply"), dir.file("strict.spz"), "pm");
-    st.strict = true;
-    auto refused = encodeFile(st);
-    ASSERT_FALSE(refused.isOk());
-    const std::string refusal = "strict: the container would not keep " + merged_entry;
-    EXPECT_NE(refused.status().message().find(refusal), std::string::npos) << refused.status().toString();
-    EXPECT_FALSE(std::filesystem::exists(st.output));
-    st.keep_scalars = false;  // no point differs then
-    auto plain = encodeFile(st);
-    ASSERT_TRUE(plain.isOk()) << plain.status().toString();
+    DecodeSettings d;
+    d.input = p.output;
+    d.output = dir.file("seam.ply");
+    ASSERT_TRUE(decodeFile(d).isOk());
+    auto back = readMeshFile(d.output);
+    ASSERT_TRUE(back.isOk());
+    // Corner for corner: the same rows at the same (quantized) corners as an edgebreaker round trip, lossless too.
+    EncodeSettings e = uvSettingsFor(ply, dir.file("eb.spz"), "edgebreaker");
+    ASSERT_TRUE(encodeFile(e).isOk());
+    d.input = e.output;
+    d.output = dir.file("eb.ply");
+    ASSERT_TRUE(decodeFile(d).isOk());
+    auto want = readMeshFile(d.output);
+    ASSERT_TRUE(want.isOk());
+    auto corners = [](const Mesh& x) {
+      const size_t stride = x.scalars.size() / x.positions.size();
+      std::vector<std::array<std::pair<Vec3d, std::vector<uint32_t>>, 3>> out;
+      for (const Triangle& t : x.triangles) {
+        std::array<std::pair<Vec3d, std::vector<uint32_t>>, 3> c;
+        for (int k = 0; k < 3; ++k)
+          c[size_t(k)] = {x.positions[t[size_t(k)]],
+                          std::vector<uint32_t>(x.scalars.begin() + ptrdiff_t(t[size_t(k)] * stride),
+                                                x.scalars.begin() + ptrdiff_t((t[size_t(k)] + 1) * stride))};
+        std::rotate(c.begin(), std::min_element(c.begin(), c.end()), c.end());
+        out.push_back(c);
+      }
+      std::sort(out.begin(), out.end());
+      return out;
+    };
+    EXPECT_TRUE(corners(*back) == corners(*want));
   }
   p.codec = "auto";
+  p.strict = false;
   p.output = dir.file("auto.spz");
   testing::setRmsTarget(p, 1e-3);
-  auto fallback = encodeFile(p);
-  ASSERT_TRUE(fallback.isOk()) << fallback.status().toString();
-  EXPECT_EQ(fallback->codec, "edgebreaker");
-  EXPECT_EQ(fallback->layout.scalars.size(), 3u);
+  auto chosen = encodeFile(p);
+  ASSERT_TRUE(chosen.isOk()) << chosen.status().toString();
+  EXPECT_EQ(chosen->layout.scalars.size(), 3u);
   EncodeSettings s = uvSettingsFor(ply, dir.file("q.spz"), "edgebreaker");
   ASSERT_TRUE(encodeFile(s).isOk());
   DecodeSettings d;
@@ -689,7 +721,7 @@ TEST(Texcoords, DroppedBySimplifyingCodecsAndWrittenFromPly) {
 // within 30 degrees of the corner's face (smooth across gentle edges, split at sharp ones), one `vn` record per
 // corner. The reader splits each vertex into one wedge per distinct normal; through kdtree, octree and edgebreaker
 // (one tile and many) every decoded corner has its own normal to the octahedral precision, so no normal is
-// averaged across a crease. pm keeps a normal per vertex and lists the others.
+// averaged across a crease; pm (v5) too, whose simplifier moves a corner only to a wedge on its own side.
 TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
   const std::string fandisk = testing::sharedDataDir() + "/fandisk.obj";
   if (!std::filesystem::exists(fandisk)) GTEST_SKIP() << "shared data not found: " << fandisk;
@@ -789,9 +821,9 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
       EXPECT_EQ(inexact, 0u) << "corners whose normal is not the file's bit for bit";
     }
   };
-  for (const auto& [codec, tile_triangles] :
-       {std::pair{"kdtree", uint64_t(1) << 20}, std::pair{"octree", uint64_t(2000)},
-        std::pair{"edgebreaker", uint64_t(2000)}}) {
+  const std::pair<const char*, uint64_t> runs[] = {
+      {"kdtree", uint64_t(1) << 20}, {"octree", 2000}, {"edgebreaker", 2000}, {"pm", uint64_t(1) << 20}, {"pm", 2000}};
+  for (const auto& [codec, tile_triangles] : runs) {
     SCOPED_TRACE(std::string(codec) + ", " + std::to_string(tile_triangles) + " triangles per tile");
     EncodeSettings s = uvSettingsFor(in, dir.file("f.spz"), codec);
     s.tile_triangles = tile_triangles;
@@ -807,7 +839,8 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
   }
   // --lossless-normals: every corner's normal bit for bit, in PLY and OBJ output, one tile and many.
   for (const auto& [codec, tile_triangles] :
-       {std::pair{"kdtree", uint64_t(1) << 20}, std::pair{"edgebreaker", uint64_t(2000)}}) {
+       {std::pair{"kdtree", uint64_t(1) << 20}, std::pair{"edgebreaker", uint64_t(2000)},
+        std::pair{"pm", uint64_t(2000)}}) {
     SCOPED_TRACE(std::string(codec) + ", " + std::to_string(tile_triangles) + " triangles per tile, lossless");
     EncodeSettings s = uvSettingsFor(in, dir.file("l.spz"), codec);
     s.tile_triangles = tile_triangles;
@@ -826,24 +859,10 @@ TEST(CornerNormals, FandiskCreasesSurviveEncodeAndDecode) {
       checkCorners(d.output, true);
     }
   }
-  // pm: a normal per vertex (its first corner's), the others listed.
-  EncodeSettings s = uvSettingsFor(in, dir.file("p.spz"), "pm");
-  auto enc = encodeFile(s);
-  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-  EXPECT_EQ(enc->read.vertices, m.positions.size());
-  EXPECT_NE(describeDropped(enc->read.dropped).find("obj vn per corner (codec pm keeps a normal per vertex)"),
-            std::string::npos)
-      << describeDropped(enc->read.dropped);
-  // pm carries scalar channels, so lossless normals too (its first corner's, bit for bit).
-  s.lossless_normals = true;
-  s.output = dir.file("q.spz");
-  enc = encodeFile(s);
-  ASSERT_TRUE(enc.isOk()) << enc.status().toString();
-  ASSERT_TRUE(losslessNormalsWord(enc->layout.scalars).has_value());
   // prm makes new vertices (their normals would be resampled): refused, nothing written.
-  s.codec = "prm";
-  s.output = dir.file("r.spz");
-  enc = encodeFile(s);
+  EncodeSettings s = uvSettingsFor(in, dir.file("r.spz"), "prm");
+  s.lossless_normals = true;
+  auto enc = encodeFile(s);
   ASSERT_FALSE(enc.isOk());
   EXPECT_NE(enc.status().message().find("--lossless-normals needs a codec that keeps the scan's vertices"),
             std::string::npos)

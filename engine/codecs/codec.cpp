@@ -42,7 +42,7 @@ constexpr std::array<CodecInfo, 6> kCodecs = {{
      true, 3},
     {CodecId::kOctree, "octree", 4, kHierarchyFloor, &octreeEncode, &octreeDecode, &octreeLevels, &octreeDecodeLevel,
      true, 3},
-    {CodecId::kPm, "pm", 4, kPmFloor, &pmEncode, &pmDecode, &pmLevels, &pmDecodeLevel, false, 3, true},
+    {CodecId::kPm, "pm", 5, kPmFloor, &pmEncode, &pmDecode, &pmLevels, &pmDecodeLevel, false, 3, true, 5},
     {CodecId::kEdgebreaker, "edgebreaker", 2, kEdgebreakerFloor, &edgebreakerEncode, &edgebreakerDecode},
     {CodecId::kPrm, "prm", 2, kEdgebreakerFloor, &prmEncode, &prmDecode},
 }};

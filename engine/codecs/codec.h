@@ -123,8 +123,8 @@ struct EncodedTile {
   // or seams as version 3, which older builds read too. The container records it (ContainerWriter::addTile).
   uint16_t version = 0;
   // Input points merged into another point at their grid position whose attributes (normal, color or scalar row)
-  // differ: pm's weld keeps the first point's, and where its last level is lossless (it simplifies nothing) the
-  // report lists how many it did not keep.
+  // differ: pm's weld keeps the wedges its triangles' corners use (a point no triangle uses is merged), and where its
+  // last level is lossless (it simplifies nothing) the report lists how many it did not keep.
   uint64_t merged_points = 0;
 };
 
@@ -169,8 +169,9 @@ struct CodecInfo {
                                             const DecodeLimits& limits) = nullptr;
   Result<QuantizedMesh> (*decode_level)(const TileContext& ctx, uint16_t version, std::span<const uint8_t> payload,
                                         uint32_t level, const DecodeLimits& limits) = nullptr;
-  // False when the codec derives normals and colors from the triangles instead of keeping them (pm): its tiles
-  // weld by position even when complete, as coarse levels do, and get attributes derived from the welded mesh.
+  // False when the codec's payloads before `keeps_attributes_from` do not give back the tile's vertices with their
+  // attributes (pm before v5 welded by position and kept the first point's): such tiles weld by position even when
+  // complete, as coarse levels do, and get attributes derived from the welded mesh where they code none.
   bool keeps_attributes = true;
   // The first version whose levels show the tile's own normals and colors, coded through its levels (kdtree and
   // octree from 3, pm from 3; 0: coarse levels derive them from their triangles). A codec that welds by position
@@ -179,12 +180,20 @@ struct CodecInfo {
   // Whether the first level shows them as well (pm: its base mesh codes them). kdtree's and octree's root level has
   // no segment: it derives them.
   bool root_level_attributes = false;
+  // The first version whose whole payloads give back the tile's vertices with their attributes when
+  // keeps_attributes is false (pm: 5, which keeps creases' and seams' wedges); 0: none.
+  uint16_t keeps_attributes_from = 0;
   bool progressive() const { return levels != nullptr; }
+  // Whether a whole payload of `version` gives back the tile's vertices and their attributes (else its tiles weld
+  // by position).
+  bool keepsAttributes(uint16_t version) const {
+    return keeps_attributes || (keeps_attributes_from != 0 && version >= keeps_attributes_from);
+  }
   // Whether a payload of `version` decodes with the tile's own attributes: whole (`level` = nullopt) or at a coarse
   // level (`root`: the first level).
   bool showsOwnAttributes(uint16_t version, bool coarse, bool root) const {
     const bool coded = coarse_attributes_from != 0 && version >= coarse_attributes_from;
-    if (!coarse) return keeps_attributes || coded;
+    if (!coarse) return keepsAttributes(version) || coded;
     return coded && (!root || root_level_attributes);
   }
 };

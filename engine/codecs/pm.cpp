@@ -31,27 +31,36 @@
 //  - Batches (the simplifier's passes) are grouped into levels so that a level grows the vertex count by a useful
 //    step; each level is one range-coder stream (models carry over), so a payload cut after a level's end decodes it.
 //  - The encoder welds vertices sharing a grid position and drops triangles that repeat a vertex after the weld:
-//    the last level is the tile as triangles over positions (with multiplicity and orientation), not its vertex
-//    list. Normals and colors are not kept in v1 and v2: every level derives them from its triangles
-//    (deriveAttributes).
+//    the last level is the tile as triangles over positions (with multiplicity and orientation) and, from v5, the
+//    wedges of their corners. Normals and colors are not kept in v1 and v2: every level derives them from its
+//    triangles (deriveAttributes).
 //  - Attributes (v3; ../shared/papers/attributes-selective-refinement.md §3): a vertex's normal and color are the
-//    ones it has in the last level (a welded position takes its first input vertex's). The base codec codes the base
-//    vertices' with the base mesh; a vertex a split adds shows its parent's until the last level, whose stream ends
-//    with the attributes of every vertex the splits added, predicted from the finest geometry as kdtree's last level
-//    predicts its (LevelAttributes). Every level thus shows the scan's own values. Where the paper merges the
-//    attributes of a collapse into new values, we keep one of them (the kept vertex's): no value is coded twice,
-//    and no level shows a value the scan does not have.
+//    ones it has in the last level (v3, v4: a welded position takes its first input vertex's). The base codec codes
+//    the base vertices' with the base mesh; a vertex a split adds shows its parent's until the last level, whose
+//    stream ends with the attributes of every vertex the splits added, predicted from the finest geometry as
+//    kdtree's last level predicts its (LevelAttributes). Every level thus shows the scan's own values. Where the
+//    paper merges the attributes of a collapse into new values, we keep one of them (the kept vertex's): no value is
+//    coded twice, and no level shows a value the scan does not have.
 //  - Scalar channels (v4: confidence, intensity, lossless normals, texture coordinates) go the same way, coded
-//    before the normals at the last level as kdtree's are. The weld keeps one texture coordinate per position, so a
-//    tile whose vertices at one position have different ones (a seam as duplicated vertices) is refused, not
-//    coded with one side's across the seam; a seam-keeping pm needs wedges through the simplifier and the splits.
+//    before the normals at the last level as kdtree's are.
+//  - Wedges (v5; the paper's corner graph, §3): a crease or a texture seam is points at one position with other
+//    attributes, and v4's weld kept one of them. v5 keeps each as a wedge: faces name their corners' wedges, and
+//    attributes are per wedge. The paper marks edges sharp and propagates attributes through contractions; here the
+//    simplifier carries each corner's wedge and moves a corner only to a wedge of its own side (simplify.h,
+//    corner_wedges), so a seam's vertex leaves only along its seam. A split then names, per new face, which of k's
+//    and of w's wedges its corners take (nothing where a vertex has one: about a bit per new face along seams), and
+//    r's wedges follow from k's that they pair with. A wedge a split adds shows its paired wedge's values until the
+//    last level, which codes the added wedges over the mesh of wedges (a wedge's predicted normal is its own side's).
+//    Written for every tile with attributes, so that a decoded tile is its vertices with their attributes and
+//    decoders weld tiles by position and attributes.
 //
-// Payload v1 to v4 (FORMAT.md, "Codec pm"):
+// Payload v1 to v5 (FORMAT.md, "Codec pm"):
 //   u8 base codec id (1 store, 2 kdtree, 3 octree), varint base codec version, varint base payload bytes B,
-//   varint base vertices V0, varint base faces F0, f32 base error (grid cells, little-endian bits),
-//   varint L (levels after the base), L x { varint batches, varint vertices, varint faces, f32 error,
-//   varint stream bytes }, then the base payload (B bytes), then the L level streams (v3 with normals or colors, v4
-//   with scalar channels: the last one ends with the attributes of the vertices the splits added).
+//   varint base vertices V0 (v5: wedges), varint base faces F0, f32 base error (grid cells, little-endian bits),
+//   varint L (levels after the base), L x { varint batches, varint vertices, [v5: varint wedges,] varint faces,
+//   f32 error, varint stream bytes }, then the base payload (B bytes), then the L level streams (v3 with normals or
+//   colors, v4 with scalar channels: the last one ends with the attributes of the vertices, v5 wedges, the splits
+//   added).
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -71,11 +80,13 @@ namespace {
 // 2: the same layout as 1; its base payloads are kdtree's and octree's version 2 (so are its golden bytes).
 // 3: normals and colors at every level (the base's in the base payload, the split vertices' at the end of the last
 // level's stream); without them the bytes of v2.
-// 4: scalar channels too, coded as normals and colors are; a tile without them is written as version 3 (the same
-// bytes), which older builds read.
-constexpr uint16_t kVersion = 4;
+// 4: scalar channels too, coded as normals and colors are.
+// 5: wedges (creases and texture seams kept); written for every tile with attributes. A tile without any is written
+// as version 3 (v2's bytes).
+constexpr uint16_t kVersion = 5;
 constexpr uint16_t kAttributesFrom = 3;
 constexpr uint16_t kScalarsFrom = 4;
+constexpr uint16_t kWedgesFrom = 5;
 // A level closes once it has at least this many splits and grew the vertex count by this factor (or at the last
 // batch): fewer, larger levels pay less per-level overhead (a 4-byte flush and the table entry).
 constexpr uint64_t kMinLevelSplits = 64;
@@ -99,6 +110,7 @@ uint32_t bitLength(uint64_t v) {
 
 struct Models {
   BitModel flag[2];
+  BitModel wedge_same[2];  // v5: a new face's corner at k / at its third vertex takes the predicted wedge
   BitModel moved[3];
   BitModel orient[2];
   BitModel sign[3];
@@ -109,8 +121,9 @@ struct Models {
   std::vector<SymbolModel> bucket;
   // Buffers reused by every split (allocation dominated the decoder's profile).
   struct Scratch {
-    std::vector<uint32_t> fan, in_moved, in_stayed, nbrs, cut, extra_w, rn, kn;
-    std::vector<uint8_t> starts, extra_o, orients;
+    std::vector<uint32_t> fan, in_moved, in_stayed, nbrs, cut, extra_w, rn, kn, kw, xw;
+    std::vector<uint8_t> starts, extra_o, orients, taken;
+    std::vector<std::array<uint32_t, 2>> wedges;
     std::vector<std::pair<uint32_t, uint8_t>> ordered;
   } scratch;
   Models() : bucket(3 * kScales * (1 + kRelContexts), SymbolModel(kBuckets)) {}
@@ -163,19 +176,35 @@ void codeCount(C& c, SymbolModel& m, uint64_t& n) {
   n = uint64_t(kCountEscape) + rest;
 }
 
-// The mesh both sides keep while splitting: positions, faces, and per vertex its faces.
+// The mesh both sides keep while splitting: positions, faces, and per vertex its faces; and the wedges (v5): the
+// corners of a vertex on a crease or a texture seam show one set of attributes per side, a wedge each. A face names
+// its corners' wedges; attributes are per wedge. Before v5 every vertex has one wedge, whose id is the vertex's.
 struct PmState {
   std::vector<Vec3u> pos;
   std::vector<Triangle> faces;
   std::vector<std::vector<uint32_t>> vf;
-  std::vector<OctNormal> normals;  // v3, with normals: per coded vertex
-  std::vector<Rgba8> colors;       // v3, with colors: per coded vertex
-  ScalarValues scalars;            // v4, with scalar channels: the layout's stride per coded vertex
-  std::vector<uint32_t> parent;    // per vertex: the vertex it split from (a base vertex: itself)
+  std::vector<Triangle> fw;        // per face: its corners' wedges
+  std::vector<uint32_t> wv;        // per wedge: its vertex
+  std::vector<uint32_t> parent;    // per wedge: the wedge it split from (a base wedge: itself)
+  std::vector<OctNormal> normals;  // v3, with normals: per coded wedge
+  std::vector<Rgba8> colors;       // v3, with colors: per coded wedge
+  ScalarValues scalars;            // v4, with scalar channels: the layout's stride per coded wedge
 
-  void addFace(const Triangle& t) {
+  uint32_t wedgeAt(uint32_t f, uint32_t v) const {
+    const Triangle& t = faces[f];
+    return fw[f][t[0] == v ? 0 : (t[1] == v ? 1 : 2)];
+  }
+  // v's distinct wedges, ascending.
+  void wedgesOf(uint32_t v, std::vector<uint32_t>& out) const {
+    out.clear();
+    for (uint32_t f : vf[v]) out.push_back(wedgeAt(f, v));
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+  }
+  void addFace(const Triangle& t, const Triangle& w) {
     const uint32_t id = uint32_t(faces.size());
     faces.push_back(t);
+    fw.push_back(w);
     vf[t[0]].push_back(id);
     if (t[1] != t[0]) vf[t[1]].push_back(id);
     if (t[2] != t[0] && t[2] != t[1]) vf[t[2]].push_back(id);
@@ -260,29 +289,37 @@ struct PmState {
 // of at most max(64, N/16) vertices code theirs) would code none here, as the base already has about N/8.
 class LevelAttributes {
  public:
-  // `base_vertices`: 0 when the payload codes no attributes (nothing is kept then).
-  LevelAttributes(const AttributeLayout& layout, uint32_t base_vertices)
-      : layout_(layout), base_(base_vertices), shows_(base_vertices) {
+  // `base_wedges`: 0 when the payload codes no attributes (nothing is kept then).
+  LevelAttributes(const AttributeLayout& layout, uint32_t base_wedges)
+      : layout_(layout), base_(base_wedges), shows_(base_wedges) {
     std::iota(shows_.begin(), shows_.end(), 0u);
   }
-  // The end of a level's stream (`last`: the payload's last level). `truth` (encoder): attributes by vertex.
+  // The end of a level's stream (`last`: the payload's last level). `truth` (encoder): attributes by wedge. The
+  // last level's wedges are coded as vertices of the mesh of wedges (faces over their corners' wedges), so that a
+  // wedge's predicted normal is that of its own side of a crease.
   template <class Io>
   void endLevel(Io& io, PmState& st, bool last, const hierarchy::Points* truth) {
-    const uint32_t n = uint32_t(st.pos.size());
+    const uint32_t n = uint32_t(st.wv.size());
     if (!last) {
-      for (uint32_t v = uint32_t(shows_.size()); v < n; ++v) shows_.push_back(shows_[st.parent[v]]);
+      for (uint32_t w = uint32_t(shows_.size()); w < n; ++w) shows_.push_back(shows_[st.parent[w]]);
       return;
     }
+    std::vector<Vec3u> wpos(n);
+    for (uint32_t w = 0; w < n; ++w) wpos[w] = st.pos[st.wv[w]];
+    // Per wedge its faces, in the order of its vertex's face list (before v5 that list itself).
+    std::vector<std::vector<uint32_t>> wvf(n);
+    for (uint32_t v = 0; v < st.pos.size(); ++v)
+      for (uint32_t f : st.vf[v]) wvf[st.wedgeAt(f, v)].push_back(f);
     hierarchy::codePredictedRange(
-        io, layout_, base_, n, st.faces, [&](uint32_t v) { return std::span<const uint32_t>(st.vf[v]); },
-        [&](uint32_t v) { return hierarchy::angleWeightedNormalAt(st.pos, st.faces, st.vf[v], v); },
-        [](uint32_t) { return false; }, truth, st.normals, st.colors, &st.scalars, &st.pos);
+        io, layout_, base_, n, st.fw, [&](uint32_t w) { return std::span<const uint32_t>(wvf[w]); },
+        [&](uint32_t w) { return hierarchy::angleWeightedNormalAt(wpos, st.fw, wvf[w], w); },
+        [](uint32_t) { return false; }, truth, st.normals, st.colors, &st.scalars, &wpos);
     shows_.resize(n);
     std::iota(shows_.begin(), shows_.end(), 0u);
   }
-  // The decoded level's attributes, by vertex.
+  // The decoded level's attributes, by wedge.
   void show(const PmState& st, QuantizedMesh& out) const {
-    const uint32_t n = uint32_t(st.pos.size());
+    const uint32_t n = uint32_t(st.wv.size());
     if (layout_.hasNormals())
       for (uint32_t v = 0; v < n; ++v) out.normals.push_back(st.normals[shows_[v]]);
     if (layout_.hasColors())
@@ -300,15 +337,50 @@ class LevelAttributes {
  private:
   AttributeLayout layout_;
   uint32_t base_;
-  std::vector<uint32_t> shows_;  // per vertex: the vertex whose attributes it shows
+  std::vector<uint32_t> shows_;  // per wedge: the wedge whose attributes it shows
 };
 
 // One vertex split in the state's indices: k splits into k (at vs) and a new vertex (at vr).
 struct Split {
   std::vector<uint8_t> moved;                           // per fan face: goes to the new vertex
   std::vector<std::pair<uint32_t, uint8_t>> new_faces;  // (third vertex w, 0: (k, r, w) / 1: (k, w, r))
+  std::vector<std::array<uint32_t, 2>> new_wedges;      // encoder, per new face: the wedges of its k and w corners
+  std::vector<std::pair<uint32_t, uint32_t>> created;   // after the split: (k's wedge, r's new wedge it pairs with)
   Vec3u vs{}, vr{};
 };
+
+// Which of `list` (v's distinct wedges) a new face's corner at v names: nothing when v has one; else whether it is
+// `pred` (the wedge of a face beside it), then which other.
+template <class C>
+Status codeWedge(C& c, BitModel& same, const std::vector<uint32_t>& list, uint32_t pred, uint32_t& wedge) {
+  if (list.empty()) return makeError(ErrorCode::kMalformed, "pm: a new face's corner has no wedge to take");
+  uint32_t idx = 0;
+  if constexpr (C::kEncode) {
+    auto it = std::lower_bound(list.begin(), list.end(), wedge);
+    if (it == list.end() || *it != wedge)
+      return makeError(ErrorCode::kInternal, "pm: a new face's wedge is not among its vertex's");
+    idx = uint32_t(it - list.begin());
+  }
+  if (list.size() == 1) return wedge = list[0], Status::ok();
+  const auto p = std::lower_bound(list.begin(), list.end(), pred);
+  const bool predicted = p != list.end() && *p == pred;
+  uint32_t n = uint32_t(list.size());
+  if (predicted) {
+    const uint32_t pi = uint32_t(p - list.begin());
+    int hit = idx == pi;
+    c.bit(same, hit);
+    if (hit) return wedge = pred, Status::ok();
+    --n;
+    if (C::kEncode && idx > pi) --idx;
+    if (n > 1) c.uniform(idx, n);
+    else idx = 0;
+    if (idx >= pi) ++idx;
+  } else {
+    c.uniform(idx, n);
+  }
+  wedge = list[idx];
+  return Status::ok();
+}
 
 int predictOrientation(const PmState& st, uint32_t k, const std::vector<uint32_t>& fan,
                        const std::vector<uint8_t>& moved, uint32_t w, bool& known) {
@@ -524,11 +596,54 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
     codeResidual(c, m, 2, scaleOf(pred_s, vp), ds);
     SP_RETURN_IF_ERROR(add(pred_s, ds, s.vs));
   }
+  // Wedges (v5): each new face's corners at k and at w name one of that vertex's wedges (a vertex with one wedge
+  // codes nothing: every payload before v5). The prediction is the face beside it in k's fan that holds w, a
+  // staying one first.
+  auto &kw = m.scratch.kw, &xw = m.scratch.xw;
+  kw.clear();
+  for (uint32_t f : fan) kw.push_back(st.wedgeAt(f, k));
+  std::sort(kw.begin(), kw.end());
+  kw.erase(std::unique(kw.begin(), kw.end()), kw.end());
+  auto& wedges = m.scratch.wedges;
+  wedges.assign(ordered.size(), {0, 0});
+  auto& taken = m.scratch.taken;
+  taken.assign(C::kEncode ? s.new_faces.size() : 0, 0);
+  for (size_t i = 0; i < ordered.size(); ++i) {
+    const uint32_t w = ordered[i].first;
+    if constexpr (C::kEncode) {
+      size_t j = 0;
+      while (j < s.new_faces.size() && (taken[j] || s.new_faces[j] != ordered[i])) ++j;
+      if (j == s.new_faces.size() || j >= s.new_wedges.size())
+        return makeError(ErrorCode::kInternal, "pm: a new face has no wedges");
+      taken[j] = 1;
+      wedges[i] = s.new_wedges[j];
+    }
+    uint32_t pk = UINT32_MAX, px = UINT32_MAX;
+    for (int pass = 0; pass < 2 && pk == UINT32_MAX; ++pass)
+      for (size_t f = 0; f < fan.size(); ++f) {
+        const Triangle& t = st.faces[fan[f]];
+        if (s.moved[f] != pass || (t[0] != w && t[1] != w && t[2] != w)) continue;
+        pk = st.wedgeAt(fan[f], k), px = st.wedgeAt(fan[f], w);
+        break;
+      }
+    SP_RETURN_IF_ERROR(codeWedge(c, m.wedge_same[0], kw, pk, wedges[i][0]));
+    st.wedgesOf(w, xw);
+    SP_RETURN_IF_ERROR(codeWedge(c, m.wedge_same[1], xw, px, wedges[i][1]));
+  }
   const uint32_t r = n;
-  // Apply.
+  // Apply. r gets a new wedge per wedge of k that its corners pair with, in the order they are met.
+  s.created.clear();
+  auto wedgeOfR = [&](uint32_t a) {
+    for (const auto& [from, to] : s.created)
+      if (from == a) return to;
+    const uint32_t id = uint32_t(st.wv.size());
+    st.wv.push_back(r);
+    st.parent.push_back(a);
+    s.created.push_back({a, id});
+    return id;
+  };
   st.pos[k] = s.vs;
   st.pos.push_back(s.vr);
-  st.parent.push_back(k);
   st.vf.emplace_back();
   std::vector<uint32_t> stay;
   stay.reserve(fan.size());
@@ -537,17 +652,24 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
       stay.push_back(fan[i]);
       continue;
     }
-    for (uint32_t& v : st.faces[fan[i]])
-      if (v == k) v = r;
+    Triangle& t = st.faces[fan[i]];
+    for (int j = 0; j < 3; ++j)
+      if (t[j] == k) t[j] = r, st.fw[fan[i]][j] = wedgeOfR(st.fw[fan[i]][j]);
     st.vf[r].push_back(fan[i]);
   }
   st.vf[k] = std::move(stay);
-  for (const auto& [w, o] : ordered) st.addFace(o ? Triangle{k, w, r} : Triangle{k, r, w});
+  for (size_t i = 0; i < ordered.size(); ++i) {
+    const auto [w, o] = ordered[i];
+    const uint32_t a = wedges[i][0], b = wedges[i][1], rw = wedgeOfR(a);
+    if (o) st.addFace(Triangle{k, w, r}, Triangle{a, b, rw});
+    else st.addFace(Triangle{k, r, w}, Triangle{a, rw, b});
+  }
   return Status::ok();
 }
 
 struct LevelEntry {
   uint64_t batches = 0, vertices = 0, faces = 0, bytes = 0;
+  uint64_t wedges = 0;  // v5 (before: the vertices)
   float error = 0;
 };
 struct Header {
@@ -556,6 +678,7 @@ struct Header {
   float base_error = 0;
   std::vector<LevelEntry> levels;
   size_t base_offset = 0;  // where the base payload starts
+  bool wedges = false;     // v5: base_vertices and the levels' wedges count wedges
 };
 
 void putF32(ByteWriter& w, float f) {
@@ -567,13 +690,14 @@ void putF32(ByteWriter& w, float f) {
 Status checkVersion(uint16_t version) {
   if (version < 1 || version > kVersion)
     return makeError(ErrorCode::kUnknownVersion,
-                     "pm codec version " + std::to_string(version) + " is not known to this build (knows 1 to 4)");
+                     "pm codec version " + std::to_string(version) + " is not known to this build (knows 1 to 5)");
   return Status::ok();
 }
 
-Result<Header> parseHeader(std::span<const uint8_t> payload, const DecodeLimits& limits) {
+Result<Header> parseHeader(std::span<const uint8_t> payload, const DecodeLimits& limits, uint16_t version) {
   ByteReader r(payload, "pm payload");
   Header h;
+  h.wedges = version >= kWedgesFrom;
   SP_RETURN_IF_ERROR(r.u8(h.base_codec));
   if (h.base_codec < 1 || h.base_codec > 3) return r.error(ErrorCode::kMalformed, "unknown base codec");
   SP_RETURN_IF_ERROR(r.varint(h.base_version));
@@ -590,19 +714,22 @@ Result<Header> parseHeader(std::span<const uint8_t> payload, const DecodeLimits&
   // Every level entry takes at least 8 bytes: the count is bounded by the bytes left before anything is allocated.
   if (count > r.remaining() / 8) return r.error(ErrorCode::kMalformed, "more levels than the payload could hold");
   h.levels.resize(count);
-  uint64_t prev_v = h.base_vertices, prev_f = h.base_faces;
+  // v5: the base's vertices are wedges, and its positions are known only once it is decoded.
+  uint64_t prev_v = h.wedges ? 0 : h.base_vertices, prev_f = h.base_faces, prev_w = h.base_vertices;
   for (auto& l : h.levels) {
     SP_RETURN_IF_ERROR(r.varint(l.batches));
     SP_RETURN_IF_ERROR(r.varint(l.vertices));
+    l.wedges = l.vertices;
+    if (h.wedges) SP_RETURN_IF_ERROR(r.varint(l.wedges));
     SP_RETURN_IF_ERROR(r.varint(l.faces));
     SP_RETURN_IF_ERROR(r.u32(u));
     std::memcpy(&l.error, &u, 4);
     SP_RETURN_IF_ERROR(r.varint(l.bytes));
-    SP_RETURN_IF_ERROR(checkLimits("pm level", l.vertices, l.faces, limits));
-    if (l.vertices < prev_v || l.faces < prev_f || l.batches == 0 || l.batches > l.vertices - prev_v + 1 ||
-        l.bytes > (uint64_t(1) << 40))
+    SP_RETURN_IF_ERROR(checkLimits("pm level", l.wedges, l.faces, limits));
+    if (l.vertices < prev_v || l.wedges < l.vertices || l.wedges < prev_w || l.faces < prev_f || l.batches == 0 ||
+        l.batches > l.wedges - prev_w + 1 || l.bytes > (uint64_t(1) << 40))
       return r.error(ErrorCode::kMalformed, "inconsistent level entry");
-    prev_v = l.vertices, prev_f = l.faces;
+    prev_v = l.vertices, prev_f = l.faces, prev_w = l.wedges;
   }
   h.base_offset = r.position();
   return h;
@@ -624,7 +751,7 @@ std::vector<CodecLevel> levelsOf(const Header& h) {
     CodecLevel l = base;
     l.level = uint32_t(i + 1);
     l.end_bytes = end;
-    l.vertices = h.levels[i].vertices;
+    l.vertices = h.levels[i].wedges;
     l.max_error = h.levels[i].error;
     l.complete = i + 1 == h.levels.size();
     out.push_back(l);
@@ -640,14 +767,19 @@ std::vector<uint32_t> canonicalOrder(const std::vector<Vec3u>& pos) {
   return order;
 }
 
-// The base mesh in canonical order as the state to split from.
+// The base mesh in canonical order as the state to split from: its vertices are the wedges, those at one position
+// the wedges of one state vertex (before v5 the positions are distinct: a wedge per vertex, the same ids).
 PmState initialState(const QuantizedMesh& base, std::vector<uint32_t>* order_out) {
   const std::vector<uint32_t> order = canonicalOrder(base.positions);
   std::vector<uint32_t> rank(order.size());
   for (uint32_t i = 0; i < order.size(); ++i) rank[order[i]] = i;
   PmState st;
   st.pos.reserve(order.size());
-  for (uint32_t v : order) st.pos.push_back(base.positions[v]);
+  st.wv.reserve(order.size());
+  for (uint32_t v : order) {
+    if (st.pos.empty() || base.positions[v] != st.pos.back()) st.pos.push_back(base.positions[v]);
+    st.wv.push_back(uint32_t(st.pos.size() - 1));
+  }
   if (!base.normals.empty())
     for (uint32_t v : order) st.normals.push_back(base.normals[v]);
   if (!base.colors.empty())
@@ -659,10 +791,13 @@ PmState initialState(const QuantizedMesh& base, std::vector<uint32_t>* order_out
       st.scalars.insert(st.scalars.end(), base.scalars.begin() + ptrdiff_t(v * stride),
                         base.scalars.begin() + ptrdiff_t((v + 1) * stride));
   }
-  st.vf.resize(order.size());
+  st.vf.resize(st.pos.size());
   st.parent.resize(order.size());
   std::iota(st.parent.begin(), st.parent.end(), 0u);
-  for (const auto& t : base.triangles) st.addFace({rank[t[0]], rank[t[1]], rank[t[2]]});
+  for (const auto& t : base.triangles) {
+    const Triangle w{rank[t[0]], rank[t[1]], rank[t[2]]};
+    st.addFace({st.wv[w[0]], st.wv[w[1]], st.wv[w[2]]}, w);
+  }
   if (order_out) *order_out = order;
   return st;
 }
@@ -673,7 +808,7 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   if (ctx.layout.hasScalars() && version < kScalarsFrom)
     return makeError(ErrorCode::kMalformed, "pm payload of version " + std::to_string(version) +
                                                 " in a container with scalar channels (those carry none)");
-  SP_ASSIGN_OR_RETURN(Header h, parseHeader(payload, limits));
+  SP_ASSIGN_OR_RETURN(Header h, parseHeader(payload, limits, version));
   const uint32_t target = std::min<uint32_t>(level, uint32_t(h.levels.size()));
   if (h.base_bytes > payload.size() - h.base_offset)
     return makeError(ErrorCode::kTruncated, "pm payload ends inside its base mesh");
@@ -689,8 +824,9 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   if (base.positions.size() != h.base_vertices || base.triangles.size() != h.base_faces)
     return makeError(ErrorCode::kMalformed, "pm: the base mesh does not have the counts the header gives");
   for (const auto& t : base.triangles)
-    if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2])
-      return makeError(ErrorCode::kMalformed, "pm: a base triangle repeats a vertex");
+    if (base.positions[t[0]] == base.positions[t[1]] || base.positions[t[1]] == base.positions[t[2]] ||
+        base.positions[t[0]] == base.positions[t[2]])
+      return makeError(ErrorCode::kMalformed, "pm: a base triangle repeats a position");
   if (attributes && ((ctx.layout.hasNormals() && base.normals.size() != base.positions.size()) ||
                      (ctx.layout.hasColors() && base.colors.size() != base.positions.size()) ||
                      base.scalars.size() != base.positions.size() * size_t(ctx.layout.scalarStride())))
@@ -698,6 +834,8 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   const uint64_t final_v = target == 0 ? h.base_vertices : h.levels[target - 1].vertices;
   const uint64_t final_f = target == 0 ? h.base_faces : h.levels[target - 1].faces;
   PmState st = initialState(base, nullptr);
+  if (!h.wedges && st.pos.size() != st.wv.size())
+    return makeError(ErrorCode::kMalformed, "pm: base vertices share a position (a payload before version 5)");
   st.pos.reserve(final_v);
   st.vf.reserve(final_v);
   st.faces.reserve(final_f);
@@ -727,6 +865,8 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
         if (st.pos.size() >= le.vertices)
           return makeError(ErrorCode::kMalformed, "pm: level " + std::to_string(li + 1) + " splits too many vertices");
         SP_RETURN_IF_ERROR(codeSplit(c, m, st, v, s, max_coord, le.faces - st.faces.size()));
+        if (st.wv.size() > le.wedges)
+          return makeError(ErrorCode::kMalformed, "pm: level " + std::to_string(li + 1) + " adds too many wedges");
         st.block(v, uint32_t(st.pos.size() - 1), blocked, mark);
         if (rd.overrun()) return makeError(ErrorCode::kTruncated, "pm: level stream ends early");
       }
@@ -738,15 +878,16 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
       level_attributes.endLevel(io, st, li + 1 == h.levels.size(), nullptr);
     }
     if (rd.overrun()) return makeError(ErrorCode::kTruncated, "pm: level stream ends early");
-    if (st.pos.size() != le.vertices || st.faces.size() != le.faces)
+    if (st.pos.size() != le.vertices || st.wv.size() != le.wedges || st.faces.size() != le.faces)
       return makeError(ErrorCode::kMalformed,
                        "pm: level " + std::to_string(li + 1) + " does not have the counts its entry gives");
     offset += le.bytes;
   }
   QuantizedMesh out;
   if (attributes) level_attributes.show(st, out);
-  out.positions = std::move(st.pos);
-  out.triangles = std::move(st.faces);
+  out.positions.reserve(st.wv.size());
+  for (uint32_t v : st.wv) out.positions.push_back(st.pos[v]);
+  out.triangles = std::move(st.fw);
   if (!attributes) {
     deriveAttributes(out, ctx.layout);
   }
@@ -760,6 +901,8 @@ struct CollapseRecord {
   Vec3u vs{}, vr{}, vp{};
   std::vector<std::pair<uint32_t, uint32_t>> moved;  // faces (kept, a, b) after the collapse, as (a, b)
   std::vector<std::pair<uint32_t, uint8_t>> new_faces;  // deleted faces: (w, 0: (kept, removed, w) / 1: (kept, w, removed))
+  std::vector<std::array<uint32_t, 2>> new_wedges;   // per deleted face: the wedges of its kept and w corners
+  std::vector<std::pair<uint32_t, uint32_t>> pairs;  // (kept's wedge, removed's wedge) the deleted faces pair
 };
 
 std::array<uint32_t, 3> rotateMin(const Triangle& t) {
@@ -777,12 +920,100 @@ std::vector<std::array<uint32_t, 3>> faceKeys(const std::vector<Triangle>& faces
   return keys;
 }
 
+// Faces over positions with their corners' wedges, each rotated to start at its least position, sorted: two meshes
+// over the same positions and wedges have the same faces exactly when these are equal.
+std::vector<std::array<uint32_t, 6>> wedgeFaceKeys(const std::vector<Triangle>& faces,
+                                                   const std::vector<Triangle>& wedges) {
+  std::vector<std::array<uint32_t, 6>> keys;
+  keys.reserve(faces.size());
+  for (size_t f = 0; f < faces.size(); ++f) {
+    const Triangle& t = faces[f];
+    const int i = t[1] < t[0] ? (t[2] < t[1] ? 2 : 1) : (t[2] < t[0] ? 2 : 0);
+    std::array<uint32_t, 6> k;
+    for (int j = 0; j < 3; ++j) k[j] = t[(i + j) % 3], k[3 + j] = wedges[f][(i + j) % 3];
+    keys.push_back(k);
+  }
+  std::sort(keys.begin(), keys.end());
+  return keys;
+}
+
+// The tile as pm codes it: triangles over positions, and the wedges of their corners (v5). A wedge is a position's
+// set of attributes; wedges of one position are consecutive and in position order.
+struct WedgedMesh {
+  QuantizedMesh mesh;                  // positions and the triangles over them (no attributes)
+  std::vector<uint8_t> locked;         // per position
+  std::vector<Triangle> corners;       // per triangle: its corners' wedges
+  std::vector<uint32_t> wedge_vertex;  // per wedge: its position
+  QuantizedMesh attrs;                 // per wedge: normals, colors, scalar rows (no positions)
+  bool wedged() const { return wedge_vertex.size() > mesh.positions.size(); }
+};
+
+// The part of `from` that is left: the positions `keep` marks (at `positions`), the triangles `tris` over from's
+// positions and their corners' wedges `corners`. A kept position keeps the wedges these use, or its first when they
+// use none (a point without triangles); both are renumbered in order. `wedge_map` gets from's wedge -> the result's.
+WedgedMesh compact(const WedgedMesh& from, const std::vector<Vec3u>& positions, std::span<const uint8_t> keep,
+                   const std::vector<Triangle>& tris, const std::vector<Triangle>& corners,
+                   std::vector<uint32_t>* wedge_map, size_t stride) {
+  const size_t np = from.mesh.positions.size(), nw = from.wedge_vertex.size();
+  std::vector<uint8_t> used(nw, 0), pos_used(np, 0);
+  for (const Triangle& c : corners)
+    for (uint32_t w : c) used[w] = 1, pos_used[from.wedge_vertex[w]] = 1;
+  WedgedMesh out;
+  std::vector<uint32_t> pmap(np, UINT32_MAX), wmap(nw, UINT32_MAX);
+  for (uint32_t p = 0; p < np; ++p)
+    if (keep[p]) {
+      pmap[p] = uint32_t(out.mesh.positions.size());
+      out.mesh.positions.push_back(positions[p]);
+      out.locked.push_back(from.locked[p]);
+    }
+  for (uint32_t w = 0; w < nw; ++w) {
+    const uint32_t p = from.wedge_vertex[w];
+    const bool first = w == 0 || from.wedge_vertex[w - 1] != p;
+    if (!keep[p] || !(used[w] || (!pos_used[p] && first))) continue;
+    wmap[w] = uint32_t(out.wedge_vertex.size());
+    out.wedge_vertex.push_back(pmap[p]);
+    if (!from.attrs.normals.empty()) out.attrs.normals.push_back(from.attrs.normals[w]);
+    if (!from.attrs.colors.empty()) out.attrs.colors.push_back(from.attrs.colors[w]);
+    if (stride)
+      out.attrs.scalars.insert(out.attrs.scalars.end(), from.attrs.scalars.begin() + ptrdiff_t(w * stride),
+                               from.attrs.scalars.begin() + ptrdiff_t((w + 1) * stride));
+  }
+  for (size_t f = 0; f < tris.size(); ++f) {
+    const Triangle& t = tris[f];
+    out.mesh.triangles.push_back({pmap[t[0]], pmap[t[1]], pmap[t[2]]});
+    out.corners.push_back({wmap[corners[f][0]], wmap[corners[f][1]], wmap[corners[f][2]]});
+  }
+  if (wedge_map) *wedge_map = std::move(wmap);
+  return out;
+}
+
+// Orders two vertices (of meshes with one layout) by position, then normal, color (the layout's channels: decoders
+// give RGB alpha 255) and scalar row.
+int compareVertices(const QuantizedMesh& a, uint32_t i, const QuantizedMesh& b, uint32_t j,
+                    const AttributeLayout& layout) {
+  if (a.positions[i] != b.positions[j]) return a.positions[i] < b.positions[j] ? -1 : 1;
+  if (layout.hasNormals() && a.normals[i] != b.normals[j]) return a.normals[i] < b.normals[j] ? -1 : 1;
+  for (int c = 0; c < layout.color_channels; ++c)
+    if (a.colors[i][c] != b.colors[j][c]) return a.colors[i][c] < b.colors[j][c] ? -1 : 1;
+  const size_t stride = size_t(layout.scalarStride());
+  for (size_t k = 0; k < stride; ++k) {
+    const uint32_t x = a.scalars[i * stride + k], y = b.scalars[j * stride + k];
+    if (x != y) return x < y ? -1 : 1;
+  }
+  return 0;
+}
+
+std::vector<uint32_t> flatten(const std::vector<Triangle>& corners) {
+  std::vector<uint32_t> out;
+  out.reserve(3 * corners.size());
+  for (const Triangle& c : corners) out.insert(out.end(), c.begin(), c.end());
+  return out;
+}
+
 Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, const CodecOptions& options) {
   const QuantizedMesh& in = tile.mesh;
   if (in.positions.size() >= UINT32_MAX || in.triangles.size() >= UINT32_MAX)
     return makeError(ErrorCode::kLimitExceeded, "tile has more than 2^32-2 vertices or triangles");
-  // Weld by position; lock flags are OR-ed; attributes (v3, scalars v4) are the first input vertex's at the
-  // position.
   const AttributeLayout& layout = ctx.layout;
   const bool with_normals = layout.hasNormals(), with_colors = layout.hasColors();
   const size_t stride = size_t(layout.scalarStride());
@@ -796,86 +1027,90 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   const auto appendRow = [](ScalarValues& to, std::span<const uint32_t> row) {
     to.insert(to.end(), row.begin(), row.end());
   };
-  // Texture coordinates are one value per position after the weld: a seam (points at one position with different
-  // ones) would take one side's across it, so such a tile is refused rather than mapped wrongly.
-  const std::optional<TexcoordChannels> texcoords = findTexcoords(layout.scalars);
-  uint64_t seam_positions = 0, merged = 0;
-  QuantizedMesh welded;
-  std::vector<uint8_t> locked;
+  // Weld by position (lock flags are OR-ed). The input vertices at one position with the same attributes are one
+  // wedge; a position keeps the wedges its triangles' corners use (two at a crease or a texture seam: v5), or its
+  // first when none does. Points at a position whose wedge nothing uses are merged into the others (counted).
+  WedgedMesh welded;
+  uint64_t merged = 0;
   {
-    const std::vector<uint32_t> order = canonicalOrder(in.positions);
-    std::vector<uint32_t> map(in.positions.size());
-    uint32_t first = 0;  // the first input vertex at the current position
-    bool seam = false;
+    QuantizedMesh keyed;  // the input's attributes, with the positions, to order vertices by both
+    keyed.positions = in.positions;
+    keyed.normals = in.normals;
+    keyed.colors = in.colors;
+    keyed.scalars = in.scalars;
+    std::vector<uint32_t> order(in.positions.size());
+    std::iota(order.begin(), order.end(), 0u);
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+      const int c = compareVertices(keyed, a, keyed, b, layout);
+      return c != 0 ? c < 0 : a < b;
+    });
+    std::vector<uint32_t> pos_of(in.positions.size()), wedge_of(in.positions.size()), first_of;
     for (uint32_t i = 0; i < order.size(); ++i) {
       const uint32_t v = order[i];
-      if (i == 0 || in.positions[v] != welded.positions.back()) {
-        welded.positions.push_back(in.positions[v]);
-        if (with_normals) welded.normals.push_back(in.normals[v]);
-        if (with_colors) welded.colors.push_back(in.colors[v]);
-        if (stride) appendRow(welded.scalars, scalarRow(in.scalars, v));
-        locked.push_back(0);
-        first = v, seam = false;
-      } else {
-        const uint32_t *a = in.scalars.data() + size_t(first) * stride, *b = in.scalars.data() + size_t(v) * stride;
-        if (texcoords && !seam &&
-            (a[texcoords->u_word] != b[texcoords->u_word] || a[texcoords->v_word] != b[texcoords->v_word]))
-          seam = true, ++seam_positions;
-        merged += (with_normals && in.normals[v] != in.normals[first]) ||
-                  (with_colors && in.colors[v] != in.colors[first]) || !std::equal(a, a + stride, b);
+      if (i == 0 || in.positions[v] != welded.mesh.positions.back()) {
+        welded.mesh.positions.push_back(in.positions[v]);
+        welded.locked.push_back(0);
       }
-      map[v] = uint32_t(welded.positions.size() - 1);
-      if (!tile.locked.empty() && tile.locked[v]) locked.back() = 1;
+      if (i == 0 || compareVertices(keyed, order[i - 1], keyed, v, layout) != 0) {
+        first_of.push_back(v);
+        welded.wedge_vertex.push_back(uint32_t(welded.mesh.positions.size() - 1));
+      }
+      pos_of[v] = uint32_t(welded.mesh.positions.size() - 1);
+      wedge_of[v] = uint32_t(first_of.size() - 1);
+      if (!tile.locked.empty() && tile.locked[v]) welded.locked.back() = 1;
+    }
+    for (uint32_t v : first_of) {
+      if (with_normals) welded.attrs.normals.push_back(in.normals[v]);
+      if (with_colors) welded.attrs.colors.push_back(in.colors[v]);
+      if (stride) appendRow(welded.attrs.scalars, scalarRow(in.scalars, v));
     }
     for (const auto& t : in.triangles) {
       for (uint32_t v : t)
         if (v >= in.positions.size()) return makeError(ErrorCode::kInvalidArgument, "triangle index out of range");
-      const Triangle w{map[t[0]], map[t[1]], map[t[2]]};
-      if (w[0] != w[1] && w[1] != w[2] && w[0] != w[2]) welded.triangles.push_back(w);
+      const Triangle w{pos_of[t[0]], pos_of[t[1]], pos_of[t[2]]};
+      if (w[0] != w[1] && w[1] != w[2] && w[0] != w[2]) {
+        welded.mesh.triangles.push_back(w);
+        welded.corners.push_back({wedge_of[t[0]], wedge_of[t[1]], wedge_of[t[2]]});
+      }
     }
+    std::vector<uint32_t> wmap;
+    const std::vector<uint8_t> all(welded.mesh.positions.size(), 1);
+    WedgedMesh kept = compact(welded, welded.mesh.positions, all, welded.mesh.triangles, welded.corners, &wmap, stride);
+    for (uint32_t v = 0; v < in.positions.size(); ++v) merged += wmap[wedge_of[v]] == UINT32_MAX;
+    welded = std::move(kept);
   }
-  if (seam_positions)
-    return makeError(ErrorCode::kUnsupported,
-                     "pm keeps one texture coordinate per position, and " + std::to_string(seam_positions) +
-                         " positions of this tile have several (texture seams): code it with kdtree, octree or "
-                         "edgebreaker, or drop the texture coordinates (--no-scalars)");
+  const bool wedged = welded.wedged();
   const PmOptions& opt = options.pm;
   // The last level.
-  QuantizedMesh last;
-  std::vector<uint8_t> last_locked;
+  WedgedMesh last;
   float last_error = 0;
   if (opt.max_error < 0 && opt.ratio >= 1) {
     last = std::move(welded);
-    last_locked = std::move(locked);
   } else {
     SimplifyOptions so;
     so.weights = opt.weights;
     so.max_error = opt.max_error < 0 ? std::numeric_limits<double>::infinity() : opt.max_error;
-    so.target_faces = opt.ratio < 1 ? uint64_t(std::ceil(std::max(0.0, opt.ratio) * double(welded.triangles.size())))
-                                    : 0;
-    SP_ASSIGN_OR_RETURN(Simplification s1, simplify(welded, locked, so));
+    so.target_faces =
+        opt.ratio < 1 ? uint64_t(std::ceil(std::max(0.0, opt.ratio) * double(welded.mesh.triangles.size()))) : 0;
+    const std::vector<uint32_t> corners = wedged ? flatten(welded.corners) : std::vector<uint32_t>{};
+    SP_ASSIGN_OR_RETURN(Simplification s1, simplify(welded.mesh, welded.locked, so, corners));
     if (!s1.pass_errors.empty()) last_error = s1.pass_errors.back();
-    std::vector<uint8_t> gone(welded.positions.size(), 0);
+    std::vector<uint8_t> keep(welded.mesh.positions.size(), 1);
     for (const auto& c : s1.collapses) {
-      if (c.removed >= gone.size()) return makeError(ErrorCode::kInternal, "pm: simplifier removed an unknown vertex");
-      gone[c.removed] = 1;
+      if (c.removed >= keep.size()) return makeError(ErrorCode::kInternal, "pm: simplifier removed an unknown vertex");
+      keep[c.removed] = 0;
     }
-    std::vector<uint32_t> map(gone.size(), UINT32_MAX);
-    for (uint32_t v = 0; v < gone.size(); ++v)
-      if (!gone[v]) {
-        map[v] = uint32_t(last.positions.size());
-        last.positions.push_back(s1.mesh.positions[v]);
-        if (with_normals) last.normals.push_back(welded.normals[v]);
-        if (with_colors) last.colors.push_back(welded.colors[v]);
-        if (stride) appendRow(last.scalars, scalarRow(welded.scalars, v));
-        last_locked.push_back(locked[v]);
-      }
-    for (const auto& t : s1.mesh.triangles) {
-      const Triangle w{map[t[0]], map[t[1]], map[t[2]]};
-      if (w[0] == UINT32_MAX || w[1] == UINT32_MAX || w[2] == UINT32_MAX)
+    for (const auto& t : s1.mesh.triangles)
+      if (!keep[t[0]] || !keep[t[1]] || !keep[t[2]])
         return makeError(ErrorCode::kInternal, "pm: simplified mesh uses a removed vertex");
-      last.triangles.push_back(w);
+    std::vector<Triangle> s1_corners;
+    if (wedged) {
+      for (size_t f = 0; f < s1.mesh.triangles.size(); ++f)
+        s1_corners.push_back({s1.corner_wedges[3 * f], s1.corner_wedges[3 * f + 1], s1.corner_wedges[3 * f + 2]});
+    } else {
+      s1_corners = s1.mesh.triangles;  // one wedge per position, with its id
     }
+    last = compact(welded, s1.mesh.positions, keep, s1.mesh.triangles, s1_corners, nullptr, stride);
   }
   // Simplify further to the base.
   SimplifyOptions so2;
@@ -884,18 +1119,20 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   // (bench/RESULTS.md: igea, 16 bits, lossless, 58.3 bpv with optimal placements); the last level itself keeps the
   // simplifier's best placements.
   so2.endpoints_only = true;
-  so2.target_faces = std::max<uint64_t>(kBaseMinFaces, uint64_t(double(last.triangles.size()) * kBaseFaceShare));
+  so2.target_faces = std::max<uint64_t>(kBaseMinFaces, uint64_t(double(last.mesh.triangles.size()) * kBaseFaceShare));
   Simplification s2;
-  if (last.triangles.size() > so2.target_faces) {
-    SP_ASSIGN_OR_RETURN(s2, simplify(last, last_locked, so2));
+  if (last.mesh.triangles.size() > so2.target_faces) {
+    const std::vector<uint32_t> corners = wedged ? flatten(last.corners) : std::vector<uint32_t>{};
+    SP_ASSIGN_OR_RETURN(s2, simplify(last.mesh, last.locked, so2, corners));
   }
   // Replay forwards, recording each collapse.
-  const uint32_t nl = uint32_t(last.positions.size());
+  const uint32_t nl = uint32_t(last.mesh.positions.size());
+  const uint32_t nw = uint32_t(last.wedge_vertex.size());
   std::vector<CollapseRecord> records(s2.collapses.size());
   PmState fw;
-  fw.pos = last.positions;
+  fw.pos = last.mesh.positions;
   fw.vf.resize(nl);
-  for (const auto& t : last.triangles) fw.addFace(t);
+  for (size_t f = 0; f < last.mesh.triangles.size(); ++f) fw.addFace(last.mesh.triangles[f], last.corners[f]);
   std::vector<uint8_t> alive_face(fw.faces.size(), 1), alive_v(nl, 1);
   for (size_t ci = 0; ci < s2.collapses.size(); ++ci) {
     const EdgeCollapse& c = s2.collapses[ci];
@@ -905,18 +1142,30 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
     rec.kept = c.kept, rec.removed = c.removed;
     rec.vs = fw.pos[c.kept], rec.vr = fw.pos[c.removed], rec.vp = c.position;
     for (uint32_t f : fw.vf[c.removed]) {
+      const Triangle& t = fw.faces[f];
+      if (alive_face[f] && (t[0] == c.kept || t[1] == c.kept || t[2] == c.kept))
+        rec.pairs.push_back({fw.wedgeAt(f, c.kept), fw.wedgeAt(f, c.removed)});
+    }
+    for (uint32_t f : fw.vf[c.removed]) {
       if (!alive_face[f]) continue;
       Triangle& t = fw.faces[f];
       const bool has_k = t[0] == c.kept || t[1] == c.kept || t[2] == c.kept;
       if (has_k) {
         alive_face[f] = 0;
         const auto [a, b] = fw.others(f, c.kept);
-        rec.new_faces.push_back(a == c.removed ? std::pair<uint32_t, uint8_t>{b, 0}
-                                               : std::pair<uint32_t, uint8_t>{a, 1});
+        const uint32_t w = a == c.removed ? b : a;
+        rec.new_faces.push_back({w, a == c.removed ? 0 : 1});
+        rec.new_wedges.push_back({fw.wedgeAt(f, c.kept), fw.wedgeAt(f, w)});
         continue;
       }
-      for (uint32_t& v : t)
-        if (v == c.removed) v = c.kept;
+      for (int j = 0; j < 3; ++j) {
+        if (t[j] != c.removed) continue;
+        t[j] = c.kept;
+        uint32_t& wedge = fw.fw[f][j];
+        auto it = std::find_if(rec.pairs.begin(), rec.pairs.end(), [&](const auto& p) { return p.second == wedge; });
+        if (it == rec.pairs.end()) return makeError(ErrorCode::kInternal, "pm: a collapse leaves a wedge unpaired");
+        wedge = it->first;
+      }
       fw.vf[c.kept].push_back(f);
       rec.moved.push_back(fw.others(f, c.kept));
     }
@@ -925,33 +1174,34 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
     alive_v[c.removed] = 0;
     fw.pos[c.kept] = c.position;
   }
-  // The base mesh, and each base codec's encoding of it decoded back.
-  QuantizedMesh base;
-  std::vector<uint32_t> base_to_last;
-  std::vector<uint32_t> last_to_base(nl, UINT32_MAX);
-  for (uint32_t v = 0; v < nl; ++v)
-    if (alive_v[v]) {
-      last_to_base[v] = uint32_t(base.positions.size()), base_to_last.push_back(v), base.positions.push_back(fw.pos[v]);
-      if (with_normals) base.normals.push_back(last.normals[v]);
-      if (with_colors) base.colors.push_back(last.colors[v]);
-      if (stride) appendRow(base.scalars, scalarRow(last.scalars, v));
-    }
+  // The base mesh (a vertex per wedge), and each base codec's encoding of it decoded back.
+  std::vector<Triangle> base_tris, base_corners;
   for (uint32_t f = 0; f < fw.faces.size(); ++f)
-    if (alive_face[f]) {
-      const Triangle& t = fw.faces[f];
-      base.triangles.push_back({last_to_base[t[0]], last_to_base[t[1]], last_to_base[t[2]]});
-    }
+    if (alive_face[f]) base_tris.push_back(fw.faces[f]), base_corners.push_back(fw.fw[f]);
+  std::vector<uint32_t> last_to_base;
+  const WedgedMesh bw = compact(last, fw.pos, alive_v, base_tris, base_corners, &last_to_base, stride);
+  std::vector<uint32_t> base_to_last(bw.wedge_vertex.size());
+  for (uint32_t w = 0; w < nw; ++w)
+    if (last_to_base[w] != UINT32_MAX) base_to_last[last_to_base[w]] = w;
+  QuantizedMesh base = bw.attrs;
+  for (uint32_t p : bw.wedge_vertex) base.positions.push_back(bw.mesh.positions[p]);
+  base.triangles = bw.corners;
   const TileContext base_ctx{ctx.bits, attributes ? layout : AttributeLayout{}};
-  std::vector<uint32_t> sorted_base = canonicalOrder(base.positions);
-  bool unique_positions = true;
+  // Decoded vertices are found by position and attributes (unique unless the simplifier moved two points of the
+  // base onto one position with the same ones; then only an order-keeping decode is used).
+  std::vector<uint32_t> sorted_base(base.positions.size());
+  std::iota(sorted_base.begin(), sorted_base.end(), 0u);
+  std::stable_sort(sorted_base.begin(), sorted_base.end(),
+                   [&](uint32_t a, uint32_t b) { return compareVertices(base, a, base, b, layout) < 0; });
+  bool unique_keys = true;
   for (size_t i = 1; i < sorted_base.size(); ++i)
-    if (base.positions[sorted_base[i]] == base.positions[sorted_base[i - 1]]) unique_positions = false;
+    if (compareVertices(base, sorted_base[i], base, sorted_base[i - 1], layout) == 0) unique_keys = false;
   const auto base_keys = faceKeys(base.triangles);
   const CodecInfo* best = nullptr;
   uint16_t best_version = 0;
   std::vector<uint8_t> best_payload;
   QuantizedMesh best_decoded;
-  std::vector<uint32_t> best_map;  // decoded base vertex -> last-level vertex
+  std::vector<uint32_t> best_map;  // decoded base vertex -> last-level wedge
   for (const CodecInfo& codec : allCodecs()) {
     if (codec.id != CodecId::kStore && codec.id != CodecId::kKdtree && codec.id != CodecId::kOctree) continue;
     auto enc = codec.encode(base_ctx, TileView{base, {}}, options);
@@ -963,24 +1213,19 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
         (with_colors && dec->colors.size() != dec->positions.size()) ||
         dec->scalars.size() != dec->positions.size() * stride)
       continue;
-    // Decoded vertex -> base vertex: by position when positions are unique, else only an order-keeping decode.
     std::vector<uint32_t> map(dec->positions.size());
     bool ok = true;
     for (uint32_t i = 0; i < map.size() && ok; ++i) {
-      if (unique_positions) {
-        auto it = std::lower_bound(sorted_base.begin(), sorted_base.end(), dec->positions[i],
-                                   [&](uint32_t v, const Vec3u& p) { return base.positions[v] < p; });
-        ok = it != sorted_base.end() && base.positions[*it] == dec->positions[i];
+      if (unique_keys) {
+        auto it = std::lower_bound(sorted_base.begin(), sorted_base.end(), i, [&](uint32_t v, uint32_t d) {
+          return compareVertices(base, v, *dec, d, layout) < 0;
+        });
+        ok = it != sorted_base.end() && compareVertices(base, *it, *dec, i, layout) == 0;
         if (ok) map[i] = *it;
       } else {
-        ok = dec->positions[i] == base.positions[i];
+        ok = compareVertices(base, i, *dec, i, layout) == 0;
         map[i] = i;
       }
-      // Each base vertex's attributes come back as they were (the levels predict from them).
-      if (ok && with_normals) ok = dec->normals[i] == base.normals[map[i]];
-      if (ok && with_colors)
-        for (int c = 0; c < layout.color_channels; ++c) ok &= dec->colors[i][c] == base.colors[map[i]][c];
-      if (ok && stride) ok = std::ranges::equal(scalarRow(dec->scalars, i), scalarRow(base.scalars, map[i]));
     }
     if (!ok) continue;
     std::vector<Triangle> mapped;
@@ -997,13 +1242,18 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   // Backward: split from the decoded base, as the decoder will.
   std::vector<uint32_t> order;
   PmState st = initialState(best_decoded, &order);
-  std::vector<uint32_t> last_of;  // state index -> last-level vertex
-  for (uint32_t v : order) last_of.push_back(best_map[v]);
+  std::vector<uint32_t> wedge_truth;  // state wedge -> last-level wedge
+  for (uint32_t v : order) wedge_truth.push_back(best_map[v]);
+  std::vector<uint32_t> wedge_state(nw, UINT32_MAX);
+  for (uint32_t i = 0; i < wedge_truth.size(); ++i) wedge_state[wedge_truth[i]] = i;
+  std::vector<uint32_t> last_of(st.pos.size());  // state vertex -> last-level vertex
+  for (uint32_t w = 0; w < wedge_truth.size(); ++w) last_of[st.wv[w]] = last.wedge_vertex[wedge_truth[w]];
   std::vector<uint32_t> state_of(nl, UINT32_MAX);
   for (uint32_t i = 0; i < last_of.size(); ++i) state_of[last_of[i]] = i;
   const size_t passes = s2.pass_ends.size();
   std::vector<uint8_t> streams;
   Header h;
+  h.wedges = attributes;  // v5 whenever attributes are coded (CodecInfo::keeps_attributes_from)
   h.base_codec = uint8_t(best->id);
   // Without attributes kdtree's and octree's version 3 payloads are their version 2 bytes: such a base keeps naming
   // 2, as pm v2 always has (the same bytes as v2, golden ones included).
@@ -1014,7 +1264,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   h.base_error = last_error + (s2.pass_errors.empty() ? 0.f : s2.pass_errors.back());
   const uint32_t max_coord = uint32_t((uint64_t(1) << ctx.bits) - 1);
   Models m;
-  LevelAttributes level_attributes(layout, attributes ? uint32_t(st.pos.size()) : 0);
+  LevelAttributes level_attributes(layout, attributes ? uint32_t(st.wv.size()) : 0);
   std::vector<uint32_t> blocked;
   uint32_t mark = 0;
   std::vector<uint8_t> level_bytes;
@@ -1068,27 +1318,40 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
         s.moved.push_back(moved);
       }
       if (!to_move.empty()) return makeError(ErrorCode::kInternal, "pm: a pass's collapses are not independent");
-      for (const auto& [w, o] : rec.new_faces) {
-        const uint32_t ws = state_of[w];
-        if (ws == UINT32_MAX) return makeError(ErrorCode::kInternal, "pm: a new face's vertex is not present");
+      for (size_t j = 0; j < rec.new_faces.size(); ++j) {
+        const auto [w, o] = rec.new_faces[j];
+        const uint32_t ws = state_of[w], a = wedge_state[rec.new_wedges[j][0]], b = wedge_state[rec.new_wedges[j][1]];
+        if (ws == UINT32_MAX || a == UINT32_MAX || b == UINT32_MAX)
+          return makeError(ErrorCode::kInternal, "pm: a new face's vertex or wedge is not present");
         s.new_faces.push_back({ws, o});
+        s.new_wedges.push_back({a, b});
       }
       SP_RETURN_IF_ERROR(codeSplit(c, m, st, v, s, max_coord, UINT64_MAX));
       st.block(v, uint32_t(st.pos.size() - 1), blocked, mark);
       state_of[rec.removed] = uint32_t(st.pos.size() - 1);
       last_of.push_back(rec.removed);
+      // r's new wedges are the removed vertex's that the deleted faces pair with k's.
+      for (const auto& [a, id] : s.created) {
+        auto it =
+            std::find_if(rec.pairs.begin(), rec.pairs.end(), [&](const auto& q) { return q.first == wedge_truth[a]; });
+        if (it == rec.pairs.end() || id != wedge_truth.size())
+          return makeError(ErrorCode::kInternal, "pm: a split's new wedge pairs with none of the collapse's");
+        wedge_truth.push_back(it->second);
+        wedge_state[it->second] = id;
+      }
     }
     if (next != splits.size()) return makeError(ErrorCode::kInternal, "pm: a split was not coded");
     if (!splits.empty()) ++cur.batches;
     const uint64_t grown = st.pos.size() - level_start_v;
     if (p == 0 || (grown >= kMinLevelSplits && double(st.pos.size()) >= kLevelGrowth * double(level_start_v))) {
-      // The last level (the last with splits) ends with the attributes of every vertex the splits added.
+      // The last level (the last with splits) ends with the attributes of every wedge the splits added.
       if (attributes && cur.batches > 0 && st.pos.size() == nl) {
-        hierarchy::Points truth;  // by state index
-        for (uint32_t i = 0; i < nl; ++i) {
-          if (with_normals) truth.normals.push_back(last.normals[last_of[i]]);
-          if (with_colors) truth.colors.push_back(last.colors[last_of[i]]);
-          if (stride) appendRow(truth.scalars, scalarRow(last.scalars, last_of[i]));
+        if (st.wv.size() != nw) return makeError(ErrorCode::kInternal, "pm: splits do not restore the wedges");
+        hierarchy::Points truth;  // by state wedge
+        for (uint32_t i = 0; i < nw; ++i) {
+          if (with_normals) truth.normals.push_back(last.attrs.normals[wedge_truth[i]]);
+          if (with_colors) truth.colors.push_back(last.attrs.colors[wedge_truth[i]]);
+          if (stride) appendRow(truth.scalars, scalarRow(last.attrs.scalars, wedge_truth[i]));
         }
         AttributeEncodeIo io{*re};
         level_attributes.endLevel(io, st, true, &truth);
@@ -1100,6 +1363,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
         continue;
       }
       cur.vertices = st.pos.size();
+      cur.wedges = st.wv.size();
       cur.faces = st.faces.size();
       cur.error = last_error + (p == 0 || p > s2.pass_errors.size() ? 0.f : s2.pass_errors[p - 1]);
       cur.bytes = level_bytes.size();
@@ -1109,13 +1373,22 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
       cur = LevelEntry{};
     }
   }
-  // The last state must be the last level: same positions per vertex, same faces.
-  if (st.pos.size() != nl) return makeError(ErrorCode::kInternal, "pm: splits do not restore the last level");
+  // The last state must be the last level: same positions per vertex, same wedges, same faces.
+  if (st.pos.size() != nl || st.wv.size() != nw)
+    return makeError(ErrorCode::kInternal, "pm: splits do not restore the last level");
   for (uint32_t i = 0; i < nl; ++i)
-    if (st.pos[i] != last.positions[last_of[i]]) return makeError(ErrorCode::kInternal, "pm: split positions differ");
-  std::vector<Triangle> mapped;
-  for (const auto& t : st.faces) mapped.push_back({last_of[t[0]], last_of[t[1]], last_of[t[2]]});
-  if (faceKeys(mapped) != faceKeys(last.triangles))
+    if (st.pos[i] != last.mesh.positions[last_of[i]])
+      return makeError(ErrorCode::kInternal, "pm: split positions differ");
+  for (uint32_t w = 0; w < nw; ++w)
+    if (last.wedge_vertex[wedge_truth[w]] != last_of[st.wv[w]])
+      return makeError(ErrorCode::kInternal, "pm: a wedge is at another vertex");
+  std::vector<Triangle> mapped, mapped_wedges;
+  for (size_t f = 0; f < st.faces.size(); ++f) {
+    const Triangle &t = st.faces[f], &w = st.fw[f];
+    mapped.push_back({last_of[t[0]], last_of[t[1]], last_of[t[2]]});
+    mapped_wedges.push_back({wedge_truth[w[0]], wedge_truth[w[1]], wedge_truth[w[2]]});
+  }
+  if (wedgeFaceKeys(mapped, mapped_wedges) != wedgeFaceKeys(last.mesh.triangles, last.corners))
     return makeError(ErrorCode::kInternal, "pm: splits do not restore the last level's faces");
   // Assemble.
   EncodedTile result;
@@ -1130,6 +1403,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   for (const auto& l : h.levels) {
     w.varint(l.batches);
     w.varint(l.vertices);
+    if (h.wedges) w.varint(l.wedges);
     w.varint(l.faces);
     putF32(w, l.error);
     w.varint(l.bytes);
@@ -1138,11 +1412,14 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   w.bytes(best_payload);
   w.bytes(streams);
   QuantizedMesh final_mesh;
-  final_mesh.positions = std::move(st.pos);
-  final_mesh.triangles = std::move(st.faces);
+  for (uint32_t v : st.wv) final_mesh.positions.push_back(st.pos[v]);
+  final_mesh.triangles = std::move(st.fw);
   result.decoded = summarize(final_mesh);
   result.levels = levelsOf(h);
-  result.version = stride ? kScalarsFrom : kAttributesFrom;
+  // With attributes, v5 (wedges) even when every position has one: a v5 tile gives back the tile's vertices, so
+  // the decoders weld it to its neighbours by position and attributes, which a tile of v3 or v4 (welded by position,
+  // the first point's attributes kept) does not allow; without, v3 (v2's bytes).
+  result.version = attributes ? kWedgesFrom : kAttributesFrom;
   // Reported where the last level is the tile (lossless): a simplified one drops vertices and their attributes
   // anyway, and the weld is its first step.
   result.merged_points = opt.max_error < 0 && opt.ratio >= 1 ? merged : 0;
@@ -1163,7 +1440,7 @@ Result<QuantizedMesh> pmDecode(const TileContext& ctx, uint16_t version, std::sp
 Result<std::vector<CodecLevel>> pmLevels(const TileContext&, uint16_t version, std::span<const uint8_t> payload,
                                          const DecodeLimits& limits) {
   SP_RETURN_IF_ERROR(checkVersion(version));
-  SP_ASSIGN_OR_RETURN(Header h, parseHeader(payload, limits));
+  SP_ASSIGN_OR_RETURN(Header h, parseHeader(payload, limits, version));
   auto levels = levelsOf(h);
   if (levels.back().end_bytes > payload.size())
     return makeError(ErrorCode::kTruncated, "pm payload is shorter than its levels");

@@ -529,9 +529,9 @@ Result<QuantizedMesh> decodeTilePayload(const ContainerHeader& header, const Til
     auto mesh = partial ? codec->decode_level(ctx, e.codec_version, payload, *level, limits)
                         : codec->decode(ctx, e.codec_version, payload, limits);
     if (!mesh.isOk()) return mesh.status().withContext(where);
-    // A codec that welds by position (pm) never yields a complete tile: its tiles weld as coarse ones do, with their
-    // own attributes from the version that codes them.
-    if (complete) *complete = !partial && codec->keeps_attributes;
+    // A payload that welds by position (pm before v5) never yields a complete tile: its tiles weld as coarse ones
+    // do, with their own attributes from the version that codes them.
+    if (complete) *complete = !partial && codec->keepsAttributes(e.codec_version);
     if (own_attributes)
       *own_attributes = partial ? coarse_own : codec->showsOwnAttributes(e.codec_version, false, false);
     if (partial) return mesh;

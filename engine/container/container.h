@@ -161,7 +161,7 @@ DecodeLimits limitsOf(const TileEntry& entry);
 // claims more is kMalformed before anything is allocated), and checks that the complete tile has exactly the
 // index's counts. With a `level` (progressive codecs only; kInvalidArgument otherwise) the tile's mesh at that
 // level (see CodecLevel); `complete` says whether that was the tile's last level with its vertices as given (false
-// for a codec that welds by position, CodecInfo::keeps_attributes: such tiles weld by position); `own_attributes`
+// for a payload that welds by position, CodecInfo::keepsAttributes: such tiles weld by position); `own_attributes`
 // whether the mesh's normals and colors are the tile's own (CodecInfo::showsOwnAttributes: a complete tile of a
 // codec that keeps them, or levels coded with them) rather than derived from its triangles. Running out of memory
 // while decoding is a data error (kMalformed): only a hostile payload can ask for more than its index allows.

@@ -114,9 +114,15 @@ struct Collapse {
 
 class Simplifier {
  public:
-  Simplifier(const QuantizedMesh& mesh, std::span<const uint8_t> locked, const SimplifyOptions& options)
+  Simplifier(const QuantizedMesh& mesh, std::span<const uint8_t> locked, const SimplifyOptions& options,
+             std::span<const uint32_t> corner_wedges)
       : options_(options), pos_(mesh.positions), tris_(mesh.triangles) {
     const size_t n = pos_.size();
+    if (!corner_wedges.empty()) {
+      wedges_.resize(tris_.size());
+      for (size_t f = 0; f < tris_.size(); ++f)
+        for (int i = 0; i < 3; ++i) wedges_[f][i] = corner_wedges[3 * f + size_t(i)];
+    }
     frozen_.assign(n, 0);
     for (size_t v = 0; v < locked.size(); ++v) frozen_[v] = locked[v] ? 1 : 0;
     face_alive_.assign(tris_.size(), 1);
@@ -190,7 +196,10 @@ class Simplifier {
     out.mesh.positions = std::move(pos_);
     out.mesh.triangles.reserve(faces_);
     for (size_t f = 0; f < tris_.size(); ++f)
-      if (face_alive_[f]) out.mesh.triangles.push_back(tris_[f]);
+      if (face_alive_[f]) {
+        out.mesh.triangles.push_back(tris_[f]);
+        if (!wedges_.empty()) out.corner_wedges.insert(out.corner_wedges.end(), wedges_[f].begin(), wedges_[f].end());
+      }
     return out;
   }
 
@@ -515,11 +524,64 @@ class Simplifier {
       if (after > 2 && e.ck <= 2 && e.cr <= 2) return false;
       if (after == 0) return false;
     }
+    return wedges_.empty() || wedgesKept(k, r);
+  }
+
+  static bool has(const Triangle& t, uint32_t v) { return t[0] == v || t[1] == v || t[2] == v; }
+  uint32_t wedgeAt(uint32_t f, uint32_t v) const {
+    const Triangle& t = tris_[f];
+    return wedges_[f][t[0] == v ? 0 : (t[1] == v ? 1 : 2)];
+  }
+
+  // The wedge rules of a collapse of r onto k (simplify.h, corner_wedges).
+  bool wedgesKept(uint32_t k, uint32_t r) {
+    pairs_.clear();  // (r's wedge, k's wedge, still used after the collapse)
+    for (uint32_t f : facesOf(k)) {
+      if (!face_alive_[f] || !has(tris_[f], r)) continue;
+      const uint32_t wr = wedgeAt(f, r), wk = wedgeAt(f, k);
+      bool found = false;
+      for (const auto& p : pairs_) {
+        if ((p[0] == wr) != (p[1] == wk)) return false;  // M is not one to one
+        found |= p[0] == wr;
+      }
+      if (!found) pairs_.push_back({wr, wk, 0});
+      // The third corner's wedge must be used by another of its triangles.
+      const Triangle& t = tris_[f];
+      const uint32_t x = t[0] != k && t[0] != r ? t[0] : (t[1] != k && t[1] != r ? t[1] : t[2]);
+      const uint32_t wx = wedgeAt(f, x);
+      bool used = false;
+      for (uint32_t g : facesOf(x))
+        if (face_alive_[g] && !(has(tris_[g], k) && has(tris_[g], r)) && wedgeAt(g, x) == wx) {
+          used = true;
+          break;
+        }
+      if (!used) return false;
+    }
+    for (uint32_t f : facesOf(r)) {
+      if (!face_alive_[f] || has(tris_[f], k)) continue;
+      const uint32_t wr = wedgeAt(f, r);
+      auto it = std::find_if(pairs_.begin(), pairs_.end(), [&](const auto& p) { return p[0] == wr; });
+      if (it == pairs_.end()) return false;  // a wedge of r the deleted triangles do not pair
+      (*it)[2] = 1;
+    }
+    for (uint32_t f : facesOf(k)) {
+      if (!face_alive_[f] || has(tris_[f], r)) continue;
+      const uint32_t wk = wedgeAt(f, k);
+      for (auto& p : pairs_)
+        if (p[1] == wk) p[2] = 1;
+    }
+    for (const auto& p : pairs_)
+      if (!p[2]) return false;
     return true;
   }
 
   void apply(const Collapse& c) {
     const uint32_t k = c.kept, r = c.removed;
+    if (!wedges_.empty()) {
+      pairs_.clear();  // M (wedgesKept), from the triangles the collapse deletes
+      for (uint32_t f : facesOf(k))
+        if (face_alive_[f] && has(tris_[f], r)) pairs_.push_back({wedgeAt(f, r), wedgeAt(f, k), 0});
+    }
     for (uint32_t f : facesOf(r)) {
       if (!face_alive_[f]) continue;
       Triangle& t = tris_[f];
@@ -527,6 +589,15 @@ class Simplifier {
         face_alive_[f] = 0;
         faces_--;
         continue;
+      }
+      if (!wedges_.empty()) {
+        // The moving corner takes k's wedge that the deleted triangles pair with its own (wedgesKept).
+        uint32_t& wr = wedges_[f][t[0] == r ? 0 : (t[1] == r ? 1 : 2)];
+        for (const auto& p : pairs_)
+          if (p[0] == wr) {
+            wr = p[1];
+            break;
+          }
       }
       for (uint32_t& w : t)
         if (w == r) w = k;
@@ -621,12 +692,14 @@ class Simplifier {
   std::vector<uint64_t> keys_;
   std::vector<uint64_t> scratch_;
   std::vector<RingEdge> ring_;
+  std::vector<std::array<uint32_t, 3>> wedges_;  // per triangle: its corners' wedges (empty: none given)
+  std::vector<std::array<uint32_t, 3>> pairs_;
 };
 
 }  // namespace
 
 Result<Simplification> simplify(const QuantizedMesh& mesh, std::span<const uint8_t> locked,
-                                const SimplifyOptions& options) {
+                                const SimplifyOptions& options, std::span<const uint32_t> corner_wedges) {
   const size_t n = mesh.positions.size();
   if (!locked.empty() && locked.size() != n)
     return makeError(ErrorCode::kInvalidArgument, "simplify: " + std::to_string(locked.size()) + " lock flags for " +
@@ -641,7 +714,11 @@ Result<Simplification> simplify(const QuantizedMesh& mesh, std::span<const uint8
   if (!(options.pass_fraction > 0 && options.pass_fraction <= 1))
     return makeError(ErrorCode::kInvalidArgument, "simplify: pass_fraction must be in (0, 1]");
   if (!(options.max_error >= 0)) return makeError(ErrorCode::kInvalidArgument, "simplify: max_error must be >= 0");
-  Simplifier s(mesh, locked, options);
+  if (!corner_wedges.empty() && corner_wedges.size() != 3 * mesh.triangles.size())
+    return makeError(ErrorCode::kInvalidArgument, "simplify: " + std::to_string(corner_wedges.size()) +
+                                                      " corner wedges for " + std::to_string(mesh.triangles.size()) +
+                                                      " triangles");
+  Simplifier s(mesh, locked, options, corner_wedges);
   return s.run();
 }
 

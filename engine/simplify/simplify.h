@@ -65,6 +65,8 @@ struct Simplification {
   std::vector<uint64_t> pass_faces;
   // The simplified mesh, with the input's vertex indices (removed vertices stay in `positions`, unused).
   QuantizedMesh mesh;
+  // With corner wedges (simplify's `corner_wedges`): those of mesh.triangles, three per triangle.
+  std::vector<uint32_t> corner_wedges;
 };
 
 // Simplifies `mesh` (triangles only; normals and colors are ignored and not in the result). `locked` is empty or
@@ -76,7 +78,16 @@ struct Simplification {
 // readers weld STL. Isolated vertices, vertices sharing a position and meshes without triangles are accepted.
 // kInvalidArgument for indices out of range, lock flags of the wrong size, a pass_fraction outside (0, 1] or a
 // negative max_error.
+//
+// `corner_wedges` is empty or has three ids per triangle (its corners' wedges: the attribute values a corner shows,
+// so that a vertex on a crease or a texture seam has one wedge per side). A collapse of r onto k then needs:
+//  - the deleted triangles (those with k and r) pair r's and k's wedges one to one (M: r's wedge -> k's), and every
+//    wedge of r is paired: r's triangles that move to k take M's wedge at their new corner, so each side of a seam
+//    stays on its side, and a seam vertex leaves only along its seam;
+//  - every wedge of k that M names, and the third corner's wedge of every deleted triangle, is still used after the
+//    collapse: a vertex split that undoes it (codec pm) then names those wedges among the ones its vertices have.
+// The result's corner_wedges are the wedges of its triangles' corners.
 Result<Simplification> simplify(const QuantizedMesh& mesh, std::span<const uint8_t> locked,
-                                const SimplifyOptions& options);
+                                const SimplifyOptions& options, std::span<const uint32_t> corner_wedges = {});
 
 }  // namespace scanpress

@@ -98,13 +98,13 @@ options:
   --no-colors         drop colors
   --no-scalars        drop per-vertex scalar properties (a PLY's confidence, intensity, quality, ...; kept
                       losslessly at their type by store, kdtree, octree and edgebreaker, by pm at the vertices
-                      it keeps, resampled by prm and the remesh stage; texture coordinates only by the first four)
+                      it keeps, resampled by prm and the remesh stage; texture coordinates not by the last two)
   --allow-degenerate  keep going when quantization makes more than 0.1%% of the triangles degenerate (they are
                       dropped); without it such a scan fails with exit 2 (raise --bits instead). Implied by
                       --max-error, whose measured error accounts for them
   --strict            fail (exit 2) when the input holds anything the container would not keep
-                      (materials, per-face properties, extra PLY elements, texture coordinates under pm, prm or
-                      the remesh stage, other attributes of points pm welds); without it they are dropped with
+                      (materials, per-face properties, extra PLY elements, texture coordinates under prm or
+                      the remesh stage, points pm merges); without it they are dropped with
                       one warning and listed in the report
   --tile-triangles N  target triangles per tile (default 131072; tiles adapt to density around it)
   --threads N         worker threads (default: all cores); the output is the same at any count
