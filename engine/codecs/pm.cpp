@@ -197,7 +197,15 @@ struct PmState {
   // v's distinct wedges, ascending.
   void wedgesOf(uint32_t v, std::vector<uint32_t>& out) const {
     out.clear();
-    for (uint32_t f : vf[v]) out.push_back(wedgeAt(f, v));
+    bool one = true;  // the common case (away from creases and seams), without a sort
+    for (uint32_t f : vf[v]) {
+      out.push_back(wedgeAt(f, v));
+      one &= out.back() == out.front();
+    }
+    if (one && !out.empty()) {
+      out.resize(1);
+      return;
+    }
     std::sort(out.begin(), out.end());
     out.erase(std::unique(out.begin(), out.end()), out.end());
   }
@@ -306,13 +314,22 @@ class LevelAttributes {
     }
     std::vector<Vec3u> wpos(n);
     for (uint32_t w = 0; w < n; ++w) wpos[w] = st.pos[st.wv[w]];
-    // Per wedge its faces, in the order of its vertex's face list (before v5 that list itself).
-    std::vector<std::vector<uint32_t>> wvf(n);
+    // Per wedge its faces, in the order of its vertex's face list (before v5 that list itself), as offsets into one
+    // array.
+    std::vector<uint32_t> begin(size_t(n) + 1, 0), faces;
     for (uint32_t v = 0; v < st.pos.size(); ++v)
-      for (uint32_t f : st.vf[v]) wvf[st.wedgeAt(f, v)].push_back(f);
+      for (uint32_t f : st.vf[v]) ++begin[st.wedgeAt(f, v) + 1];
+    for (uint32_t w = 0; w < n; ++w) begin[w + 1] += begin[w];
+    faces.resize(begin[n]);
+    std::vector<uint32_t> next(begin.begin(), begin.end() - 1);
+    for (uint32_t v = 0; v < st.pos.size(); ++v)
+      for (uint32_t f : st.vf[v]) faces[next[st.wedgeAt(f, v)]++] = f;
+    const auto faces_of = [&](uint32_t w) {
+      return std::span<const uint32_t>(faces.data() + begin[w], begin[w + 1] - begin[w]);
+    };
     hierarchy::codePredictedRange(
-        io, layout_, base_, n, st.fw, [&](uint32_t w) { return std::span<const uint32_t>(wvf[w]); },
-        [&](uint32_t w) { return hierarchy::angleWeightedNormalAt(wpos, st.fw, wvf[w], w); },
+        io, layout_, base_, n, st.fw, faces_of,
+        [&](uint32_t w) { return hierarchy::angleWeightedNormalAt(wpos, st.fw, faces_of(w), w); },
         [](uint32_t) { return false; }, truth, st.normals, st.colors, &st.scalars, &wpos);
     shows_.resize(n);
     std::iota(shows_.begin(), shows_.end(), 0u);
@@ -600,10 +617,7 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
   // codes nothing: every payload before v5). The prediction is the face beside it in k's fan that holds w, a
   // staying one first.
   auto &kw = m.scratch.kw, &xw = m.scratch.xw;
-  kw.clear();
-  for (uint32_t f : fan) kw.push_back(st.wedgeAt(f, k));
-  std::sort(kw.begin(), kw.end());
-  kw.erase(std::unique(kw.begin(), kw.end()), kw.end());
+  st.wedgesOf(k, kw);  // k's faces are its fan
   auto& wedges = m.scratch.wedges;
   wedges.assign(ordered.size(), {0, 0});
   auto& taken = m.scratch.taken;
@@ -991,8 +1005,12 @@ WedgedMesh compact(const WedgedMesh& from, const std::vector<Vec3u>& positions, 
 // give RGB alpha 255) and scalar row.
 int compareVertices(const QuantizedMesh& a, uint32_t i, const QuantizedMesh& b, uint32_t j,
                     const AttributeLayout& layout) {
-  if (a.positions[i] != b.positions[j]) return a.positions[i] < b.positions[j] ? -1 : 1;
-  if (layout.hasNormals() && a.normals[i] != b.normals[j]) return a.normals[i] < b.normals[j] ? -1 : 1;
+  // Element by element: std::array's comparisons call memcmp, and the weld sorts every point of the tile with this.
+  for (int k = 0; k < 3; ++k)
+    if (a.positions[i][k] != b.positions[j][k]) return a.positions[i][k] < b.positions[j][k] ? -1 : 1;
+  if (layout.hasNormals())
+    for (int k = 0; k < 2; ++k)
+      if (a.normals[i][k] != b.normals[j][k]) return a.normals[i][k] < b.normals[j][k] ? -1 : 1;
   for (int c = 0; c < layout.color_channels; ++c)
     if (a.colors[i][c] != b.colors[j][c]) return a.colors[i][c] < b.colors[j][c] ? -1 : 1;
   const size_t stride = size_t(layout.scalarStride());
@@ -1033,15 +1051,10 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   WedgedMesh welded;
   uint64_t merged = 0;
   {
-    QuantizedMesh keyed;  // the input's attributes, with the positions, to order vertices by both
-    keyed.positions = in.positions;
-    keyed.normals = in.normals;
-    keyed.colors = in.colors;
-    keyed.scalars = in.scalars;
     std::vector<uint32_t> order(in.positions.size());
     std::iota(order.begin(), order.end(), 0u);
     std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-      const int c = compareVertices(keyed, a, keyed, b, layout);
+      const int c = compareVertices(in, a, in, b, layout);
       return c != 0 ? c < 0 : a < b;
     });
     std::vector<uint32_t> pos_of(in.positions.size()), wedge_of(in.positions.size()), first_of;
@@ -1051,7 +1064,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
         welded.mesh.positions.push_back(in.positions[v]);
         welded.locked.push_back(0);
       }
-      if (i == 0 || compareVertices(keyed, order[i - 1], keyed, v, layout) != 0) {
+      if (i == 0 || compareVertices(in, order[i - 1], in, v, layout) != 0) {
         first_of.push_back(v);
         welded.wedge_vertex.push_back(uint32_t(welded.mesh.positions.size() - 1));
       }
