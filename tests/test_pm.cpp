@@ -5,6 +5,7 @@
 // cleanly or decodes a level, and hostile counts are refused before allocation.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
 #include <map>
 #include <random>
@@ -560,6 +561,46 @@ TEST(Pm, TextureSeamsAreKeptAsWedges) {
   }
 }
 
+// A lossy last level can move a point into the cell of one it shares no triangle with (here: stray points placed
+// where the simplifier puts collapsed vertices). Such points stay apart at every level, with attributes (v5: the
+// base's wedge groups name which vertex a wedge at a shared position belongs to) and without (v3).
+TEST(Pm, PointsMovedIntoOneCellStayApart) {
+  const QuantizedMesh sphere = quantized(icosphere(4), 12);
+  SimplifyOptions so;
+  so.target_faces = uint64_t(std::ceil(0.2 * double(sphere.triangles.size())));
+  auto s = simplify(sphere, {}, so);
+  ASSERT_TRUE(s.isOk());
+  const std::set<Vec3u> taken(sphere.positions.begin(), sphere.positions.end());
+  QuantizedMesh tile = sphere;
+  for (const EdgeCollapse& c : s->collapses)
+    if (c.placement == 2 && !taken.count(c.position)) tile.positions.push_back(c.position);
+  ASSERT_GT(tile.positions.size(), sphere.positions.size() + 100);
+  for (const AttributeLayout& layout : {AttributeLayout{}, AttributeLayout{0, 3}}) {
+    SCOPED_TRACE(int(layout.color_channels));
+    size_t shared = 0;
+    QuantizedMesh t = tile;
+    if (layout.hasColors()) t.colors.assign(t.positions.size(), Rgba8{10, 20, 30, 255});  // no wedges
+    const TileContext ctx{12, layout};
+    const Encoded enc = encodeTile(ctx, t, {}, ratioOptions(0.2));
+    ASSERT_GE(enc.levels.size(), 2u);
+    EXPECT_EQ(enc.version, layout.hasColors() ? 5 : 3);
+    for (const CodecLevel& l : enc.levels) {
+      auto d = pm().decode_level(ctx, enc.version, std::span(enc.tile.payload).first(l.end_bytes), l.level,
+                                 limitsOf(enc.tile.decoded));
+      ASSERT_TRUE(d.isOk()) << d.status().toString();
+      ASSERT_EQ(d->positions.size(), l.vertices);
+      if (l.level == 0) {
+        std::set<Vec3u> seen;
+        for (const Vec3u& p : d->positions) shared += !seen.insert(p).second;
+      }
+    }
+    auto full = pm().decode(ctx, enc.version, enc.tile.payload, limitsOf(enc.tile.decoded));
+    ASSERT_TRUE(full.isOk()) << full.status().toString();
+    EXPECT_EQ(full->triangles.size(), enc.tile.decoded.faces);
+    EXPECT_GT(shared, 0u) << "no base point shares its cell: the test would not see the case";
+  }
+}
+
 // Version 2 payloads (no attributes coded) still decode, with attributes derived from the triangles.
 TEST(Pm, Version2DerivesAttributes) {
   const AttributeLayout layout{10, 3};
@@ -656,6 +697,14 @@ TEST(Pm, HostileCountsAreRefusedBeforeAllocating) {
       auto r2 = pm().decode(ctx, version, h2, DecodeLimits{1000, 2000});
       EXPECT_EQ(r2.status().code(), ErrorCode::kMalformed) << r2.status().toString();
     }
+  // A version 5 payload (wedges) in a container without attributes: refused (no encoder writes one).
+  {
+    const AttributeLayout colors{0, 3};
+    const QuantizedMesh colored = quantized(testing::coloredIcosphere(2), 12, colors);
+    const Encoded v5 = encodeTile(TileContext{12, colors}, colored, {});
+    ASSERT_EQ(v5.version, 5);
+    EXPECT_EQ(pm().decode(ctx, 5, v5.tile.payload, limitsOf(v5.tile.decoded)).status().code(), ErrorCode::kMalformed);
+  }
   // An unknown version.
   EXPECT_EQ(pm().decode(ctx, pm().version + 1, enc.tile.payload, limitsOf(s)).status().code(),
             ErrorCode::kUnknownVersion);

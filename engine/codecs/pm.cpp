@@ -124,6 +124,24 @@ struct Models {
     std::vector<uint32_t> fan, in_moved, in_stayed, nbrs, cut, extra_w, rn, kn, kw, xw;
     std::vector<uint8_t> starts, extra_o, orients, taken;
     std::vector<std::array<uint32_t, 2>> wedges;
+    // Per split (stamped, so that nothing is cleared per split): per vertex the fan face that predicts a new face's
+    // wedges and the vertex's wedge list (in `lists`); per wedge of k the wedge of r it pairs with.
+    std::vector<uint32_t> vertex_stamp, pred_face, list_stamp, list_begin, list_size, lists, wedge_stamp, r_wedge;
+    uint32_t stamp = 0;
+    void next(size_t vertices, size_t wedges_now) {
+      if (++stamp == 0) {
+        std::fill(vertex_stamp.begin(), vertex_stamp.end(), 0);
+        std::fill(list_stamp.begin(), list_stamp.end(), 0);
+        std::fill(wedge_stamp.begin(), wedge_stamp.end(), 0);
+        stamp = 1;
+      }
+      if (vertex_stamp.size() < vertices) {
+        vertex_stamp.resize(vertices, 0), pred_face.resize(vertices), list_stamp.resize(vertices, 0);
+        list_begin.resize(vertices), list_size.resize(vertices);
+      }
+      if (wedge_stamp.size() < wedges_now) wedge_stamp.resize(wedges_now, 0), r_wedge.resize(wedges_now);
+      lists.clear();
+    }
     std::vector<std::pair<uint32_t, uint8_t>> ordered;
   } scratch;
   Models() : bucket(3 * kScales * (1 + kRelContexts), SymbolModel(kBuckets)) {}
@@ -369,7 +387,7 @@ struct Split {
 // Which of `list` (v's distinct wedges) a new face's corner at v names: nothing when v has one; else whether it is
 // `pred` (the wedge of a face beside it), then which other.
 template <class C>
-Status codeWedge(C& c, BitModel& same, const std::vector<uint32_t>& list, uint32_t pred, uint32_t& wedge) {
+Status codeWedge(C& c, BitModel& same, std::span<const uint32_t> list, uint32_t pred, uint32_t& wedge) {
   if (list.empty()) return makeError(ErrorCode::kMalformed, "pm: a new face's corner has no wedge to take");
   uint32_t idx = 0;
   if constexpr (C::kEncode) {
@@ -616,8 +634,18 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
   // Wedges (v5): each new face's corners at k and at w name one of that vertex's wedges (a vertex with one wedge
   // codes nothing: every payload before v5). The prediction is the face beside it in k's fan that holds w, a
   // staying one first.
-  auto &kw = m.scratch.kw, &xw = m.scratch.xw;
+  auto& sc = m.scratch;
+  sc.next(st.pos.size(), st.wv.size());
+  auto &kw = sc.kw, &xw = sc.xw;
   st.wedgesOf(k, kw);  // k's faces are its fan
+  // The predicting face of each vertex of the fan (one pass: a new face costs O(1), not a scan of the fan).
+  for (uint8_t pass = 0; pass < 2; ++pass)
+    for (size_t f = 0; f < fan.size(); ++f) {
+      if (s.moved[f] != pass) continue;
+      const auto [a, b] = st.others(fan[f], k);
+      for (uint32_t x : {a, b})
+        if (sc.vertex_stamp[x] != sc.stamp) sc.vertex_stamp[x] = sc.stamp, sc.pred_face[x] = fan[f];
+    }
   auto& wedges = m.scratch.wedges;
   wedges.assign(ordered.size(), {0, 0});
   auto& taken = m.scratch.taken;
@@ -633,27 +661,27 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
       wedges[i] = s.new_wedges[j];
     }
     uint32_t pk = UINT32_MAX, px = UINT32_MAX;
-    for (int pass = 0; pass < 2 && pk == UINT32_MAX; ++pass)
-      for (size_t f = 0; f < fan.size(); ++f) {
-        const Triangle& t = st.faces[fan[f]];
-        if (s.moved[f] != pass || (t[0] != w && t[1] != w && t[2] != w)) continue;
-        pk = st.wedgeAt(fan[f], k), px = st.wedgeAt(fan[f], w);
-        break;
-      }
+    if (sc.vertex_stamp[w] == sc.stamp) pk = st.wedgeAt(sc.pred_face[w], k), px = st.wedgeAt(sc.pred_face[w], w);
     SP_RETURN_IF_ERROR(codeWedge(c, m.wedge_same[0], kw, pk, wedges[i][0]));
-    st.wedgesOf(w, xw);
-    SP_RETURN_IF_ERROR(codeWedge(c, m.wedge_same[1], xw, px, wedges[i][1]));
+    // w's wedges, once per split (a hostile split may give one vertex many new faces).
+    if (sc.list_stamp[w] != sc.stamp) {
+      st.wedgesOf(w, xw);
+      sc.list_stamp[w] = sc.stamp, sc.list_begin[w] = uint32_t(sc.lists.size()), sc.list_size[w] = uint32_t(xw.size());
+      sc.lists.insert(sc.lists.end(), xw.begin(), xw.end());
+    }
+    const std::span<const uint32_t> wl(sc.lists.data() + sc.list_begin[w], sc.list_size[w]);
+    SP_RETURN_IF_ERROR(codeWedge(c, m.wedge_same[1], wl, px, wedges[i][1]));
   }
   const uint32_t r = n;
   // Apply. r gets a new wedge per wedge of k that its corners pair with, in the order they are met.
   s.created.clear();
-  auto wedgeOfR = [&](uint32_t a) {
-    for (const auto& [from, to] : s.created)
-      if (from == a) return to;
+  auto wedgeOfR = [&](uint32_t a) {  // a: one of k's wedges, below the count at the split's start
+    if (sc.wedge_stamp[a] == sc.stamp) return sc.r_wedge[a];
     const uint32_t id = uint32_t(st.wv.size());
     st.wv.push_back(r);
     st.parent.push_back(a);
     s.created.push_back({a, id});
+    sc.wedge_stamp[a] = sc.stamp, sc.r_wedge[a] = id;
     return id;
   };
   st.pos[k] = s.vs;
@@ -693,6 +721,8 @@ struct Header {
   std::vector<LevelEntry> levels;
   size_t base_offset = 0;  // where the base payload starts
   bool wedges = false;     // v5: base_vertices and the levels' wedges count wedges
+  // v5: the base wedges (canonical index, group) that are not their position's first vertex's (initialState).
+  std::vector<std::pair<uint64_t, uint64_t>> groups;
 };
 
 void putF32(ByteWriter& w, float f) {
@@ -723,6 +753,22 @@ Result<Header> parseHeader(std::span<const uint8_t> payload, const DecodeLimits&
   uint32_t u = 0;
   SP_RETURN_IF_ERROR(r.u32(u));
   std::memcpy(&h.base_error, &u, 4);
+  if (h.wedges) {
+    uint64_t g = 0;
+    SP_RETURN_IF_ERROR(r.varint(g));
+    if (g > r.remaining() / 2 || g > h.base_vertices)
+      return r.error(ErrorCode::kMalformed, "more wedge groups than the base has wedges");
+    h.groups.resize(g);
+    uint64_t prev = 0;
+    for (auto& [index, group] : h.groups) {
+      uint64_t gap = 0;
+      SP_RETURN_IF_ERROR(r.varint(gap));
+      SP_RETURN_IF_ERROR(r.varint(group));
+      if (gap == 0 || gap > h.base_vertices - prev || group == 0)
+        return r.error(ErrorCode::kMalformed, "inconsistent wedge group");
+      index = prev += gap;
+    }
+  }
   uint64_t count = 0;
   SP_RETURN_IF_ERROR(r.varint(count));
   // Every level entry takes at least 8 bytes: the count is bounded by the bytes left before anything is allocated.
@@ -740,8 +786,10 @@ Result<Header> parseHeader(std::span<const uint8_t> payload, const DecodeLimits&
     std::memcpy(&l.error, &u, 4);
     SP_RETURN_IF_ERROR(r.varint(l.bytes));
     SP_RETURN_IF_ERROR(checkLimits("pm level", l.wedges, l.faces, limits));
+    // Every batch adds a vertex (and a wedge); v5's first level is checked against the decoded base (decodeImpl).
     if (l.vertices < prev_v || l.wedges < l.vertices || l.wedges < prev_w || l.faces < prev_f || l.batches == 0 ||
-        l.batches > l.wedges - prev_w + 1 || l.bytes > (uint64_t(1) << 40))
+        l.batches > l.wedges - prev_w + 1 || (prev_v > 0 && l.batches > l.vertices - prev_v + 1) ||
+        l.bytes > (uint64_t(1) << 40))
       return r.error(ErrorCode::kMalformed, "inconsistent level entry");
     prev_v = l.vertices, prev_f = l.faces, prev_w = l.wedges;
   }
@@ -781,19 +829,34 @@ std::vector<uint32_t> canonicalOrder(const std::vector<Vec3u>& pos) {
   return order;
 }
 
-// The base mesh in canonical order as the state to split from: its vertices are the wedges, those at one position
-// the wedges of one state vertex (before v5 the positions are distinct: a wedge per vertex, the same ids).
-PmState initialState(const QuantizedMesh& base, std::vector<uint32_t>* order_out) {
+// The base mesh in canonical order as the state to split from: its vertices are the wedges. Before v5 (`groups`
+// null) each is a state vertex of its own (the same ids). In v5 the wedges at one position are one vertex's, its
+// position's first (group 0), unless `groups` (ascending canonical indices) names another: group g < the groups met
+// at that position so far is the g-th vertex there, g equal to it a new one (two points the simplifier moved into
+// one cell). nullopt on a group no vertex has.
+std::optional<PmState> initialState(const QuantizedMesh& base, const std::vector<std::pair<uint64_t, uint64_t>>* groups,
+                                    std::vector<uint32_t>* order_out) {
   const std::vector<uint32_t> order = canonicalOrder(base.positions);
   std::vector<uint32_t> rank(order.size());
   for (uint32_t i = 0; i < order.size(); ++i) rank[order[i]] = i;
   PmState st;
   st.pos.reserve(order.size());
   st.wv.reserve(order.size());
-  for (uint32_t v : order) {
-    if (st.pos.empty() || base.positions[v] != st.pos.back()) st.pos.push_back(base.positions[v]);
-    st.wv.push_back(uint32_t(st.pos.size() - 1));
+  std::vector<uint32_t> here;  // the state vertices at the current position, by group
+  size_t next = 0;
+  for (uint32_t i = 0; i < order.size(); ++i) {
+    const Vec3u& p = base.positions[order[i]];
+    uint64_t g = 0;
+    if (groups && next < groups->size() && (*groups)[next].first == i) g = (*groups)[next++].second;
+    if (!groups || i == 0 || p != base.positions[order[i - 1]]) {
+      if (g != 0) return std::nullopt;
+      here.clear();
+    }
+    if (g > here.size()) return std::nullopt;
+    if (g == here.size()) here.push_back(uint32_t(st.pos.size())), st.pos.push_back(p);
+    st.wv.push_back(here[g]);
   }
+  if (groups && next != groups->size()) return std::nullopt;
   if (!base.normals.empty())
     for (uint32_t v : order) st.normals.push_back(base.normals[v]);
   if (!base.colors.empty())
@@ -822,6 +885,9 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   if (ctx.layout.hasScalars() && version < kScalarsFrom)
     return makeError(ErrorCode::kMalformed, "pm payload of version " + std::to_string(version) +
                                                 " in a container with scalar channels (those carry none)");
+  if (version >= kWedgesFrom && !ctx.layout.hasNormals() && !ctx.layout.hasColors() && !ctx.layout.hasScalars())
+    return makeError(ErrorCode::kMalformed, "pm payload of version " + std::to_string(version) +
+                                                " in a container without attributes (its wedges would have none)");
   SP_ASSIGN_OR_RETURN(Header h, parseHeader(payload, limits, version));
   const uint32_t target = std::min<uint32_t>(level, uint32_t(h.levels.size()));
   if (h.base_bytes > payload.size() - h.base_offset)
@@ -837,19 +903,21 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
                                          DecodeLimits{uint32_t(h.base_vertices), uint32_t(h.base_faces)}));
   if (base.positions.size() != h.base_vertices || base.triangles.size() != h.base_faces)
     return makeError(ErrorCode::kMalformed, "pm: the base mesh does not have the counts the header gives");
-  for (const auto& t : base.triangles)
-    if (base.positions[t[0]] == base.positions[t[1]] || base.positions[t[1]] == base.positions[t[2]] ||
-        base.positions[t[0]] == base.positions[t[2]])
-      return makeError(ErrorCode::kMalformed, "pm: a base triangle repeats a position");
   if (attributes && ((ctx.layout.hasNormals() && base.normals.size() != base.positions.size()) ||
                      (ctx.layout.hasColors() && base.colors.size() != base.positions.size()) ||
                      base.scalars.size() != base.positions.size() * size_t(ctx.layout.scalarStride())))
     return makeError(ErrorCode::kMalformed, "pm: the base mesh lacks the layout's attributes");
   const uint64_t final_v = target == 0 ? h.base_vertices : h.levels[target - 1].vertices;
   const uint64_t final_f = target == 0 ? h.base_faces : h.levels[target - 1].faces;
-  PmState st = initialState(base, nullptr);
-  if (!h.wedges && st.pos.size() != st.wv.size())
-    return makeError(ErrorCode::kMalformed, "pm: base vertices share a position (a payload before version 5)");
+  std::optional<PmState> initial = initialState(base, h.wedges ? &h.groups : nullptr, nullptr);
+  if (!initial) return makeError(ErrorCode::kMalformed, "pm: a wedge group of the base names no vertex");
+  PmState st = std::move(*initial);
+  for (const auto& t : st.faces)
+    if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2])
+      return makeError(ErrorCode::kMalformed, "pm: a base triangle repeats a vertex");
+  if (!h.levels.empty() &&
+      (h.levels[0].vertices < st.pos.size() || h.levels[0].batches > h.levels[0].vertices - st.pos.size() + 1))
+    return makeError(ErrorCode::kMalformed, "pm: level 1 does not follow the base");
   st.pos.reserve(final_v);
   st.vf.reserve(final_v);
   st.faces.reserve(final_f);
@@ -1252,9 +1320,25 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
     best_map = std::move(map);
   }
   if (!best) return makeError(ErrorCode::kInternal, "pm: no codec reproduces the base mesh");
-  // Backward: split from the decoded base, as the decoder will.
+  // Backward: split from the decoded base, as the decoder will. v5: the base wedges at one position that are not
+  // its first vertex's (the simplifier may move a point into the cell of one it does not share a triangle with).
+  Header h;
+  h.wedges = attributes;  // v5 whenever attributes are coded (CodecInfo::keeps_attributes_from)
+  if (h.wedges) {         // (before v5 every base vertex is a state vertex of its own)
+    const std::vector<uint32_t> sorted = canonicalOrder(best_decoded.positions);
+    std::vector<uint32_t> here;  // last-level vertices at the current position, by group
+    for (uint32_t i = 0; i < sorted.size(); ++i) {
+      const uint32_t vertex = last.wedge_vertex[best_map[sorted[i]]];
+      if (i == 0 || best_decoded.positions[sorted[i]] != best_decoded.positions[sorted[i - 1]]) here.clear();
+      const uint64_t g = uint64_t(std::find(here.begin(), here.end(), vertex) - here.begin());
+      if (g == here.size()) here.push_back(vertex);
+      if (g != 0) h.groups.push_back({i, g});
+    }
+  }
   std::vector<uint32_t> order;
-  PmState st = initialState(best_decoded, &order);
+  std::optional<PmState> initial = initialState(best_decoded, h.wedges ? &h.groups : nullptr, &order);
+  if (!initial) return makeError(ErrorCode::kInternal, "pm: the base's wedge groups are inconsistent");
+  PmState st = std::move(*initial);
   std::vector<uint32_t> wedge_truth;  // state wedge -> last-level wedge
   for (uint32_t v : order) wedge_truth.push_back(best_map[v]);
   std::vector<uint32_t> wedge_state(nw, UINT32_MAX);
@@ -1265,8 +1349,6 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   for (uint32_t i = 0; i < last_of.size(); ++i) state_of[last_of[i]] = i;
   const size_t passes = s2.pass_ends.size();
   std::vector<uint8_t> streams;
-  Header h;
-  h.wedges = attributes;  // v5 whenever attributes are coded (CodecInfo::keeps_attributes_from)
   h.base_codec = uint8_t(best->id);
   // Without attributes kdtree's and octree's version 3 payloads are their version 2 bytes: such a base keeps naming
   // 2, as pm v2 always has (the same bytes as v2, golden ones included).
@@ -1412,6 +1494,15 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   w.varint(h.base_vertices);
   w.varint(h.base_faces);
   putF32(w, h.base_error);
+  if (h.wedges) {
+    w.varint(h.groups.size());
+    uint64_t prev = 0;
+    for (const auto& [index, group] : h.groups) {
+      w.varint(index - prev);
+      w.varint(group);
+      prev = index;
+    }
+  }
   w.varint(h.levels.size());
   for (const auto& l : h.levels) {
     w.varint(l.batches);
