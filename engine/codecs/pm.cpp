@@ -201,8 +201,20 @@ struct PmState {
   std::vector<Vec3u> pos;
   std::vector<Triangle> faces;
   std::vector<std::vector<uint32_t>> vf;
-  std::vector<Triangle> fw;        // per face: its corners' wedges
-  std::vector<uint32_t> wv;        // per wedge: its vertex
+  std::vector<Triangle> fw;  // per face: its corners' wedges (empty while `identity`)
+  // Every vertex is named by one wedge, with its own id (before v5, and a v5 base without a crease or seam): a
+  // split then keeps it so (r's one wedge gets r's id), corners' wedges are their vertices and `fw` is not kept.
+  bool identity = false;
+  const std::vector<Triangle>& cornerWedges() const { return identity ? faces : fw; }
+  std::vector<uint32_t> wv;  // per wedge: its vertex
+  // Per vertex: how many wedges name it, and the first. A vertex named by one wedge has it at every corner, so its
+  // list (wedgesOf) needs no look at its faces: the common case, and every vertex before v5.
+  std::vector<uint32_t> wedge_count, first_wedge;
+  void addWedge(uint32_t v, uint32_t parent_wedge) {
+    if (wedge_count[v]++ == 0) first_wedge[v] = uint32_t(wv.size());
+    wv.push_back(v);
+    parent.push_back(parent_wedge);
+  }
   std::vector<uint32_t> parent;    // per wedge: the wedge it split from (a base wedge: itself)
   std::vector<OctNormal> normals;  // v3, with normals: per coded wedge
   std::vector<Rgba8> colors;       // v3, with colors: per coded wedge
@@ -210,12 +222,17 @@ struct PmState {
 
   uint32_t wedgeAt(uint32_t f, uint32_t v) const {
     const Triangle& t = faces[f];
+    if (identity) return v;
     return fw[f][t[0] == v ? 0 : (t[1] == v ? 1 : 2)];
   }
-  // v's distinct wedges, ascending.
+  // v's distinct wedges at its faces' corners, ascending.
   void wedgesOf(uint32_t v, std::vector<uint32_t>& out) const {
     out.clear();
-    bool one = true;  // the common case (away from creases and seams), without a sort
+    if (wedge_count[v] == 1) {
+      out.push_back(first_wedge[v]);
+      return;
+    }
+    bool one = true;
     for (uint32_t f : vf[v]) {
       out.push_back(wedgeAt(f, v));
       one &= out.back() == out.front();
@@ -230,7 +247,7 @@ struct PmState {
   void addFace(const Triangle& t, const Triangle& w) {
     const uint32_t id = uint32_t(faces.size());
     faces.push_back(t);
-    fw.push_back(w);
+    if (!identity) fw.push_back(w);
     vf[t[0]].push_back(id);
     if (t[1] != t[0]) vf[t[1]].push_back(id);
     if (t[2] != t[0] && t[2] != t[1]) vf[t[2]].push_back(id);
@@ -346,8 +363,8 @@ class LevelAttributes {
       return std::span<const uint32_t>(faces.data() + begin[w], begin[w + 1] - begin[w]);
     };
     hierarchy::codePredictedRange(
-        io, layout_, base_, n, st.fw, faces_of,
-        [&](uint32_t w) { return hierarchy::angleWeightedNormalAt(wpos, st.fw, faces_of(w), w); },
+        io, layout_, base_, n, st.cornerWedges(), faces_of,
+        [&](uint32_t w) { return hierarchy::angleWeightedNormalAt(wpos, st.cornerWedges(), faces_of(w), w); },
         [](uint32_t) { return false; }, truth, st.normals, st.colors, &st.scalars, &wpos);
     shows_.resize(n);
     std::iota(shows_.begin(), shows_.end(), 0u);
@@ -638,14 +655,20 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
   sc.next(st.pos.size(), st.wv.size());
   auto &kw = sc.kw, &xw = sc.xw;
   st.wedgesOf(k, kw);  // k's faces are its fan
-  // The predicting face of each vertex of the fan (one pass: a new face costs O(1), not a scan of the fan).
-  for (uint8_t pass = 0; pass < 2; ++pass)
-    for (size_t f = 0; f < fan.size(); ++f) {
-      if (s.moved[f] != pass) continue;
-      const auto [a, b] = st.others(fan[f], k);
-      for (uint32_t x : {a, b})
-        if (sc.vertex_stamp[x] != sc.stamp) sc.vertex_stamp[x] = sc.stamp, sc.pred_face[x] = fan[f];
-    }
+  // The predicting face of each vertex of the fan, in one pass (a new face then costs O(1), not a scan of the
+  // fan), made when a corner has several wedges to choose from.
+  bool predicted = false;
+  const auto predict = [&] {
+    if (predicted) return;
+    predicted = true;
+    for (uint8_t pass = 0; pass < 2; ++pass)
+      for (size_t f = 0; f < fan.size(); ++f) {
+        if (s.moved[f] != pass) continue;
+        const auto [a, b] = st.others(fan[f], k);
+        for (uint32_t x : {a, b})
+          if (sc.vertex_stamp[x] != sc.stamp) sc.vertex_stamp[x] = sc.stamp, sc.pred_face[x] = fan[f];
+      }
+  };
   auto& wedges = m.scratch.wedges;
   wedges.assign(ordered.size(), {0, 0});
   auto& taken = m.scratch.taken;
@@ -660,9 +683,6 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
       taken[j] = 1;
       wedges[i] = s.new_wedges[j];
     }
-    uint32_t pk = UINT32_MAX, px = UINT32_MAX;
-    if (sc.vertex_stamp[w] == sc.stamp) pk = st.wedgeAt(sc.pred_face[w], k), px = st.wedgeAt(sc.pred_face[w], w);
-    SP_RETURN_IF_ERROR(codeWedge(c, m.wedge_same[0], kw, pk, wedges[i][0]));
     // w's wedges, once per split (a hostile split may give one vertex many new faces).
     if (sc.list_stamp[w] != sc.stamp) {
       st.wedgesOf(w, xw);
@@ -670,6 +690,12 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
       sc.lists.insert(sc.lists.end(), xw.begin(), xw.end());
     }
     const std::span<const uint32_t> wl(sc.lists.data() + sc.list_begin[w], sc.list_size[w]);
+    uint32_t pk = UINT32_MAX, px = UINT32_MAX;
+    if (kw.size() > 1 || wl.size() > 1) {
+      predict();
+      if (sc.vertex_stamp[w] == sc.stamp) pk = st.wedgeAt(sc.pred_face[w], k), px = st.wedgeAt(sc.pred_face[w], w);
+    }
+    SP_RETURN_IF_ERROR(codeWedge(c, m.wedge_same[0], kw, pk, wedges[i][0]));
     SP_RETURN_IF_ERROR(codeWedge(c, m.wedge_same[1], wl, px, wedges[i][1]));
   }
   const uint32_t r = n;
@@ -678,14 +704,15 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
   auto wedgeOfR = [&](uint32_t a) {  // a: one of k's wedges, below the count at the split's start
     if (sc.wedge_stamp[a] == sc.stamp) return sc.r_wedge[a];
     const uint32_t id = uint32_t(st.wv.size());
-    st.wv.push_back(r);
-    st.parent.push_back(a);
+    st.addWedge(r, a);
     s.created.push_back({a, id});
     sc.wedge_stamp[a] = sc.stamp, sc.r_wedge[a] = id;
     return id;
   };
   st.pos[k] = s.vs;
   st.pos.push_back(s.vr);
+  st.wedge_count.push_back(0);
+  st.first_wedge.push_back(0);
   st.vf.emplace_back();
   std::vector<uint32_t> stay;
   stay.reserve(fan.size());
@@ -695,8 +722,12 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
       continue;
     }
     Triangle& t = st.faces[fan[i]];
-    for (int j = 0; j < 3; ++j)
-      if (t[j] == k) t[j] = r, st.fw[fan[i]][j] = wedgeOfR(st.fw[fan[i]][j]);
+    for (int j = 0; j < 3; ++j) {
+      if (t[j] != k) continue;
+      t[j] = r;
+      if (st.identity) wedgeOfR(k);  // r's one wedge, id r
+      else st.fw[fan[i]][j] = wedgeOfR(st.fw[fan[i]][j]);
+    }
     st.vf[r].push_back(fan[i]);
   }
   st.vf[k] = std::move(stay);
@@ -706,6 +737,9 @@ Status codeSplit(C& c, Models& m, PmState& st, uint32_t k, Split& s, uint32_t ma
     if (o) st.addFace(Triangle{k, w, r}, Triangle{a, b, rw});
     else st.addFace(Triangle{k, r, w}, Triangle{a, rw, b});
   }
+  // A split that gives r no face (no encoder writes one) still gives it a wedge: every vertex has one, and `identity`
+  // keeps its ids.
+  if (st.wedge_count[r] == 0) wedgeOfR(st.first_wedge[k]);
   return Status::ok();
 }
 
@@ -871,6 +905,11 @@ std::optional<PmState> initialState(const QuantizedMesh& base, const std::vector
   st.vf.resize(st.pos.size());
   st.parent.resize(order.size());
   std::iota(st.parent.begin(), st.parent.end(), 0u);
+  st.wedge_count.assign(st.pos.size(), 0);
+  st.first_wedge.assign(st.pos.size(), 0);
+  for (uint32_t w = 0; w < st.wv.size(); ++w)
+    if (st.wedge_count[st.wv[w]]++ == 0) st.first_wedge[st.wv[w]] = w;
+  st.identity = st.wv.size() == st.pos.size();  // one wedge per vertex, in vertex order (initialState's numbering)
   for (const auto& t : base.triangles) {
     const Triangle w{rank[t[0]], rank[t[1]], rank[t[2]]};
     st.addFace({st.wv[w[0]], st.wv[w[1]], st.wv[w[2]]}, w);
@@ -969,7 +1008,7 @@ Result<QuantizedMesh> decodeImpl(const TileContext& ctx, uint16_t version, std::
   if (attributes) level_attributes.show(st, out);
   out.positions.reserve(st.wv.size());
   for (uint32_t v : st.wv) out.positions.push_back(st.pos[v]);
-  out.triangles = std::move(st.fw);
+  out.triangles = st.identity ? std::move(st.faces) : std::move(st.fw);
   if (!attributes) {
     deriveAttributes(out, ctx.layout);
   }
@@ -1427,8 +1466,9 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
       last_of.push_back(rec.removed);
       // r's new wedges are the removed vertex's that the deleted faces pair with k's.
       for (const auto& [a, id] : s.created) {
+        const uint32_t kept_wedge = wedge_truth[a];  // (clang 14 captures no structured binding)
         auto it =
-            std::find_if(rec.pairs.begin(), rec.pairs.end(), [&](const auto& q) { return q.first == wedge_truth[a]; });
+            std::find_if(rec.pairs.begin(), rec.pairs.end(), [&](const auto& q) { return q.first == kept_wedge; });
         if (it == rec.pairs.end() || id != wedge_truth.size())
           return makeError(ErrorCode::kInternal, "pm: a split's new wedge pairs with none of the collapse's");
         wedge_truth.push_back(it->second);
@@ -1479,7 +1519,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
       return makeError(ErrorCode::kInternal, "pm: a wedge is at another vertex");
   std::vector<Triangle> mapped, mapped_wedges;
   for (size_t f = 0; f < st.faces.size(); ++f) {
-    const Triangle &t = st.faces[f], &w = st.fw[f];
+    const Triangle &t = st.faces[f], &w = st.cornerWedges()[f];
     mapped.push_back({last_of[t[0]], last_of[t[1]], last_of[t[2]]});
     mapped_wedges.push_back({wedge_truth[w[0]], wedge_truth[w[1]], wedge_truth[w[2]]});
   }
@@ -1517,7 +1557,7 @@ Result<EncodedTile> pmEncodeImpl(const TileContext& ctx, const TileView& tile, c
   w.bytes(streams);
   QuantizedMesh final_mesh;
   for (uint32_t v : st.wv) final_mesh.positions.push_back(st.pos[v]);
-  final_mesh.triangles = std::move(st.fw);
+  final_mesh.triangles = st.identity ? std::move(st.faces) : std::move(st.fw);
   result.decoded = summarize(final_mesh);
   result.levels = levelsOf(h);
   // With attributes, v5 (wedges) even when every position has one: a v5 tile gives back the tile's vertices, so
