@@ -7,6 +7,7 @@
 #include <bit>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <random>
 #include <set>
@@ -231,6 +232,22 @@ Mesh fandiskWedged(const Mesh& base, size_t leave_out) {
   return wedged;
 }
 
+// Per level of `levels`: the corners across a crease, and those one normal per position would show (printed); their
+// totals.
+std::pair<size_t, size_t> acrossPerLevel(const std::vector<std::pair<uint32_t, QuantizedMesh>>& levels,
+                                         const std::function<void(uint32_t, size_t, size_t)>& check = {}) {
+  size_t total = 0, total_merged = 0;
+  for (const auto& [level, m] : levels) {
+    const size_t across = cornersAcrossACrease(m, 12);
+    const size_t merged = cornersAcrossACrease(onePerPosition(m), 12);
+    std::printf("level %u: %zu corners, %zu across a crease (one normal per position: %zu)\n", level,
+                3 * m.triangles.size(), across, merged);
+    total += across, total_merged += merged;
+    if (check) check(level, across, merged);
+  }
+  return {total, total_merged};
+}
+
 // Fandisk with a normal per corner split at its sharp edges (30 degrees), each vertex one wedge per distinct
 // normal: at every coarse level the corners' normals come from their own side of the creases. Measured against the
 // same levels with one normal per position, which is what version 3 showed.
@@ -246,21 +263,17 @@ TEST_P(Creases, FandiskCreasesSurviveEveryLevel) {
   auto levels = coarseLevels(codec(), TileContext{14, layout}, q);
   ASSERT_GE(levels.size(), 2u);
   levels.pop_back();
-  size_t total = 0, total_merged = 0;
-  for (const auto& [level, m] : levels) {
-    const size_t across = cornersAcrossACrease(m, 12);
-    const size_t merged = cornersAcrossACrease(onePerPosition(m), 12);
-    std::printf("level %u: %zu corners, %zu across a crease (one normal per position: %zu)\n", level,
-                3 * m.triangles.size(), across, merged);
-    total += across, total_merged += merged;
-    // Each level at least halves them; once cells are at most 64 grid cells (of 2^14), none is left (at coarser
-    // levels a coarse triangle bridging a crease has a normal between its sides) on the projections of the tile's
-    // triangles (octree's ghosts, one on fandisk, lie on no side).
+  // Each level at least halves them; once cells are at most 64 grid cells (of 2^14), none is left (at coarser
+  // levels a coarse triangle bridging a crease has a normal between its sides) on the projections of the tile's
+  // triangles (octree's ghosts, one on fandisk, lie on no side).
+  size_t i = 0;
+  const auto [total, total_merged] = acrossPerLevel(levels, [&](uint32_t level, size_t across, size_t merged) {
     EXPECT_LE(2 * across, merged) << "level " << level;
+    const QuantizedMesh& m = levels[i++].second;
     if (level >= 8) {
       EXPECT_EQ(cornersAcrossACrease(m, 12, projections(q, m, level, 14)), 0u) << "level " << level;
     }
-  }
+  });
   EXPECT_EQ(cornersAcrossACrease(q, 12), 0u) << "the measure itself";
   EXPECT_GT(total_merged, 1000u);
   EXPECT_LT(total * 5, total_merged);
@@ -488,14 +501,7 @@ TEST(PmCreases, FandiskCreasesSurviveEveryLevel) {
     const auto levels = pmLevels(TileContext{14, layout}, q, ratio);
     ASSERT_GE(levels.size(), 3u);
     if (ratio == 1.0) EXPECT_TRUE(testing::cornerMultiset(levels.back().second, 12) == testing::cornerMultiset(q, 12));
-    size_t total = 0, total_merged = 0;
-    for (const auto& [level, m] : levels) {
-      const size_t across = cornersAcrossACrease(m, 12);
-      const size_t merged = cornersAcrossACrease(onePerPosition(m), 12);
-      std::printf("level %u: %zu corners, %zu across a crease (one normal per position: %zu)\n", level,
-                  3 * m.triangles.size(), across, merged);
-      total += across, total_merged += merged;
-    }
+    const auto [total, total_merged] = acrossPerLevel(levels);
     EXPECT_GT(total_merged, 300u);
     EXPECT_LE(total * 50, total_merged);
   }

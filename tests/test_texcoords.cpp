@@ -326,6 +326,16 @@ TEST(Texcoords, PlyFaceTexcoordListsAreWedges) {
   EXPECT_EQ(own_u->scalar_channels, (std::vector<ScalarChannel>{{"u", ScalarType::kUint8}}));
 }
 
+// Decodes the container `spz` to `out` and reads that file back.
+Result<Mesh> decodeAndRead(const std::string& spz, const std::string& out) {
+  DecodeSettings d;
+  d.input = spz;
+  d.output = out;
+  auto dec = decodeFile(d);
+  if (!dec.isOk()) return dec.status();
+  return readMeshFile(out);
+}
+
 EncodeSettings uvSettingsFor(const std::string& in, const std::string& out, const std::string& codec) {
   EncodeSettings s = testing::encodeSettings(in, out, codec);
   s.bits = 20;
@@ -603,12 +613,8 @@ TEST(Texcoords, KeptBySimplifyingCodecsAndWrittenFromPly) {
     EncodeSettings a = uvSettingsFor(in, dir.file("lossy.spz"), "pm");
     a.codec_options.pm.ratio = 0.3;
     ASSERT_TRUE(encodeFile(a).isOk());
-    DecodeSettings d;
-    d.input = a.output;
-    d.output = dir.file("lossy.obj");
-    ASSERT_TRUE(decodeFile(d).isOk());
-    auto back = readMeshFile(d.output);
-    ASSERT_TRUE(back.isOk());
+    auto back = decodeAndRead(a.output, dir.file("lossy.obj"));
+    ASSERT_TRUE(back.isOk()) << back.status().toString();
     const auto tc = findTexcoords(back->scalar_channels);
     ASSERT_TRUE(tc.has_value());
     const size_t stride = back->scalars.size() / back->positions.size();
@@ -653,20 +659,13 @@ TEST(Texcoords, KeptBySimplifyingCodecsAndWrittenFromPly) {
   EXPECT_EQ(kept->layout.scalars.size(), 3u);
   EXPECT_TRUE(kept->read.dropped.empty()) << describeDropped(kept->read.dropped);
   {
-    DecodeSettings d;
-    d.input = p.output;
-    d.output = dir.file("seam.ply");
-    ASSERT_TRUE(decodeFile(d).isOk());
-    auto back = readMeshFile(d.output);
-    ASSERT_TRUE(back.isOk());
+    auto back = decodeAndRead(p.output, dir.file("seam.ply"));
+    ASSERT_TRUE(back.isOk()) << back.status().toString();
     // Corner for corner: the same rows at the same (quantized) corners as an edgebreaker round trip, lossless too.
     EncodeSettings e = uvSettingsFor(ply, dir.file("eb.spz"), "edgebreaker");
     ASSERT_TRUE(encodeFile(e).isOk());
-    d.input = e.output;
-    d.output = dir.file("eb.ply");
-    ASSERT_TRUE(decodeFile(d).isOk());
-    auto want = readMeshFile(d.output);
-    ASSERT_TRUE(want.isOk());
+    auto want = decodeAndRead(e.output, dir.file("eb.ply"));
+    ASSERT_TRUE(want.isOk()) << want.status().toString();
     auto corners = [](const Mesh& x) {
       const size_t stride = x.scalars.size() / x.positions.size();
       std::vector<std::array<std::pair<Vec3d, std::vector<uint32_t>>, 3>> out;
