@@ -114,7 +114,8 @@ void drawText(Image& img, int x, int y, const std::string& text, int scale) {
 }
 
 // The vertex colors at `p` on triangle `t`, interpolated barycentrically (as fractions of 255).
-std::array<double, 3> vertexColor(const Mesh& mesh, uint32_t t, const Vec3d& p) {
+// The barycentric weights of point p (on triangle t, clamped to it).
+std::array<double, 3> barycentric(const Mesh& mesh, uint32_t t, const Vec3d& p) {
   const auto& tri = mesh.triangles[t];
   const Vec3d a = mesh.positions[tri[0]], e1 = vsub(mesh.positions[tri[1]], a), e2 = vsub(mesh.positions[tri[2]], a);
   const Vec3d d = vsub(p, a);
@@ -125,11 +126,26 @@ std::array<double, 3> vertexColor(const Mesh& mesh, uint32_t t, const Vec3d& p) 
     u = std::clamp((d22 * d1 - d12 * d2) / den, 0.0, 1.0);
     v = std::clamp((d11 * d2 - d12 * d1) / den, 0.0, 1.0 - u);
   }
-  const double w[3] = {1 - u - v, u, v};
+  return {1 - u - v, u, v};
+}
+
+std::array<double, 3> vertexColor(const Mesh& mesh, uint32_t t, const Vec3d& p) {
+  const auto& tri = mesh.triangles[t];
+  const auto w = barycentric(mesh, t, p);
   std::array<double, 3> c{0, 0, 0};
   for (int k = 0; k < 3; ++k)
     for (int j = 0; j < 3; ++j) c[k] += w[j] * mesh.colors[tri[j]][k] / 255.0;
   return c;
+}
+
+// The mesh's normal at p, interpolated over triangle t (not normalized; zero where the corners' cancel).
+Vec3d vertexNormal(const Mesh& mesh, uint32_t t, const Vec3d& p) {
+  const auto& tri = mesh.triangles[t];
+  const auto w = barycentric(mesh, t, p);
+  Vec3d n{0, 0, 0};
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 3; ++j) n[k] += w[j] * mesh.normals[tri[j]][k];
+  return n;
 }
 
 }  // namespace
@@ -236,6 +252,7 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
     // between them at their seam.
     SP_ASSIGN_OR_RETURN(SurfaceIndex scene, SurfaceIndex::build(device, m->positions, m->triangles, &mesh_center));
     const bool colors = !reference && !m->colors.empty() && m->colors.size() == m->positions.size();
+    const bool normals = s.vertex_normals && !m->normals.empty() && m->normals.size() == m->positions.size();
     if (colors && albedo.empty()) albedo.assign(pixels, {0.85, 0.85, 0.85});
     vertex_colors |= colors;
     tbb::parallel_for(title_h, title_h + view_h, [&](int y) {
@@ -247,8 +264,13 @@ Result<RenderResult> renderSurface(const ChunkedSurface& mesh, const RenderSetti
         const size_t k = size_t(y) * s.width + x;
         if (!hit.hit || !(hit.t < depth[k])) continue;
         depth[k] = hit.t;
-        shade[k] = 0.25 + 0.75 * std::fabs(vdot(hit.normal, dir));
         const Vec3d point = vadd(eye, vmul(dir, hit.t));
+        Vec3d n = hit.normal;
+        if (normals) {
+          const Vec3d v = vertexNormal(*m, hit.triangle, point);
+          if (const double l = vlen(v); l > 0) n = vmul(v, 1 / l);
+        }
+        shade[k] = 0.25 + 0.75 * std::fabs(vdot(n, dir));
         if (face_colors) {
           const auto& c = s.face_colors[hit.triangle];
           albedo[k] = {c[0] / 255.0, c[1] / 255.0, c[2] / 255.0};

@@ -32,6 +32,9 @@ struct RenderSettings {
   std::vector<LegendEntry> legend;  // swatches with labels along the bottom (what the colors mean); none when empty
   // One color per triangle of a mesh drawn whole (one chunk) without a reference; none when empty.
   std::vector<std::array<uint8_t, 3>> face_colors;
+  // Shade with the mesh's normals interpolated over each triangle (where it has them: a crease's wedges show
+  // whether their sides' normals stay apart), instead of each triangle's own plane.
+  bool vertex_normals = false;
 };
 
 struct Image {

@@ -420,6 +420,61 @@ TEST(Render, ShadedAndErrorColoredPicturesAreDeterministic) {
   EXPECT_FALSE(renderMesh(Mesh(), s, device()).isOk());
 }
 
+// `--shade normals`: a cube whose faces have their own vertices and normals (its edges creases) shades as its flat
+// faces do (within rounding); the same cube with one normal per corner position (the three faces' mean) does not,
+// and neither does a sphere with its smooth normals against its facets.
+TEST(Render, VertexNormalShadingShowsCreases) {
+  Mesh cube;
+  for (int axis = 0; axis < 3; ++axis)
+    for (int side = 0; side < 2; ++side) {
+      const uint32_t b = uint32_t(cube.positions.size());
+      const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+      for (int i = 0; i < 4; ++i) {
+        Vec3d p{0, 0, 0};
+        p[size_t(axis)] = side ? 1 : -1;
+        p[size_t(u)] = (i == 1 || i == 2) ? 1 : -1;
+        p[size_t(v)] = (i >= 2) ? 1 : -1;
+        cube.positions.push_back(p);
+        Vec3f n{0, 0, 0};
+        n[size_t(axis)] = side ? 1.f : -1.f;
+        cube.normals.push_back(n);
+      }
+      cube.triangles.push_back({b, b + 1, b + 2});
+      cube.triangles.push_back({b, b + 2, b + 3});
+    }
+  RenderSettings s;
+  s.width = 160, s.height = 120;
+  auto flat = renderMesh(cube, s, device());
+  s.vertex_normals = true;
+  auto own = renderMesh(cube, s, device());
+  ASSERT_TRUE(flat.isOk() && own.isOk());
+  size_t lit = 0, off = 0;
+  for (size_t i = 0; i < flat->image.rgb.size(); ++i) {
+    lit += flat->image.rgb[i] != 245;
+    off += std::abs(int(flat->image.rgb[i]) - int(own->image.rgb[i])) > 1;
+  }
+  EXPECT_GT(lit, 3000u);
+  EXPECT_EQ(off, 0u) << "the faces' own normals shade as the faces do";
+  Mesh averaged = cube;
+  for (size_t v = 0; v < averaged.positions.size(); ++v) {
+    const Vec3d& p = averaged.positions[v];
+    const double l = std::sqrt(3.0);
+    averaged.normals[v] = {float(p[0] / l), float(p[1] / l), float(p[2] / l)};
+  }
+  auto merged = renderMesh(averaged, s, device());
+  ASSERT_TRUE(merged.isOk());
+  size_t differ = 0;
+  for (size_t i = 0; i < flat->image.rgb.size(); ++i)
+    differ += std::abs(int(flat->image.rgb[i]) - int(merged->image.rgb[i])) > 8;
+  EXPECT_GT(differ, 1000u) << "one normal per corner position shades across the edges";
+  // Without normals the option changes nothing.
+  Mesh bare = cube;
+  bare.normals.clear();
+  auto plain = renderMesh(bare, s, device());
+  ASSERT_TRUE(plain.isOk());
+  EXPECT_EQ(plain->image.rgb, flat->image.rgb);
+}
+
 // The bounding box of the pixels that are not background, as {x0, y0, x1, y1} (inclusive); x0 > x1 when none.
 std::array<int, 4> foreground(const Image& img, int x_end) {
   std::array<int, 4> b{img.width, img.height, -1, -1};

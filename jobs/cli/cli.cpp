@@ -185,6 +185,9 @@ options:
                        white) or `regularity` (regular against irregular). The title gives the regular share,
                        and so does a line on standard output. The container is drawn whole (within
                        --memory-budget, else it fails).
+  --shade S            `faces` (default): each triangle by its own plane; `normals`: by MESH's normals
+                       interpolated over each triangle (where it has them), to see whether a crease's two sides keep
+                       their own normals
 MESH or ORIGINAL may be a container (.spz): it is drawn as `decode` would write it, a tile at a time.
 )";
 
@@ -759,7 +762,8 @@ int runRender(int argc, char** argv) {
   Args args;
   std::string error;
   if (!parseArgs(argc, argv, 2,
-                 {"--against", "--view", "--size", "--scale-max", "--memory-budget", "--scratch-dir", "--color-by"},
+                 {"--against", "--view", "--size", "--scale-max", "--memory-budget", "--scratch-dir", "--color-by",
+                  "--shade"},
                  {"--help"}, args, error))
     return usage(error, "render");
   if (args.has("--help")) return std::fputs(kRenderHelp, stdout), 0;
@@ -785,6 +789,10 @@ int runRender(int argc, char** argv) {
     if (!e.isOk()) return usage(e.status().message(), "render");
     if (!(*e > 0)) return usage("--scale-max must be positive, got '" + *v + "'", "render");
     s.scale_max_relative = *e;
+  }
+  if (const auto* v = args.get("--shade")) {
+    if (*v != "faces" && *v != "normals") return usage("--shade is `faces` or `normals`, got '" + *v + "'", "render");
+    s.vertex_normals = *v == "normals";
   }
   s.title = std::filesystem::path(args.positional[0]).filename().string();
   std::vector<std::string> inputs = {args.positional[0]};
